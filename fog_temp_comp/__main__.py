@@ -1,0 +1,7 @@
+"""``python -m fog_temp_comp`` runs the command-line tool."""
+
+import sys
+
+from fog_temp_comp.cli import main
+
+sys.exit(main())

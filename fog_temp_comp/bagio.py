@@ -1,0 +1,296 @@
+"""Bag input/output with ``rosbags``: ROS 2 (MCAP, sqlite3) and ROS 1 bags, no ROS install needed.
+
+Errors from rosbags (missing, empty, truncated or unreadable bags) are raised as :class:`BagError`
+with the path in the message.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Connection, ConnectionExtRosbag2
+from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag2 import Writer as Writer2
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Typestore
+
+from fog_temp_comp.record import ChamberRecord
+from fog_temp_comp.units import NS_PER_S
+
+FloatArray = NDArray[np.float64]
+IMU_TYPE = 'sensor_msgs/msg/Imu'
+TEMPERATURE_TYPE = 'sensor_msgs/msg/Temperature'
+FORMATS = ('mcap', 'sqlite3', 'ros1')
+
+
+class BagError(Exception):
+    """A bag cannot be read or written, or lacks what was asked of it."""
+
+
+@cache
+def typestore() -> Typestore:
+    """ROS 2 Jazzy message types (also used for ROS 1 bags of the same types)."""
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def stamp_to_s(stamp: Any) -> float:
+    """``builtin_interfaces/Time`` to float seconds."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def s_to_stamp_ns(stamp_s: float) -> int:
+    """Float seconds to integer nanoseconds (rounded)."""
+    return round(stamp_s * NS_PER_S)
+
+
+@contextmanager
+def open_bag(path: str | Path) -> Iterator[AnyReader]:
+    """Open a bag for reading (directory, ``.mcap``, ``.db3`` or ROS 1 ``.bag``)."""
+    path = Path(path)
+    if not path.exists():
+        raise BagError(f'{path}: no such bag')
+    try:
+        reader = AnyReader([path], default_typestore=typestore())
+        reader.open()
+    except Exception as err:  # rosbags raises many types for broken files
+        raise BagError(f'{path}: cannot open bag: {err}') from err
+    try:
+        yield reader
+    finally:
+        reader.close()
+
+
+def bag_format(path: str | Path) -> str:
+    """One of :data:`FORMATS` for an existing bag."""
+    path = Path(path)
+    if path.suffix == '.bag':
+        return 'ros1'
+    if path.suffix == '.mcap':
+        return 'mcap'
+    if path.suffix == '.db3':
+        return 'sqlite3'
+    if path.is_dir():
+        if list(path.glob('*.mcap')):
+            return 'mcap'
+        if list(path.glob('*.db3')):
+            return 'sqlite3'
+    raise BagError(
+        f'{path}: not a recognised bag (expected a rosbag2 directory, .mcap, .db3, .bag)'
+    )
+
+
+def _normalise(topic: str) -> str:
+    return topic if topic.startswith('/') else '/' + topic
+
+
+def resolve_topic(reader: AnyReader, topic: str | None, msgtype: str, flag: str) -> str:
+    """The bag topic to use for ``msgtype``.
+
+    With ``topic`` given it must exist and carry ``msgtype`` (a missing leading slash is
+    accepted); without, the bag must have exactly one topic of that type.
+    """
+    topics = {name: info.msgtype for name, info in reader.topics.items()}
+    if topic is not None:
+        for name in (topic, _normalise(topic)):
+            if name in topics:
+                if topics[name] != msgtype:
+                    raise BagError(f'{flag} {topic}: has type {topics[name]}, expected {msgtype}')
+                return name
+        listing = ', '.join(f'{n} ({t})' for n, t in sorted(topics.items())) or 'none'
+        raise BagError(f'{flag} {topic}: not in bag; topics: {listing}')
+    candidates = sorted(name for name, t in topics.items() if t == msgtype)
+    if len(candidates) == 1:
+        return candidates[0]
+    if not candidates:
+        raise BagError(f'no {msgtype} topic in bag (topics: {sorted(topics) or "none"})')
+    raise BagError(f'several {msgtype} topics: {candidates}; choose one with {flag}')
+
+
+def read_record(
+    path: str | Path, *, gyro_topic: str | None = None, temp_topic: str | None = None
+) -> ChamberRecord:
+    """Read the gyro and temperature streams of a bag into arrays."""
+    path = Path(path)
+    with open_bag(path) as reader:
+        imu_name = resolve_topic(reader, gyro_topic, IMU_TYPE, '--gyro-topic')
+        temp_name = resolve_topic(reader, temp_topic, TEMPERATURE_TYPE, '--temp-topic')
+        conns = [c for c in reader.connections if c.topic in (imu_name, temp_name)]
+        imu_t: list[float] = []
+        rates: list[tuple[float, float, float]] = []
+        temp_t: list[float] = []
+        temps: list[float] = []
+        frame_id = ''
+        try:
+            for conn, _, raw in reader.messages(connections=conns):
+                msg: Any = reader.deserialize(raw, conn.msgtype)
+                if conn.topic == imu_name:
+                    w = msg.angular_velocity
+                    imu_t.append(stamp_to_s(msg.header.stamp))
+                    rates.append((w.x, w.y, w.z))
+                    frame_id = frame_id or msg.header.frame_id
+                else:
+                    temp_t.append(stamp_to_s(msg.header.stamp))
+                    temps.append(msg.temperature)
+        except Exception as err:
+            raise BagError(f'{path}: cannot read messages (truncated bag?): {err}') from err
+    if not imu_t:
+        raise BagError(f'{path}: topic {imu_name} has no messages')
+    if not temp_t:
+        raise BagError(f'{path}: topic {temp_name} has no messages')
+    imu_order = np.argsort(np.asarray(imu_t), kind='stable')
+    temp_order = np.argsort(np.asarray(temp_t), kind='stable')
+    return ChamberRecord(
+        path=path,
+        imu_topic=imu_name,
+        temp_topic=temp_name,
+        frame_id=frame_id,
+        imu_stamps_s=np.asarray(imu_t)[imu_order],
+        rates_rad_s=np.asarray(rates, dtype=np.float64).reshape(-1, 3)[imu_order],
+        temp_stamps_s=np.asarray(temp_t)[temp_order],
+        temperature_degC=np.asarray(temps, dtype=np.float64)[temp_order],
+    )
+
+
+class BagWriter:
+    """Write a ROS 2 (``mcap``/``sqlite3``) or ROS 1 (``ros1``) bag; use as a context manager.
+
+    ROS 2 message objects of :func:`typestore` are serialized to CDR (ROS 2) or ROS 1 format.
+    """
+
+    def __init__(self, path: str | Path, fmt: str, *, compress: bool = False) -> None:
+        if fmt not in FORMATS:
+            raise ValueError(f'format must be one of {FORMATS}, got {fmt!r}')
+        self.path = Path(path)
+        if self.path.exists():
+            raise BagError(f'{self.path}: exists already, not overwriting')
+        self.fmt = fmt
+        self._ros1 = fmt == 'ros1'
+        self._writer: Any
+        if self._ros1:
+            self._writer = Writer1(self.path)
+            if compress:
+                self._writer.set_compression(Writer1.CompressionFormat.LZ4)
+        else:
+            plugin = StoragePlugin.MCAP if fmt == 'mcap' else StoragePlugin.SQLITE3
+            self._writer = Writer2(self.path, version=9, storage_plugin=plugin)
+            if compress and fmt == 'mcap':
+                self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+        self._connections: dict[str, Connection] = {}
+
+    def __enter__(self) -> BagWriter:
+        self._writer.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._writer.close()
+
+    def add_topic(self, topic: str, msgtype: str, *, like: Connection | None = None) -> None:
+        """Register a topic; ``like`` copies definition and QoS of a connection being copied."""
+        ts = typestore()
+        kwargs: dict[str, Any] = {}
+        if like is not None and like.msgtype not in ts.types:
+            kwargs['msgdef'] = like.msgdef.data
+            kwargs['md5sum' if self._ros1 else 'rihs01'] = like.digest
+        else:
+            kwargs['typestore'] = ts
+        if not self._ros1 and like is not None and isinstance(like.ext, ConnectionExtRosbag2):
+            kwargs['offered_qos_profiles'] = like.ext.offered_qos_profiles
+        self._connections[topic] = self._writer.add_connection(topic, msgtype, **kwargs)
+
+    def write_raw(self, topic: str, log_time_ns: int, data: bytes | memoryview) -> None:
+        """Write an already serialized message (in this bag's format)."""
+        self._writer.write(self._connections[topic], log_time_ns, data)
+
+    def write(self, topic: str, log_time_ns: int, msg: object) -> None:
+        """Serialize and write a message object."""
+        conn = self._connections[topic]
+        ts = typestore()
+        data = (
+            ts.serialize_ros1(msg, conn.msgtype)
+            if self._ros1
+            else ts.serialize_cdr(msg, conn.msgtype)
+        )
+        self._writer.write(conn, log_time_ns, data)
+
+    @property
+    def is_ros1(self) -> bool:
+        """Whether messages are ROS 1 serialized."""
+        return self._ros1
+
+
+def make_header(stamp_ns: int, frame_id: str) -> Any:
+    """``std_msgs/Header``."""
+    types = typestore().types
+    sec, nanosec = divmod(int(stamp_ns), NS_PER_S)
+    return types['std_msgs/msg/Header'](
+        stamp=types['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec), frame_id=frame_id
+    )
+
+
+def make_imu(stamp_ns: int, frame_id: str, rate_rad_s: Sequence[float]) -> Any:
+    """``sensor_msgs/Imu`` with only angular velocity set (orientation unknown, REP 145)."""
+    types = typestore().types
+    vec = types['geometry_msgs/msg/Vector3']
+    quat = types['geometry_msgs/msg/Quaternion']
+    orientation_cov = np.zeros(9)
+    orientation_cov[0] = -1.0  # orientation not provided
+    return types[IMU_TYPE](
+        header=make_header(stamp_ns, frame_id),
+        orientation=quat(x=0.0, y=0.0, z=0.0, w=1.0),
+        orientation_covariance=orientation_cov,
+        angular_velocity=vec(
+            x=float(rate_rad_s[0]), y=float(rate_rad_s[1]), z=float(rate_rad_s[2])
+        ),
+        angular_velocity_covariance=np.zeros(9),
+        linear_acceleration=vec(x=0.0, y=0.0, z=0.0),
+        linear_acceleration_covariance=np.zeros(9),
+    )
+
+
+def make_temperature(stamp_ns: int, frame_id: str, temperature_degC: float) -> Any:
+    """``sensor_msgs/Temperature`` (degC, variance 0 = unknown)."""
+    return typestore().types[TEMPERATURE_TYPE](
+        header=make_header(stamp_ns, frame_id), temperature=float(temperature_degC), variance=0.0
+    )
+
+
+def write_chamber_bag(
+    path: str | Path,
+    fmt: str,
+    *,
+    imu_stamps_s: FloatArray,
+    rates_rad_s: FloatArray,
+    temp_stamps_s: FloatArray,
+    temperature_degC: FloatArray,
+    imu_topic: str = '/imu/data_raw',
+    temp_topic: str = '/imu/temperature',
+    frame_id: str = 'imu_link',
+    compress: bool = False,
+) -> None:
+    """Write gyro and temperature streams as a bag; log time = header stamp, merged in order."""
+    imu_ns = np.round(np.asarray(imu_stamps_s) * NS_PER_S).astype(np.int64)
+    temp_ns = np.round(np.asarray(temp_stamps_s) * NS_PER_S).astype(np.int64)
+    # temperature first on equal stamps, as a sensor driver publishing both would
+    order = np.lexsort(
+        (np.r_[np.ones(imu_ns.size), np.zeros(temp_ns.size)], np.r_[imu_ns, temp_ns])
+    )
+    with BagWriter(path, fmt, compress=compress) as writer:
+        writer.add_topic(imu_topic, IMU_TYPE)
+        writer.add_topic(temp_topic, TEMPERATURE_TYPE)
+        n_imu = imu_ns.size
+        for k in order.tolist():
+            if k < n_imu:
+                ns = int(imu_ns[k])
+                writer.write(imu_topic, ns, make_imu(ns, frame_id, rates_rad_s[k]))
+            else:
+                j = k - n_imu
+                ns = int(temp_ns[j])
+                writer.write(temp_topic, ns, make_temperature(ns, frame_id, temperature_degC[j]))

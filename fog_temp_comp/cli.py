@@ -1,0 +1,145 @@
+"""``fog-temp-comp`` command line: parses arguments and calls :mod:`fog_temp_comp.commands`."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from fog_temp_comp import __version__, commands
+from fog_temp_comp.bagio import FORMATS
+from fog_temp_comp.denoise import METHODS, DenoiseSettings
+
+
+def _add_topics(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        '--gyro-topic',
+        metavar='T',
+        help="sensor_msgs/Imu topic (default: the bag's only Imu topic)",
+    )
+    parser.add_argument(
+        '--temp-topic',
+        metavar='T',
+        help="sensor_msgs/Temperature topic (default: the bag's only one)",
+    )
+
+
+def _add_denoise(parser: argparse.ArgumentParser, default: str | None) -> None:
+    parser.add_argument(
+        '--denoise',
+        choices=METHODS,
+        default=default,
+        help='Tdot denoising: wavelet (paper), iir (Butterworth) or none'
+        + (
+            f' (default: {default})'
+            if default
+            else ' (default: as stored in the coefficients file)'
+        ),
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Argument parser with the simulate / calibrate / compensate / evaluate / demo commands."""
+    parser = argparse.ArgumentParser(
+        prog='fog-temp-comp',
+        description='Temperature-drift calibration and compensation for fibre-optic gyros.',
+    )
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
+    sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
+
+    p = sub.add_parser('simulate', help='write synthetic thermal-chamber runs as bags')
+    p.add_argument('out_dir', type=Path, metavar='OUT_DIR')
+    p.add_argument('--format', choices=FORMATS, default='mcap', dest='fmt')
+    p.add_argument('--imu-hz', type=float, default=10.0, help='gyro rate (Hz, default 10)')
+    p.add_argument('--temp-hz', type=float, default=1.0, help='temperature rate (Hz, default 1)')
+    p.add_argument('--seed', type=int, default=0)
+
+    p = sub.add_parser('calibrate', help='fit drift coefficients from chamber bags')
+    p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
+    p.add_argument('-o', '--output', type=Path, required=True, metavar='COEFFS.yaml')
+    _add_topics(p)
+    _add_denoise(p, 'wavelet')
+
+    p = sub.add_parser('compensate', help='replay a bag through the compensator')
+    p.add_argument('in_bag', type=Path, metavar='IN_BAG')
+    p.add_argument('--coeffs', type=Path, required=True, metavar='COEFFS.yaml')
+    p.add_argument('-o', '--output', type=Path, required=True, metavar='OUT_BAG')
+    _add_topics(p)
+    p.add_argument(
+        '--output-topic',
+        default='/imu/data',
+        metavar='T',
+        help='topic of the corrected Imu (default /imu/data)',
+    )
+    _add_denoise(p, None)
+
+    p = sub.add_parser('evaluate', help='bias stability and range before/after compensation')
+    p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
+    p.add_argument('--coeffs', type=Path, required=True, metavar='COEFFS.yaml')
+    _add_topics(p)
+    _add_denoise(p, None)
+
+    p = sub.add_parser('demo', help="the paper's experiment on sample or simulated bags")
+    p.add_argument(
+        '--bags',
+        type=Path,
+        default=None,
+        metavar='DIR',
+        help='directory with manifest.yaml (default: simulate into OUT)',
+    )
+    p.add_argument('--out', type=Path, default=Path('demo_out'), metavar='OUT')
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    """Dispatch parsed arguments to a command."""
+    if args.command == 'simulate':
+        return commands.simulate_command(
+            args.out_dir, fmt=args.fmt, imu_hz=args.imu_hz, temp_hz=args.temp_hz, seed=args.seed
+        )
+    if args.command == 'calibrate':
+        return commands.calibrate_command(
+            args.bags,
+            args.output,
+            gyro_topic=args.gyro_topic,
+            temp_topic=args.temp_topic,
+            settings=DenoiseSettings(method=args.denoise),
+        )
+    if args.command == 'compensate':
+        return commands.compensate_command(
+            args.in_bag,
+            args.coeffs,
+            args.output,
+            gyro_topic=args.gyro_topic,
+            temp_topic=args.temp_topic,
+            output_topic=args.output_topic,
+            denoise_method=args.denoise,
+        )
+    if args.command == 'evaluate':
+        return commands.evaluate_command(
+            args.bags,
+            args.coeffs,
+            gyro_topic=args.gyro_topic,
+            temp_topic=args.temp_topic,
+            denoise_method=args.denoise,
+        )
+    from fog_temp_comp.demo import demo_command
+
+    return demo_command(bags_dir=args.bags, out_dir=args.out)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``fog-temp-comp`` console script."""
+    args = build_parser().parse_args(argv)
+    try:
+        return run(args)
+    except commands.USER_ERRORS as err:
+        print(f'ERROR: {err}', file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())

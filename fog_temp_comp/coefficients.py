@@ -1,0 +1,221 @@
+"""Coefficients YAML: the hand-off from ``calibrate`` to the node and ``compensate``.
+
+Schema (version 1)::
+
+    schema_version: 1
+    model: 'D [deg/h] = d0_deg_h + dt_deg_h_per_degC * T [degC] + ...'
+    terms: [const, T, Tdot]
+    frame_id: imu_link              # gyro frame the coefficients belong to ('' = any)
+    axes:                           # one mapping per axis, keys carry the unit
+      x: {d0_deg_h: ..., dt_deg_h_per_degC: ..., dtdot_deg_h_per_degC_per_min: ...}
+      y: {...}
+      z: {...}
+    calibrated_range:
+      temperature_degC: [low, high]
+      tdot_degC_per_min: [low, high]
+    denoise: {method: wavelet, tdot_period_s: 10.0, wavelet: sym8, ...}
+    fit: {x: {residual_std_deg_h: ..., r_squared: ..., n_samples: ...}, ...}   # informative
+    provenance: {bags: [...], created_utc: ..., package_version: ...}         # informative
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from fog_temp_comp.denoise import DenoiseSettings
+from fog_temp_comp.model import DriftModel, Range, coefficient_key
+from fog_temp_comp.units import AXES
+
+SCHEMA_VERSION = 1
+
+
+class CoefficientsError(ValueError):
+    """A coefficients file is missing, unreadable, or does not follow the schema."""
+
+
+@dataclass(frozen=True)
+class Coefficients:
+    """Everything a coefficients file holds."""
+
+    model: DriftModel
+    denoise: DenoiseSettings
+    frame_id: str = ''
+    fit: dict[str, Any] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+
+def model_equation(terms: tuple[str, ...]) -> str:
+    """Human-readable model equation for the YAML header."""
+    names = {'const': '{k}', 'T': '{k} * T [degC]', 'Tdot': '{k} * Tdot [degC/min]'}
+    parts = [names.get(t, '{k} * ' + t).format(k=coefficient_key(t)) for t in terms]
+    return 'D [deg/h] = ' + ' + '.join(parts)
+
+
+def to_dict(coeffs: Coefficients) -> dict[str, Any]:
+    """Plain-data form of ``coeffs`` (what :func:`save` writes)."""
+    model = coeffs.model
+    return {
+        'schema_version': SCHEMA_VERSION,
+        'model': model_equation(model.terms),
+        'terms': list(model.terms),
+        'frame_id': coeffs.frame_id,
+        'axes': {
+            axis: {
+                coefficient_key(term): float(model.coefficients[i, j])
+                for i, term in enumerate(model.terms)
+            }
+            for j, axis in enumerate(AXES)
+        },
+        'calibrated_range': {
+            'temperature_degC': [
+                float(model.temperature_range_degC.low),
+                float(model.temperature_range_degC.high),
+            ],
+            'tdot_degC_per_min': [
+                float(model.tdot_range_degC_per_min.low),
+                float(model.tdot_range_degC_per_min.high),
+            ],
+        },
+        'denoise': coeffs.denoise.to_dict(),
+        'fit': _plain(coeffs.fit),
+        'provenance': _plain(coeffs.provenance),
+    }
+
+
+def save(coeffs: Coefficients, path: str | Path) -> None:
+    """Write ``coeffs`` as YAML to ``path``."""
+    text = yaml.dump(to_dict(coeffs), Dumper=_Dumper, sort_keys=False, width=99)
+    Path(path).write_text('# fog_temp_comp coefficients\n' + text, encoding='utf-8')
+
+
+class _Dumper(yaml.SafeDumper):
+    """Block style for mappings, flow style for lists of scalars (``[low, high]``)."""
+
+
+def _represent_list(dumper: yaml.SafeDumper, data: list[Any]) -> yaml.Node:
+    flow = all(not isinstance(v, (dict, list)) for v in data)
+    return dumper.represent_sequence('tag:yaml.org,2002:seq', data, flow_style=flow)
+
+
+_Dumper.add_representer(list, _represent_list)
+
+
+def load(path: str | Path) -> Coefficients:
+    """Read a coefficients YAML file.
+
+    Raises
+    ------
+    CoefficientsError
+        File missing or unreadable, invalid YAML, or a key missing / of the wrong type / not
+        finite; the message names the file and the key.
+
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding='utf-8')
+    except OSError as err:
+        raise CoefficientsError(f'{path}: cannot read coefficients file: {err.strerror}') from err
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise CoefficientsError(f'{path}: not valid YAML: {err}') from err
+    try:
+        return from_dict(data)
+    except CoefficientsError as err:
+        raise CoefficientsError(f'{path}: {err}') from err
+
+
+def from_dict(data: Any) -> Coefficients:
+    """Validate plain data (parsed YAML) and build :class:`Coefficients`."""
+    if not isinstance(data, dict):
+        raise CoefficientsError('expected a mapping at the top level (file empty?)')
+    version = _get(data, 'schema_version', int)
+    if version != SCHEMA_VERSION:
+        raise CoefficientsError(
+            f'schema_version: {version} is not supported (this package reads {SCHEMA_VERSION})'
+        )
+    terms = _get(data, 'terms', list)
+    for term in terms:
+        try:
+            coefficient_key(str(term))
+        except ValueError as err:
+            raise CoefficientsError(f'terms: {err}') from None
+    terms = tuple(str(t) for t in terms)
+    axes = _get(data, 'axes', dict)
+    matrix = np.empty((len(terms), len(AXES)))
+    for j, axis in enumerate(AXES):
+        entry = _get(axes, axis, dict, where='axes.')
+        for i, term in enumerate(terms):
+            matrix[i, j] = _number(entry, coefficient_key(term), where=f'axes.{axis}.')
+        extra = set(entry) - {coefficient_key(t) for t in terms}
+        if extra:
+            raise CoefficientsError(f'axes.{axis}: keys {sorted(extra)} are not in terms {terms}')
+    ranges = _get(data, 'calibrated_range', dict)
+    t_range = _range(ranges, 'temperature_degC')
+    r_range = _range(ranges, 'tdot_degC_per_min')
+    try:
+        denoise = DenoiseSettings.from_dict(_get(data, 'denoise', dict))
+    except (TypeError, ValueError) as err:
+        raise CoefficientsError(f'denoise: {err}') from None
+    frame_id = data.get('frame_id', '') or ''
+    if not isinstance(frame_id, str):
+        raise CoefficientsError('frame_id: expected a string')
+    model = DriftModel(terms, matrix, t_range, r_range)
+    return Coefficients(
+        model=model,
+        denoise=denoise,
+        frame_id=frame_id,
+        fit=dict(data.get('fit') or {}),
+        provenance=dict(data.get('provenance') or {}),
+    )
+
+
+def _get(data: dict[str, Any], key: str, kind: type, *, where: str = '') -> Any:
+    if key not in data:
+        raise CoefficientsError(f'{where}{key}: missing')
+    value = data[key]
+    if (kind is int and isinstance(value, bool)) or not isinstance(value, kind):
+        raise CoefficientsError(f'{where}{key}: expected {kind.__name__}, got {value!r}')
+    return value
+
+
+def _number(data: dict[str, Any], key: str, *, where: str = '') -> float:
+    if key not in data:
+        raise CoefficientsError(f'{where}{key}: missing')
+    value = data[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise CoefficientsError(f'{where}{key}: expected a number, got {value!r}')
+    if not math.isfinite(value):
+        raise CoefficientsError(f'{where}{key}: must be finite, got {value!r}')
+    return float(value)
+
+
+def _range(data: dict[str, Any], key: str) -> Range:
+    value = _get(data, key, list, where='calibrated_range.')
+    where = f'calibrated_range.{key}'
+    if len(value) != 2:
+        raise CoefficientsError(f'{where}: expected [low, high]')
+    low = _number({'low': value[0]}, 'low', where=where + '.')
+    high = _number({'high': value[1]}, 'high', where=where + '.')
+    if low > high:
+        raise CoefficientsError(f'{where}: low {low} > high {high}')
+    return Range(low, high)
+
+
+def _plain(value: Any) -> Any:
+    """Convert numpy scalars/arrays inside nested data to plain Python for YAML."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    return value

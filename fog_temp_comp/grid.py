@@ -1,0 +1,152 @@
+"""The fixed time grid on which temperature rate (Tdot) is estimated.
+
+Samples are grouped into bins ``floor(stamp_s / period_s)``; each bin gives the mean stamp and
+the mean temperature, and Tdot of a bin is the slope from the previous bin (degC/min). The online
+:class:`TemperatureGrid` and the offline :func:`temperature_grid` give identical bins.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fog_temp_comp.units import S_PER_MIN
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class GridPoint:
+    """One completed bin: mean stamp (s), mean temperature (degC), raw Tdot (degC/min).
+
+    ``tdot_degC_per_min`` is NaN for the first bin after a (re)start.
+    """
+
+    index: int
+    stamp_s: float
+    temperature_degC: float
+    tdot_degC_per_min: float
+
+
+def bin_index(stamp_s: float, period_s: float) -> int:
+    """Grid bin a stamp falls in."""
+    return math.floor(stamp_s / period_s)
+
+
+class TemperatureGrid:
+    """Online binning of temperature samples; feed samples in time order.
+
+    Parameters
+    ----------
+    period_s : float
+        Bin length in seconds (the paper's Tdot period, 10 s).
+
+    """
+
+    def __init__(self, period_s: float = 10.0) -> None:
+        if not period_s > 0:
+            raise ValueError(f'period_s must be > 0, got {period_s}')
+        self.period_s = float(period_s)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all samples (e.g. after a time jump)."""
+        self._index: int | None = None
+        self._sum_t = 0.0
+        self._sum_x = 0.0
+        self._count = 0
+        self._previous: GridPoint | None = None
+
+    @property
+    def last(self) -> GridPoint | None:
+        """The most recently completed bin."""
+        return self._previous
+
+    def add(self, stamp_s: float, temperature_degC: float) -> GridPoint | None:
+        """Add one sample; return the bin it completed, if any."""
+        index = bin_index(stamp_s, self.period_s)
+        completed = None
+        if self._index is not None and index != self._index:
+            completed = self._close()
+        if self._index != index:
+            self._index, self._sum_t, self._sum_x, self._count = index, 0.0, 0.0, 0
+        self._sum_t += stamp_s - index * self.period_s
+        self._sum_x += temperature_degC
+        self._count += 1
+        return completed
+
+    def _close(self) -> GridPoint:
+        assert self._index is not None
+        stamp = self._index * self.period_s + self._sum_t / self._count
+        temp = self._sum_x / self._count
+        prev = self._previous
+        tdot = math.nan
+        if prev is not None:
+            tdot = (temp - prev.temperature_degC) / ((stamp - prev.stamp_s) / S_PER_MIN)
+        point = GridPoint(self._index, stamp, temp, tdot)
+        self._previous = point
+        return point
+
+
+def temperature_grid(
+    stamps_s: ArrayLike, temperature_degC: ArrayLike, period_s: float = 10.0
+) -> tuple[NDArray[np.int64], FloatArray, FloatArray, FloatArray]:
+    """Offline version of :class:`TemperatureGrid` over a whole record.
+
+    The last bin is treated as complete. Stamps must be non-decreasing.
+
+    Returns
+    -------
+    index : ndarray of int, shape (K,)
+    stamp_s, temperature_degC, tdot_degC_per_min : ndarray, shape (K,)
+        ``tdot_degC_per_min[0]`` is NaN.
+
+    """
+    index, stamp, temp = bin_means(stamps_s, temperature_degC, period_s)
+    tdot = np.full_like(temp, np.nan)
+    tdot[1:] = np.diff(temp) / (np.diff(stamp) / S_PER_MIN)
+    return index, stamp, temp, tdot
+
+
+def bin_means(
+    stamps_s: ArrayLike, values: ArrayLike, period_s: float
+) -> tuple[NDArray[np.int64], FloatArray, FloatArray]:
+    """Mean stamp and mean value per grid bin.
+
+    Parameters
+    ----------
+    stamps_s : array_like, shape (N,)
+        Non-decreasing stamps (s).
+    values : array_like, shape (N,) or (N, M)
+        Samples, any unit.
+    period_s : float
+        Bin length (s).
+
+    Returns
+    -------
+    index : ndarray of int, shape (K,)
+        Occupied bins in increasing order.
+    stamp_s : ndarray, shape (K,)
+    mean : ndarray, shape (K,) or (K, M)
+
+    """
+    t = np.asarray(stamps_s, dtype=np.float64)
+    x = np.asarray(values, dtype=np.float64)
+    if t.ndim != 1 or x.shape[:1] != t.shape:
+        raise ValueError(f'stamps (N,) and values (N, ...) expected, got {t.shape}, {x.shape}')
+    if t.size and np.any(np.diff(t) < 0):
+        raise ValueError('stamps must be non-decreasing')
+    idx = np.floor(t / period_s).astype(np.int64)
+    if not t.size:
+        return idx, t.copy(), x.copy()
+    starts = np.flatnonzero(np.r_[True, idx[1:] != idx[:-1]])
+    counts = np.diff(np.r_[starts, t.size])
+    # offsets within the bin keep full precision for epoch stamps (~1.7e9 s)
+    offset = t - idx * period_s
+    stamp = idx[starts] * period_s + np.add.reduceat(offset, starts) / counts
+    mean = np.add.reduceat(x, starts, axis=0)
+    mean = mean / (counts if x.ndim == 1 else counts[:, None])
+    return idx[starts], stamp, mean

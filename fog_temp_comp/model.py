@@ -1,0 +1,129 @@
+"""Temperature drift model of a gyro, per axis: ``D = sum_i c_i * term_i(T, Tdot)``.
+
+The paper's model is ``D [deg/h] = D0 + DT * T [degC] + DTdot * Tdot [degC/min]``; every term has a
+named coefficient whose key carries its unit, so the YAML file and the code say the same thing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fog_temp_comp.units import AXES
+
+FloatArray = NDArray[np.float64]
+
+#: term name -> (coefficient key with unit, function of (T degC, Tdot degC/min))
+TERMS: dict[str, tuple[str, Callable[[FloatArray, FloatArray], FloatArray]]] = {
+    'const': ('d0_deg_h', lambda t, r: np.ones_like(t)),
+    'T': ('dt_deg_h_per_degC', lambda t, r: t),
+    'Tdot': ('dtdot_deg_h_per_degC_per_min', lambda t, r: r),
+}
+#: the paper's model, in order
+PAPER_TERMS = ('const', 'T', 'Tdot')
+
+
+def coefficient_key(term: str) -> str:
+    """YAML key (with unit) of a model term's coefficient, e.g. ``'T' -> 'dt_deg_h_per_degC'``."""
+    try:
+        return TERMS[term][0]
+    except KeyError:
+        raise ValueError(f'unknown model term {term!r}; allowed: {sorted(TERMS)}') from None
+
+
+def design_matrix(
+    temperature_degC: ArrayLike, tdot_degC_per_min: ArrayLike, terms: Sequence[str]
+) -> FloatArray:
+    """Regressors of the drift model.
+
+    Parameters
+    ----------
+    temperature_degC, tdot_degC_per_min : array_like, shape (N,)
+        Gyro temperature and its rate.
+    terms : sequence of str
+        Term names from :data:`TERMS`.
+
+    Returns
+    -------
+    ndarray, shape (N, len(terms))
+
+    """
+    t = np.atleast_1d(np.asarray(temperature_degC, dtype=np.float64))
+    r = np.atleast_1d(np.asarray(tdot_degC_per_min, dtype=np.float64))
+    if t.shape != r.shape or t.ndim != 1:
+        raise ValueError(
+            f'temperature and Tdot must be 1-D of equal length, got {t.shape}, {r.shape}'
+        )
+    for term in terms:
+        coefficient_key(term)
+    return np.stack([TERMS[term][1](t, r) for term in terms], axis=-1)
+
+
+@dataclass(frozen=True)
+class Range:
+    """Closed interval ``[low, high]`` in the unit of the quantity it bounds."""
+
+    low: float
+    high: float
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.low) and np.isfinite(self.high) and self.low <= self.high):
+            raise ValueError(f'invalid range [{self.low}, {self.high}]')
+
+    def clamp(self, value: float) -> float:
+        """``value`` limited to the interval."""
+        return min(max(value, self.low), self.high)
+
+    def contains(self, value: float) -> bool:
+        """Whether ``low <= value <= high``."""
+        return self.low <= value <= self.high
+
+
+@dataclass(frozen=True)
+class DriftModel:
+    """Per-axis temperature drift model.
+
+    Attributes
+    ----------
+    terms : tuple of str
+        Term names, e.g. ``('const', 'T', 'Tdot')``.
+    coefficients : ndarray, shape (len(terms), 3)
+        Coefficient of each term (rows) for the x, y, z axes (columns), in the unit of
+        :func:`coefficient_key` (deg/h per unit of the term).
+    temperature_range_degC, tdot_range_degC_per_min : Range
+        What calibration covered.
+
+    """
+
+    terms: tuple[str, ...]
+    coefficients: FloatArray
+    temperature_range_degC: Range
+    tdot_range_degC_per_min: Range
+
+    def __post_init__(self) -> None:
+        coeffs = np.asarray(self.coefficients, dtype=np.float64)
+        if coeffs.shape != (len(self.terms), len(AXES)):
+            raise ValueError(
+                f'coefficients must have shape ({len(self.terms)}, {len(AXES)}), '
+                f'got {coeffs.shape}'
+            )
+        if not np.all(np.isfinite(coeffs)):
+            raise ValueError('coefficients must be finite')
+        for term in self.terms:
+            coefficient_key(term)
+        coeffs.setflags(write=False)
+        object.__setattr__(self, 'coefficients', coeffs)
+        object.__setattr__(self, 'terms', tuple(self.terms))
+
+    def drift_deg_h(self, temperature_degC: ArrayLike, tdot_degC_per_min: ArrayLike) -> FloatArray:
+        """Modelled drift in deg/h: shape (N, 3) for inputs of shape (N,), (3,) for scalars."""
+        scalar = np.ndim(temperature_degC) == 0
+        drift = design_matrix(temperature_degC, tdot_degC_per_min, self.terms) @ self.coefficients
+        return drift[0] if scalar else drift
+
+    def coefficient(self, term: str) -> FloatArray:
+        """Coefficients of one term for the three axes, shape (3,)."""
+        return self.coefficients[self.terms.index(term)]

@@ -1,0 +1,28 @@
+"""A chamber record: the gyro and temperature streams of one run, as arrays."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ChamberRecord:
+    """Gyro and temperature streams of one bag, in header-stamp time (s).
+
+    ``rates_rad_s`` has shape (N, 3); stamps are sorted (stable) so they are non-decreasing.
+    """
+
+    path: Path
+    imu_topic: str
+    temp_topic: str
+    frame_id: str
+    imu_stamps_s: FloatArray
+    rates_rad_s: FloatArray
+    temp_stamps_s: FloatArray
+    temperature_degC: FloatArray

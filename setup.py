@@ -1,0 +1,32 @@
+"""ament_python package setup (colcon build) that also installs with plain pip."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'fog_temp_comp'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*', 'benchmarks']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools', 'numpy', 'scipy', 'PyWavelets', 'PyYAML', 'rosbags'],
+    python_requires='>=3.10',
+    zip_safe=True,
+    maintainer='fog_temp_comp maintainers',
+    maintainer_email='fog-temp-comp@example.com',
+    description='Temperature-drift compensation for fibre-optic gyros (ROS 2 node + tools).',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'compensator = fog_temp_comp.node:main',
+            'fog-temp-comp = fog_temp_comp.cli:main',
+        ],
+    },
+)

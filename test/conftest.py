@@ -1,0 +1,44 @@
+"""Shared fixtures: small simulated chamber runs, coefficient files, an in-process ROS context."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from fog_temp_comp.simulate import SimulatedRun, simulate_run
+
+from simdata import SHORT_CHAMBER
+
+
+@pytest.fixture(scope='session')
+def short_cycle() -> SimulatedRun:
+    """0.5 degC/min cycle between 10 and 30 degC (about 2.3 h)."""
+    return simulate_run('cycle', 0.5, SHORT_CHAMBER, seed=11)
+
+
+@pytest.fixture(scope='session')
+def short_cycle_fast() -> SimulatedRun:
+    """1.0 degC/min cycle between 10 and 30 degC (held-out run)."""
+    return simulate_run('cycle', 1.0, SHORT_CHAMBER, seed=12)
+
+
+@pytest.fixture()
+def rng() -> np.random.Generator:
+    """Seeded generator."""
+    return np.random.default_rng(1234)
+
+
+@pytest.fixture()
+def ros_context() -> Iterator[object]:
+    """An initialised rclpy context, shut down after the test (rclpy's own test pattern)."""
+    import rclpy
+    from rclpy.context import Context
+
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        yield context
+    finally:
+        rclpy.shutdown(context=context)
