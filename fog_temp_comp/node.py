@@ -11,6 +11,7 @@ and depth can be overridden per topic with the standard ``qos_overrides`` parame
 from __future__ import annotations
 
 import dataclasses
+import os
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -79,6 +80,26 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
 }
 
 
+def resolve_path(path: str) -> str:
+    """Resolve ``package://<pkg>/<relative path>`` in the package's share directory."""
+    prefix = 'package://'
+    if not path.startswith(prefix):
+        return path
+    package, _, relative = path[len(prefix) :].partition('/')
+    from ament_index_python.packages import (
+        PackageNotFoundError,
+        get_package_share_directory,
+    )
+
+    try:
+        share = get_package_share_directory(package)
+    except PackageNotFoundError:
+        raise CoefficientsError(
+            f'coefficients_file {path}: package {package!r} is not installed (AMENT_PREFIX_PATH)'
+        ) from None
+    return os.path.join(share, relative)
+
+
 class CompensatorNode(Node):
     """Subscribes raw gyro rate and temperature, publishes the drift-corrected Imu."""
 
@@ -88,7 +109,8 @@ class CompensatorNode(Node):
             'coefficients_file',
             '',
             ParameterDescriptor(
-                description='coefficients YAML written by `fog-temp-comp calibrate` (required)',
+                description='coefficients YAML written by `fog-temp-comp calibrate` (required; '
+                'a path, or package://<pkg>/<path in its share directory>)',
                 read_only=True,
             ),
         )
@@ -108,7 +130,7 @@ class CompensatorNode(Node):
         path = self.get_parameter('coefficients_file').value
         if not path:
             raise CoefficientsError('parameter coefficients_file is not set')
-        self.coefficients: Coefficients = load(path)
+        self.coefficients: Coefficients = load(resolve_path(path))
         self.settings = self._settings_from_parameters(self.coefficients.denoise)
         self.compensator = Compensator(self.coefficients.model, self.settings)
         self.get_logger().info(
