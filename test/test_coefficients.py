@@ -1,0 +1,143 @@
+"""Coefficients YAML: round trip, and clear errors naming the key for bad files."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from numpy.testing import assert_array_equal
+
+from fog_temp_comp.coefficients import Coefficients, CoefficientsError, load, save, to_dict
+from fog_temp_comp.denoise import DenoiseSettings
+from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range
+
+
+@pytest.fixture()
+def coeffs() -> Coefficients:
+    model = DriftModel(
+        PAPER_TERMS,
+        np.array([[-12.5, 3.2, -0.85], [-8.7e-4, 2.4e-3, -1.6e-3], [0.93, -0.62, 0.45]]),
+        Range(-40.0, 60.0),
+        Range(-0.25, 0.25),
+    )
+    return Coefficients(
+        model=model,
+        denoise=DenoiseSettings(method='iir', iir_cutoff_hz=0.02),
+        frame_id='gyro_link',
+        fit={'x': {'r_squared': np.float64(0.98)}},
+        provenance={'bags': ['a', 'b']},
+    )
+
+
+def test_round_trip(tmp_path: Path, coeffs: Coefficients) -> None:
+    path = tmp_path / 'c.yaml'
+    save(coeffs, path)
+    back = load(path)
+    assert back.model.terms == coeffs.model.terms
+    assert_array_equal(back.model.coefficients, coeffs.model.coefficients)
+    assert back.model.temperature_range_degC == coeffs.model.temperature_range_degC
+    assert back.model.tdot_range_degC_per_min == coeffs.model.tdot_range_degC_per_min
+    assert back.denoise == coeffs.denoise
+    assert back.frame_id == 'gyro_link'
+    assert back.fit == {'x': {'r_squared': 0.98}}
+    assert back.provenance == {'bags': ['a', 'b']}
+
+
+def test_file_is_human_readable_with_units_in_keys(tmp_path: Path, coeffs: Coefficients) -> None:
+    path = tmp_path / 'c.yaml'
+    save(coeffs, path)
+    data = yaml.safe_load(path.read_text())
+    assert data['schema_version'] == 1
+    assert set(data['axes']['x']) == {
+        'd0_deg_h',
+        'dt_deg_h_per_degC',
+        'dtdot_deg_h_per_degC_per_min',
+    }
+    assert data['axes']['y']['dtdot_deg_h_per_degC_per_min'] == -0.62
+    assert data['calibrated_range']['temperature_degC'] == [-40.0, 60.0]
+    assert 'deg/h' in data['model']
+
+
+def set_key(path: str, value: object) -> Callable[[dict], None]:
+    """Edit that sets ``value`` at the dotted ``path``."""
+
+    def edit(data: dict) -> None:
+        *parents, leaf = path.split('.')
+        for key in parents:
+            data = data[key]
+        data[leaf] = value
+
+    return edit
+
+
+def del_key(path: str) -> Callable[[dict], None]:
+    """Edit that deletes the dotted ``path``."""
+
+    def edit(data: dict) -> None:
+        *parents, leaf = path.split('.')
+        for key in parents:
+            data = data[key]
+        del data[leaf]
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    ('edit', 'key'),
+    [
+        (del_key('axes.z'), 'axes.z'),
+        (del_key('axes.x.dt_deg_h_per_degC'), 'axes.x.dt_deg_h_per_degC'),
+        (set_key('axes.y.d0_deg_h', float('nan')), 'axes.y.d0_deg_h'),
+        (set_key('axes.y.d0_deg_h', '3.2'), 'axes.y.d0_deg_h'),
+        (set_key('axes.x.extra_deg_h', 1.0), 'axes.x'),
+        (set_key('schema_version', 2), 'schema_version'),
+        (del_key('schema_version'), 'schema_version'),
+        (set_key('terms', ['const', 'T3']), 'terms'),
+        (del_key('calibrated_range'), 'calibrated_range'),
+        (set_key('calibrated_range.temperature_degC', [60.0, -40.0]), 'temperature_degC'),
+        (set_key('calibrated_range.tdot_degC_per_min', [0.1]), 'tdot_degC_per_min'),
+        (set_key('denoise.method', 'kalman'), 'denoise'),
+        (set_key('denoise.bogus', 1), 'denoise'),
+        (set_key('frame_id', 5), 'frame_id'),
+    ],
+)
+def test_malformed_file_names_the_key(
+    tmp_path: Path, coeffs: Coefficients, edit: Callable[[dict], None], key: str
+) -> None:
+    data = to_dict(coeffs)
+    edit(data)
+    path = tmp_path / 'bad.yaml'
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(CoefficientsError, match=key) as info:
+        load(path)
+    assert str(path) in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ('text', 'match'),
+    [
+        ('', 'mapping'),
+        ('- just\n- a list\n', 'mapping'),
+        ('axes: {x: [1, 2\n', 'not valid YAML'),
+    ],
+)
+def test_empty_or_invalid_yaml(tmp_path: Path, text: str, match: str) -> None:
+    path = tmp_path / 'bad.yaml'
+    path.write_text(text)
+    with pytest.raises(CoefficientsError, match=match):
+        load(path)
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(CoefficientsError, match='cannot read'):
+        load(tmp_path / 'nope.yaml')
+
+
+def test_example_coefficients_shipped_in_config_load() -> None:
+    path = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
+    coeffs = load(path)
+    assert coeffs.model.terms == PAPER_TERMS
+    assert coeffs.denoise.method == 'wavelet'

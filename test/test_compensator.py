@@ -1,0 +1,156 @@
+"""The compensator core: causal, same result whichever way it is driven, robust to bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from fog_temp_comp.compensator import Compensator, replay
+from fog_temp_comp.denoise import DenoiseSettings
+from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range
+from fog_temp_comp.simulate import SimulatedRun, true_model
+from fog_temp_comp.units import RAD_S_PER_DEG_H
+
+
+@pytest.fixture()
+def model() -> DriftModel:
+    coeffs = np.array([[-12.5, 3.2, -0.85], [-8.7e-4, 2.4e-3, -1.6e-3], [0.93, -0.62, 0.45]])
+    return DriftModel(PAPER_TERMS, coeffs, Range(-40.0, 60.0), Range(-1.0, 1.0))
+
+
+def test_before_temperature_rates_pass_through_uncorrected(model: DriftModel) -> None:
+    comp = Compensator(model, DenoiseSettings())
+    rate = np.array([1e-4, -2e-4, 3e-4])
+    assert_array_equal(comp.correct(0.0, rate), rate)
+    assert comp.status.counters.imu_uncorrected == 1
+    assert not comp.status.has_temperature
+
+
+def test_first_temperature_gives_static_correction_in_rad_s(model: DriftModel) -> None:
+    comp = Compensator(model, DenoiseSettings())
+    comp.add_temperature(100.0, 25.0)
+    out = comp.correct(100.5, np.zeros(3))
+    expected = model.drift_deg_h(25.0, 0.0) * RAD_S_PER_DEG_H
+    assert_allclose(out, -expected, rtol=1e-15)
+    assert_allclose(comp.status.correction_deg_h, model.drift_deg_h(25.0, 0.0))
+
+
+@pytest.mark.parametrize('method', ['wavelet', 'iir', 'none'])
+def test_steady_ramp_is_compensated_with_its_tdot(model: DriftModel, method: str) -> None:
+    # noise-free 0.5 degC/min ramp: after warm-up every method sees Tdot = 0.5
+    comp = Compensator(model, DenoiseSettings(method=method))
+    t0 = 1.7e9
+    for k in range(0, 7200):
+        comp.add_temperature(t0 + k, 0.0 + 0.5 / 60 * k)
+    status = comp.status
+    assert_allclose(status.tdot_degC_per_min, 0.5, rtol=1e-6)
+    expected = model.drift_deg_h(status.temperature_degC, 0.5)
+    assert_allclose(status.correction_deg_h, expected, rtol=1e-6)
+
+
+def test_replay_equals_one_message_at_a_time(short_cycle: SimulatedRun) -> None:
+    run = short_cycle
+    settings = DenoiseSettings()
+    batch = replay(
+        Compensator(true_model(), settings),
+        run.imu_stamps_s,
+        run.rates_rad_s,
+        run.temp_stamps_s,
+        run.temperature_degC,
+    )
+    comp = Compensator(true_model(), settings)
+    j = 0
+    manual = []
+    for k, t in enumerate(run.imu_stamps_s):
+        while j < run.temp_stamps_s.size and run.temp_stamps_s[j] <= t:
+            comp.add_temperature(run.temp_stamps_s[j], run.temperature_degC[j])
+            j += 1
+        manual.append(comp.correct(t, run.rates_rad_s[k]))
+    assert_array_equal(batch, np.array(manual))
+
+
+def test_causal_output_never_depends_on_later_input(short_cycle: SimulatedRun) -> None:
+    run = short_cycle
+    full = replay(
+        Compensator(true_model(), DenoiseSettings()),
+        run.imu_stamps_s,
+        run.rates_rad_s,
+        run.temp_stamps_s,
+        run.temperature_degC,
+    )
+    cut = run.imu_stamps_s[run.imu_stamps_s.size // 2]
+    keep_imu = run.imu_stamps_s <= cut
+    keep_temp = run.temp_stamps_s <= cut
+    part = replay(
+        Compensator(true_model(), DenoiseSettings()),
+        run.imu_stamps_s[keep_imu],
+        run.rates_rad_s[keep_imu],
+        run.temp_stamps_s[keep_temp],
+        run.temperature_degC[keep_temp],
+    )
+    assert_array_equal(part, full[keep_imu])
+
+
+def test_compensation_removes_true_drift(short_cycle: SimulatedRun) -> None:
+    # with the true model the correction tracks the simulated drift; the error left is the
+    # denoised-Tdot error times DTdot (temperature-sensor noise and filter lag)
+    run = short_cycle
+    out = replay(
+        Compensator(true_model(), DenoiseSettings(method='iir')),
+        run.imu_stamps_s,
+        run.rates_rad_s,
+        run.temp_stamps_s,
+        run.temperature_degC,
+    )
+    applied_deg_h = (run.rates_rad_s - out) / RAD_S_PER_DEG_H
+    error = applied_deg_h - run.true_drift_deg_h
+    warm = run.imu_stamps_s > run.imu_stamps_s[0] + 600
+    drift_spread = run.true_drift_deg_h[warm].std(axis=0)
+    assert np.all(error[warm].std(axis=0) < 0.25 * drift_spread)
+    assert np.all(np.abs(error[warm].mean(axis=0)) < 0.01)
+
+
+def test_bad_temperature_is_rejected_and_counted(model: DriftModel) -> None:
+    comp = Compensator(model, DenoiseSettings())
+    assert comp.add_temperature(0.0, 20.0)
+    assert not comp.add_temperature(1.0, math.nan)
+    assert not comp.add_temperature(2.0, math.inf)
+    assert not comp.add_temperature(math.nan, 20.0)
+    assert comp.status.counters.temperature_rejected == 3
+    assert comp.status.temperature_degC == 20.0
+
+
+def test_duplicate_stamp_is_ignored(model: DriftModel) -> None:
+    comp = Compensator(model, DenoiseSettings())
+    assert comp.add_temperature(5.0, 20.0)
+    assert not comp.add_temperature(5.0, 99.0)
+    assert comp.status.counters.temperature_duplicate == 1
+    assert comp.status.temperature_degC == 20.0
+
+
+def test_backwards_stamp_resets_filter_state(model: DriftModel) -> None:
+    comp = Compensator(model, DenoiseSettings(method='iir'))
+    for k in range(600):
+        comp.add_temperature(1000.0 + k, 20.0 + k / 60.0)  # 1 degC/min
+    assert comp.status.tdot_degC_per_min > 0.5
+    assert comp.add_temperature(10.0, 30.0)  # clock went back
+    assert comp.status.counters.time_jumps == 1
+    assert comp.status.tdot_degC_per_min == 0.0
+    assert comp.status.temperature_degC == 30.0
+    # history after the jump is fresh: same as a new compensator fed the same samples
+    fresh = Compensator(model, DenoiseSettings(method='iir'))
+    fresh.add_temperature(10.0, 30.0)
+    for k in range(1, 100):
+        comp.add_temperature(10.0 + k, 30.0 - k / 120.0)
+        fresh.add_temperature(10.0 + k, 30.0 - k / 120.0)
+    assert_array_equal(comp.correction_rad_s, fresh.correction_rad_s)
+
+
+def test_temperature_is_clamped_to_calibrated_range(model: DriftModel) -> None:
+    comp = Compensator(model, DenoiseSettings())
+    comp.add_temperature(0.0, 85.0)
+    assert comp.status.temperature_clamped
+    assert_allclose(comp.status.correction_deg_h, model.drift_deg_h(60.0, 0.0))
