@@ -9,6 +9,7 @@ from pathlib import Path
 
 from fog_temp_comp import __version__, commands
 from fog_temp_comp.bagio import FORMATS
+from fog_temp_comp.compensator import GuardSettings
 from fog_temp_comp.denoise import METHODS, DenoiseSettings
 
 
@@ -23,6 +24,19 @@ def _add_topics(parser: argparse.ArgumentParser) -> None:
         metavar='T',
         help="sensor_msgs/Temperature topic (default: the bag's only one)",
     )
+
+
+def _add_guard(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        '--extrapolate-tdot',
+        action='store_true',
+        help='apply the model beyond the calibrated Tdot range instead of clamping Tdot to it '
+        "(the paper's protocol: fit on one cycle rate, judge on faster ones)",
+    )
+
+
+def _guard(args: argparse.Namespace) -> GuardSettings:
+    return GuardSettings(clamp_tdot=not args.extrapolate_tdot)
 
 
 def _add_denoise(parser: argparse.ArgumentParser, default: str | None) -> None:
@@ -73,12 +87,14 @@ def build_parser() -> argparse.ArgumentParser:
         help='topic of the corrected Imu (default /imu/data)',
     )
     _add_denoise(p, None)
+    _add_guard(p)
 
     p = sub.add_parser('evaluate', help='bias stability and range before/after compensation')
     p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
     p.add_argument('--coeffs', type=Path, required=True, metavar='COEFFS.yaml')
     _add_topics(p)
     _add_denoise(p, None)
+    _add_guard(p)
 
     p = sub.add_parser('demo', help="the paper's experiment on sample or simulated bags")
     p.add_argument(
@@ -115,6 +131,7 @@ def run(args: argparse.Namespace) -> int:
             temp_topic=args.temp_topic,
             output_topic=args.output_topic,
             denoise_method=args.denoise,
+            guard=_guard(args),
         )
     if args.command == 'evaluate':
         return commands.evaluate_command(
@@ -123,6 +140,7 @@ def run(args: argparse.Namespace) -> int:
             gyro_topic=args.gyro_topic,
             temp_topic=args.temp_topic,
             denoise_method=args.denoise,
+            guard=_guard(args),
         )
     from fog_temp_comp.demo import demo_command
 

@@ -15,7 +15,7 @@ from fog_temp_comp import bagio
 from fog_temp_comp.bagio import BagError, BagWriter, read_record
 from fog_temp_comp.calibration import CalibrationError, calibrate
 from fog_temp_comp.coefficients import Coefficients, CoefficientsError, load, save
-from fog_temp_comp.compensator import Compensator
+from fog_temp_comp.compensator import Compensator, GuardSettings
 from fog_temp_comp.denoise import DenoiseSettings
 from fog_temp_comp.evaluate import compensate_record, format_scores, score_record
 from fog_temp_comp.simulate import SimulationConfig, paper_plan, simulate_run, true_model
@@ -150,6 +150,7 @@ def compensate_command(
     temp_topic: str | None = None,
     output_topic: str = '/imu/data',
     denoise_method: str | None = None,
+    guard: GuardSettings | None = None,
     stdout: TextIO = sys.stdout,
 ) -> int:
     """Replay ``in_bag`` through a :class:`Compensator`; write all inputs plus corrected Imu.
@@ -159,7 +160,7 @@ def compensate_command(
     coeffs = load(coeffs_path)
     if out_bag.exists():
         raise FileExistsError(f'{out_bag}: exists already, not overwriting')
-    compensator = Compensator(coeffs.model, effective_settings(coeffs, denoise_method))
+    compensator = Compensator(coeffs.model, effective_settings(coeffs, denoise_method), guard)
     fmt = bagio.bag_format(in_bag)
     if output_topic and not output_topic.startswith('/'):
         output_topic = '/' + output_topic
@@ -188,6 +189,8 @@ def compensate_command(
                         rate = compensator.correct(
                             bagio.stamp_to_s(msg.header.stamp), (w.x, w.y, w.z)
                         )
+                        if rate is None:  # duplicate stamp: dropped, counted
+                            continue
                         w.x, w.y, w.z = float(rate[0]), float(rate[1]), float(rate[2])
                         writer.write(output_topic, log_ns, msg)
                         n_out += 1
@@ -223,6 +226,7 @@ def evaluate_command(
     gyro_topic: str | None = None,
     temp_topic: str | None = None,
     denoise_method: str | None = None,
+    guard: GuardSettings | None = None,
     stdout: TextIO = sys.stdout,
 ) -> int:
     """Print stability and range before/after compensation for each bag and axis."""
@@ -230,7 +234,9 @@ def evaluate_command(
     scores = []
     for bag in bags:
         record = read_record(bag, gyro_topic=gyro_topic, temp_topic=temp_topic)
-        corrected = compensate_record(record, coeffs, effective_settings(coeffs, denoise_method))
+        corrected = compensate_record(
+            record, coeffs, effective_settings(coeffs, denoise_method), guard
+        )
         scores += score_record(bag.name, record.imu_stamps_s, record.rates_rad_s, corrected)
     print(format_scores(scores), file=stdout)
     return 0

@@ -13,43 +13,129 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fog_temp_comp.denoise import DenoiseSettings, TdotDenoiser, make_denoiser
-from fog_temp_comp.grid import GridPoint, TemperatureGrid
+from fog_temp_comp.denoise import DenoiseSettings
 from fog_temp_comp.model import DriftModel
-from fog_temp_comp.units import RAD_S_PER_DEG_H
+from fog_temp_comp.tdot import TdotEstimate, TdotEstimator, make_estimator
+from fog_temp_comp.units import RAD_S_PER_DEG_H, S_PER_MIN
 
 FloatArray = NDArray[np.float64]
+STALE_POLICIES = ('hold', 'none')
+
+
+@dataclass(frozen=True)
+class GuardSettings:
+    """How the compensator treats missing, stale or implausible input.
+
+    Attributes
+    ----------
+    temperature_timeout_s : float
+        Temperature older (or newer) than this relative to a gyro stamp is stale; a gap this long
+        between temperature samples restarts the Tdot estimate.
+    stale_policy : str
+        With stale temperature: ``'hold'`` keeps applying the last correction, ``'none'`` passes
+        the gyro rate through uncorrected.
+    clamp_temperature, clamp_tdot : bool
+        Clamp T and Tdot to the calibrated range (no silent extrapolation; reported either way).
+    time_jump_threshold_s : float
+        A stamp this far behind the previous one is a time jump (bag looped, clock reset) and
+        resets the filter state; a smaller step back is an out-of-order message.
+    max_temperature_step_degC : float
+        A temperature sample further than this (plus ``max_temperature_rate_degC_per_min`` times
+        the elapsed time) from the previous one is rejected as a glitch, unless
+        ``step_confirm_samples`` consecutive samples agree on the new level (a real step, which
+        restarts the Tdot estimate).
+
+    """
+
+    temperature_timeout_s: float = 10.0
+    stale_policy: str = 'hold'
+    clamp_temperature: bool = True
+    clamp_tdot: bool = True
+    time_jump_threshold_s: float = 1.0
+    max_temperature_step_degC: float = 2.0
+    max_temperature_rate_degC_per_min: float = 20.0
+    step_confirm_samples: int = 5
+
+    def __post_init__(self) -> None:
+        if self.stale_policy not in STALE_POLICIES:
+            raise ValueError(
+                f'stale_policy must be one of {STALE_POLICIES}, got {self.stale_policy!r}'
+            )
+        for name in (
+            'temperature_timeout_s',
+            'time_jump_threshold_s',
+            'max_temperature_step_degC',
+            'max_temperature_rate_degC_per_min',
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and value > 0 and math.isfinite(value)):
+                raise ValueError(f'{name} must be a finite number > 0, got {value!r}')
+        if not (isinstance(self.step_confirm_samples, int) and self.step_confirm_samples >= 1):
+            raise ValueError(
+                f'step_confirm_samples must be an integer >= 1, got {self.step_confirm_samples!r}'
+            )
 
 
 @dataclass
 class CompensatorCounters:
-    """Message counts since start (for diagnostics)."""
+    """Message counts since start (for diagnostics); every input lands in exactly one group."""
 
     imu_corrected: int = 0
-    imu_uncorrected: int = 0
-    imu_rejected: int = 0
+    imu_uncorrected: int = 0  # no temperature yet, or stale with stale_policy 'none'
+    imu_held: int = 0  # corrected with a held correction (stale temperature, 'hold')
+    imu_duplicate: int = 0  # dropped: same stamp as the previous gyro message
+    # flags, each also counted in one of the groups above:
+    imu_out_of_order: int = 0  # stamp earlier than the previous one (still corrected)
+    imu_nonfinite: int = 0  # NaN/inf component(s) left as they were, others corrected
+    imu_zero_stamp: int = 0  # no usable stamp: corrected with the current correction
     temperature_accepted: int = 0
-    temperature_rejected: int = 0
+    temperature_rejected: int = 0  # NaN/inf value or stamp
     temperature_duplicate: int = 0
+    temperature_out_of_order: int = 0
+    temperature_glitches: int = 0  # implausible jump, rejected
+    temperature_steps: int = 0  # confirmed step, estimate restarted
+    temperature_gaps: int = 0  # gap longer than the timeout, estimate restarted
     time_jumps: int = 0
+
+    @property
+    def imu_total(self) -> int:
+        """Gyro messages received (each is counted once in one of the first four groups)."""
+        return self.imu_corrected + self.imu_uncorrected + self.imu_held + self.imu_duplicate
+
+    @property
+    def temperature_total(self) -> int:
+        """Temperature messages received."""
+        return (
+            self.temperature_accepted
+            + self.temperature_rejected
+            + self.temperature_duplicate
+            + self.temperature_out_of_order
+            + self.temperature_glitches
+        )
 
 
 @dataclass
 class CompensatorStatus:
-    """What the compensator is applying now.
+    """What the compensator is applying now (for diagnostics).
 
-    ``correction_deg_h`` (shape (3,)) is the drift subtracted from each axis; it is all zero and
-    ``has_temperature`` is False until the first temperature sample.
+    ``correction_deg_h`` (shape (3,)) is the drift subtracted from each axis at the last gyro
+    message; it is zero until the first temperature sample.
     """
 
     has_temperature: bool = False
     temperature_degC: float = math.nan
-    tdot_raw_degC_per_min: float = math.nan
     tdot_degC_per_min: float = 0.0
+    tdot_raw_degC_per_min: float = math.nan
+    temperature_used_degC: float = math.nan
+    tdot_used_degC_per_min: float = 0.0
     temperature_clamped: bool = False
+    tdot_clamped: bool = False
+    temperature_out_of_range: bool = False
     tdot_out_of_range: bool = False
-    denoiser_ready: bool = False
+    temperature_stale: bool = False
+    estimator_ready: bool = False
     last_temperature_stamp_s: float = -math.inf
+    last_imu_stamp_s: float = -math.inf
     correction_deg_h: FloatArray = field(default_factory=lambda: np.zeros(3))
     counters: CompensatorCounters = field(default_factory=CompensatorCounters)
 
@@ -62,99 +148,189 @@ class Compensator:
     model : DriftModel
         Calibrated coefficients (deg/h per unit of each term).
     denoise : DenoiseSettings
-        Tdot grid period and denoiser (wavelet, IIR or none).
+        Tdot estimation (grid period and denoiser).
+    guard : GuardSettings, optional
+        Handling of stale, implausible and out-of-order input.
 
     Notes
     -----
-    Temperature samples are binned on the ``denoise.tdot_period_s`` grid; each completed bin gives
-    a raw Tdot (slope from the previous bin, degC/min) that goes through the online denoiser. The
-    correction uses the latest completed bin's mean temperature (clamped to the calibrated range)
-    and the latest denoised Tdot, and is held until the next bin completes.
+    At each gyro stamp ``t`` the temperature is extrapolated from the latest Tdot estimate,
+    ``T(t) = T_ref + Tdot * (t - t_ref)`` (causal), both are limited to the calibrated range
+    (``guard``), and the modelled drift is subtracted.
 
     """
 
-    def __init__(self, model: DriftModel, denoise: DenoiseSettings) -> None:
+    def __init__(
+        self, model: DriftModel, denoise: DenoiseSettings, guard: GuardSettings | None = None
+    ) -> None:
         self.model = model
         self.denoise = denoise
-        self._grid = TemperatureGrid(denoise.tdot_period_s)
-        self._denoiser: TdotDenoiser = make_denoiser(denoise)
+        self.guard = guard or GuardSettings()
+        self._estimator: TdotEstimator = make_estimator(denoise)
         self.status = CompensatorStatus()
         self._correction_rad_s = np.zeros(3)
+        self._pending: list[tuple[float, float]] = []  # candidate samples of a temperature step
+        self._last_temperature = math.nan
 
     def reset(self) -> None:
         """Forget the temperature history (keeps the counters)."""
-        counters = self.status.counters
-        self._grid.reset()
-        self._denoiser.reset()
-        self.status = CompensatorStatus(counters=counters)
+        self._estimator.reset()
+        self.status = CompensatorStatus(counters=self.status.counters)
         self._correction_rad_s = np.zeros(3)
+        self._pending = []
+        self._last_temperature = math.nan
 
+    # ------------------------------------------------------------------ temperature
     def add_temperature(self, stamp_s: float, temperature_degC: float) -> bool:
         """Feed one temperature sample (degC at ``stamp_s`` seconds); return whether it was used.
 
-        Non-finite values are rejected; a repeated stamp is ignored; a stamp earlier than the
-        previous one (bag looped, clock reset) resets the filter state first.
+        Rejected (and counted): non-finite values, a repeated stamp, a stamp slightly earlier
+        than the previous one, an implausible jump. A stamp far earlier (time jump) resets the
+        state first; a gap longer than the timeout restarts the Tdot estimate.
         """
         status = self.status
         counters = status.counters
-        if not (math.isfinite(stamp_s) and math.isfinite(temperature_degC)):
+        guard = self.guard
+        if not (math.isfinite(stamp_s) and math.isfinite(temperature_degC)) or stamp_s <= 0:
             counters.temperature_rejected += 1
             return False
-        if stamp_s == status.last_temperature_stamp_s:
+        last = status.last_temperature_stamp_s
+        if stamp_s == last:
             counters.temperature_duplicate += 1
             return False
-        if stamp_s < status.last_temperature_stamp_s:
+        if stamp_s < last:
+            if last - stamp_s < guard.time_jump_threshold_s:
+                counters.temperature_out_of_order += 1
+                return False
             counters.time_jumps += 1
             self.reset()
             status = self.status
+        elif stamp_s - last > guard.temperature_timeout_s and status.has_temperature:
+            counters.temperature_gaps += 1
+            self._restart_estimate()
+        elif not self._plausible(stamp_s, temperature_degC):
+            return False
         counters.temperature_accepted += 1
         status.last_temperature_stamp_s = stamp_s
-        point = self._grid.add(stamp_s, temperature_degC)
-        if point is not None:
-            self._on_grid_point(point)
-        elif not status.has_temperature:
-            status.has_temperature = True
-            self._update_correction(temperature_degC, 0.0)
+        status.has_temperature = True
+        status.temperature_stale = False
+        self._last_temperature = temperature_degC
+        if self._estimator.add(stamp_s, temperature_degC):
+            estimate = self._estimator.estimate
+            assert estimate is not None
+            status.temperature_degC = estimate.temperature_degC
+            status.tdot_degC_per_min = estimate.tdot_degC_per_min
+            status.tdot_raw_degC_per_min = estimate.raw_tdot_degC_per_min
+        status.estimator_ready = self._estimator.ready
         return True
 
-    def _on_grid_point(self, point: GridPoint) -> None:
-        status = self.status
-        tdot = status.tdot_degC_per_min
-        if not math.isnan(point.tdot_degC_per_min):
-            status.tdot_raw_degC_per_min = point.tdot_degC_per_min
-            tdot = self._denoiser.update(point.tdot_degC_per_min)
-        status.denoiser_ready = self._denoiser.ready
-        status.has_temperature = True
-        self._update_correction(point.temperature_degC, tdot)
+    def _restart_estimate(self) -> None:
+        self._estimator.reset()
+        self._pending = []
 
-    def _update_correction(self, temperature_degC: float, tdot_degC_per_min: float) -> None:
-        status = self.status
-        model = self.model
-        t_used = model.temperature_range_degC.clamp(temperature_degC)
-        status.temperature_degC = temperature_degC
-        status.temperature_clamped = t_used != temperature_degC
-        status.tdot_degC_per_min = tdot_degC_per_min
-        status.tdot_out_of_range = not model.tdot_range_degC_per_min.contains(tdot_degC_per_min)
-        status.correction_deg_h = model.drift_deg_h(t_used, tdot_degC_per_min)
-        self._correction_rad_s = status.correction_deg_h * RAD_S_PER_DEG_H
+    def _plausible(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Glitch filter: reject a sample that jumps away, unless the jump is confirmed."""
+        previous = self._last_temperature
+        if math.isnan(previous):
+            return True
+        guard = self.guard
+        elapsed_min = (stamp_s - self.status.last_temperature_stamp_s) / S_PER_MIN
+        allowed = guard.max_temperature_step_degC + guard.max_temperature_rate_degC_per_min * (
+            elapsed_min
+        )
+        if abs(temperature_degC - previous) <= allowed:
+            self._pending = []
+            return True
+        pending = self._pending
+        if pending and abs(temperature_degC - pending[-1][1]) > allowed:
+            pending.clear()
+        pending.append((stamp_s, temperature_degC))
+        if len(pending) < guard.step_confirm_samples:
+            self.status.counters.temperature_glitches += 1
+            return False
+        # a real step: restart the estimate from the new level
+        self.status.counters.temperature_steps += 1
+        self._restart_estimate()
+        return True
 
+    # ------------------------------------------------------------------ gyro
     @property
     def correction_rad_s(self) -> FloatArray:
-        """Drift currently subtracted, shape (3,), rad/s."""
+        """Drift subtracted at the last gyro message, shape (3,), rad/s."""
         return self._correction_rad_s
 
-    def correct(self, stamp_s: float, rate_rad_s: ArrayLike) -> FloatArray:
-        """Corrected angular rate (rad/s, shape (3,)) for one gyro sample.
+    def correct(self, stamp_s: float, rate_rad_s: ArrayLike) -> FloatArray | None:
+        """Corrected angular rate (rad/s, shape (3,)) for one gyro sample, or None to drop it.
 
-        Until temperature arrives the rate passes through unchanged (counted as uncorrected).
+        Only a repeated stamp is dropped. Without temperature (or with stale temperature and
+        ``stale_policy='none'``) the rate passes through unchanged; non-finite components are
+        left as they are and the others corrected.
         """
-        rate = np.asarray(rate_rad_s, dtype=np.float64)
-        counters = self.status.counters
-        if not self.status.has_temperature:
+        rate = np.array(rate_rad_s, dtype=np.float64)
+        status = self.status
+        counters = status.counters
+        guard = self.guard
+        last = status.last_imu_stamp_s
+        stamp_ok = math.isfinite(stamp_s) and stamp_s > 0
+        if not stamp_ok:
+            counters.imu_zero_stamp += 1
+        elif stamp_s == last:
+            counters.imu_duplicate += 1
+            return None
+        elif stamp_s < last:
+            if last - stamp_s >= guard.time_jump_threshold_s:
+                counters.time_jumps += 1
+                self.reset()
+                status = self.status
+                status.last_imu_stamp_s = stamp_s
+            else:
+                counters.imu_out_of_order += 1
+        else:
+            status.last_imu_stamp_s = stamp_s
+        if not np.all(np.isfinite(rate)):
+            counters.imu_nonfinite += 1
+        if not status.has_temperature:
             counters.imu_uncorrected += 1
-            return rate.copy()
-        counters.imu_corrected += 1
+            status.correction_deg_h = np.zeros(3)
+            self._correction_rad_s = np.zeros(3)
+            return rate
+        stale = stamp_ok and abs(stamp_s - status.last_temperature_stamp_s) > (
+            guard.temperature_timeout_s
+        )
+        status.temperature_stale = stale
+        if stale:
+            if guard.stale_policy == 'none':
+                counters.imu_uncorrected += 1
+                return rate
+            counters.imu_held += 1
+        else:
+            if stamp_ok:
+                self._update_correction(stamp_s)
+            counters.imu_corrected += 1
         return rate - self._correction_rad_s
+
+    def _update_correction(self, stamp_s: float) -> None:
+        estimate: TdotEstimate | None = self._estimator.estimate
+        if estimate is None:
+            return
+        status = self.status
+        model = self.model
+        tdot = estimate.tdot_degC_per_min
+        # the estimate refers to a past instant (grid bins lag); extrapolate at most this far
+        horizon_s = 2 * self.denoise.tdot_period_s + self.guard.temperature_timeout_s
+        elapsed_s = min(max(stamp_s - estimate.stamp_s, 0.0), horizon_s)
+        temperature = estimate.temperature_degC + tdot * elapsed_s / S_PER_MIN
+        t_range, r_range = model.temperature_range_degC, model.tdot_range_degC_per_min
+        status.temperature_out_of_range = not t_range.contains(temperature)
+        status.tdot_out_of_range = not r_range.contains(tdot)
+        t_used = t_range.clamp(temperature) if self.guard.clamp_temperature else temperature
+        r_used = r_range.clamp(tdot) if self.guard.clamp_tdot else tdot
+        status.temperature_clamped = t_used != temperature
+        status.tdot_clamped = r_used != tdot
+        status.temperature_used_degC = t_used
+        status.tdot_used_degC_per_min = r_used
+        status.correction_deg_h = model.drift_deg_h(t_used, r_used)
+        self._correction_rad_s = status.correction_deg_h * RAD_S_PER_DEG_H
 
 
 def replay(
@@ -171,7 +347,8 @@ def replay(
     Returns
     -------
     ndarray, shape (N, 3)
-        Corrected rates (rad/s) for each gyro sample, in input order.
+        Corrected rates (rad/s) for each gyro sample, in input order; NaN rows for dropped
+        (duplicate-stamp) samples.
 
     """
     imu_t = np.asarray(imu_stamps_s, dtype=np.float64)
@@ -179,14 +356,14 @@ def replay(
     temp_t = np.asarray(temp_stamps_s, dtype=np.float64)
     temps = np.asarray(temperature_degC, dtype=np.float64)
     n_imu = imu_t.size
-    order = np.lexsort(
-        (np.r_[np.ones(n_imu), np.zeros(temp_t.size)], np.r_[imu_t, temp_t])
-    ).tolist()
-    out = np.empty_like(rates)
+    order = np.lexsort((np.r_[np.ones(n_imu), np.zeros(temp_t.size)], np.r_[imu_t, temp_t]))
+    out = np.full_like(rates, np.nan)
     imu_list, temp_list, temp_values = imu_t.tolist(), temp_t.tolist(), temps.tolist()
-    for k in order:
+    for k in order.tolist():
         if k < n_imu:
-            out[k] = compensator.correct(imu_list[k], rates[k])
+            corrected = compensator.correct(imu_list[k], rates[k])
+            if corrected is not None:
+                out[k] = corrected
         else:
             j = k - n_imu
             compensator.add_temperature(temp_list[j], temp_values[j])

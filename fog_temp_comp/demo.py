@@ -17,11 +17,14 @@ import yaml
 from fog_temp_comp.bagio import read_record
 from fog_temp_comp.coefficients import load
 from fog_temp_comp.commands import calibrate_command, simulate_command
+from fog_temp_comp.compensator import GuardSettings
 from fog_temp_comp.denoise import DenoiseSettings
 from fog_temp_comp.evaluate import compensate_record, score_record
 from fog_temp_comp.simulate import TRAINING_RUN
 
 METHODS = ('none', 'iir', 'wavelet')
+#: the paper judges a model fitted at 0.2 degC/min on faster cycles: Tdot is extrapolated
+PAPER_PROTOCOL = GuardSettings(clamp_tdot=False)
 
 
 @dataclass(frozen=True)
@@ -60,7 +63,7 @@ def run_demo(bags_dir: Path, out_dir: Path, *, stdout: TextIO = sys.stdout) -> l
                 name,
                 record.imu_stamps_s,
                 record.rates_rad_s,
-                compensate_record(record, coeffs[m]),
+                compensate_record(record, coeffs[m], guard=PAPER_PROTOCOL),
                 taus_s=(10.0,),
             )
             for m in METHODS

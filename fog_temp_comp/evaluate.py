@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fog_temp_comp.coefficients import Coefficients
-from fog_temp_comp.compensator import Compensator, replay
+from fog_temp_comp.compensator import Compensator, GuardSettings, replay
 from fog_temp_comp.denoise import DenoiseSettings
 from fog_temp_comp.metrics import bias_range, bias_stability, window_means
 from fog_temp_comp.record import ChamberRecord
@@ -34,10 +34,13 @@ class Score:
 
 
 def compensate_record(
-    record: ChamberRecord, coeffs: Coefficients, denoise: DenoiseSettings | None = None
+    record: ChamberRecord,
+    coeffs: Coefficients,
+    denoise: DenoiseSettings | None = None,
+    guard: GuardSettings | None = None,
 ) -> FloatArray:
     """Corrected rates (N, 3) rad/s, from a fresh :class:`Compensator` replaying the record."""
-    compensator = Compensator(coeffs.model, denoise or coeffs.denoise)
+    compensator = Compensator(coeffs.model, denoise or coeffs.denoise, guard)
     return replay(
         compensator,
         record.imu_stamps_s,

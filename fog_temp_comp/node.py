@@ -1,11 +1,13 @@
 """ROS 2 node ``compensator``: raw gyro Imu + Temperature in, corrected Imu out.
 
 Thin glue around :class:`fog_temp_comp.compensator.Compensator`: messages are converted to
-floats (stamps in s, rates in rad/s, temperature in degC), the core does the rest.
+floats (stamps in s, rates in rad/s, temperature in degC), the core does the rest, and its status
+is published on ``/diagnostics``.
 
 Topics (remappable): ``imu/data_raw`` (sensor_msgs/Imu, in), ``imu/temperature``
-(sensor_msgs/Temperature, in), ``imu/data`` (sensor_msgs/Imu, out). Sensor-data QoS; reliability
-and depth can be overridden per topic with the standard ``qos_overrides`` parameters.
+(sensor_msgs/Temperature, in), ``imu/data`` (sensor_msgs/Imu, out), ``/diagnostics``
+(diagnostic_msgs/DiagnosticArray, out). Sensor-data QoS on the data topics; reliability and depth
+can be overridden per topic with the standard ``qos_overrides`` parameters.
 """
 
 from __future__ import annotations
@@ -13,14 +15,18 @@ from __future__ import annotations
 import dataclasses
 import os
 import sys
+import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
     ParameterDescriptor,
+    SetParametersResult,
 )
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.executors import ExternalShutdownException
@@ -31,7 +37,7 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, Temperature
 
 from fog_temp_comp.coefficients import Coefficients, CoefficientsError, load
-from fog_temp_comp.compensator import Compensator
+from fog_temp_comp.compensator import STALE_POLICIES, Compensator, GuardSettings
 from fog_temp_comp.denoise import (
     BOUNDARY_MODES,
     METHODS,
@@ -39,45 +45,66 @@ from fog_temp_comp.denoise import (
     THRESHOLD_RULES,
     DenoiseSettings,
 )
+from fog_temp_comp.diagnostics import build_report
+from fog_temp_comp.units import AXES, RAD_S_PER_DEG_H
 
-#: filter parameters: name -> (DenoiseSettings field, type, description)
+_T = Parameter.Type
+#: Tdot filter parameters, unset = as in the coefficients file: name -> (field, type, text)
 FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
-    'denoise': ('method', Parameter.Type.STRING, f'Tdot denoising, one of {METHODS}'),
-    'tdot_period_s': (
-        'tdot_period_s',
-        Parameter.Type.DOUBLE,
-        'grid period on which Tdot is estimated (s); the paper uses 10 s',
-    ),
-    'wavelet': ('wavelet', Parameter.Type.STRING, 'PyWavelets name, e.g. sym8'),
-    'wavelet_level': ('wavelet_level', Parameter.Type.INTEGER, 'wavelet decomposition levels'),
-    'threshold_rule': (
-        'threshold_rule',
-        Parameter.Type.STRING,
-        f'wavelet threshold rule, one of {THRESHOLD_RULES}',
-    ),
-    'threshold_mode': (
-        'threshold_mode',
-        Parameter.Type.STRING,
-        f'wavelet thresholding, one of {THRESHOLD_MODES}',
-    ),
-    'boundary_mode': (
-        'boundary_mode',
-        Parameter.Type.STRING,
-        f'wavelet signal extension, one of {BOUNDARY_MODES}',
-    ),
-    'window_samples': (
-        'window_samples',
-        Parameter.Type.INTEGER,
-        'sliding wavelet window (Tdot samples)',
-    ),
-    'delay_samples': (
-        'delay_samples',
-        Parameter.Type.INTEGER,
-        'wavelet output delay (Tdot samples); 0 = newest sample',
-    ),
-    'iir_order': ('iir_order', Parameter.Type.INTEGER, 'Butterworth order'),
-    'iir_cutoff_hz': ('iir_cutoff_hz', Parameter.Type.DOUBLE, 'Butterworth cut-off (Hz)'),
+    'denoise': ('method', _T.STRING, f'Tdot denoising, one of {METHODS}'),
+    'tdot_period_s': ('tdot_period_s', _T.DOUBLE, 'grid period on which Tdot is estimated (s)'),
+    'wavelet': ('wavelet', _T.STRING, 'PyWavelets wavelet name, e.g. sym8'),
+    'wavelet_level': ('wavelet_level', _T.INTEGER, 'wavelet decomposition levels'),
+    'threshold_rule': ('threshold_rule', _T.STRING, f'threshold rule, one of {THRESHOLD_RULES}'),
+    'threshold_mode': ('threshold_mode', _T.STRING, f'thresholding, one of {THRESHOLD_MODES}'),
+    'boundary_mode': ('boundary_mode', _T.STRING, f'signal extension, one of {BOUNDARY_MODES}'),
+    'window_samples': ('window_samples', _T.INTEGER, 'sliding wavelet window (Tdot samples)'),
+    'delay_samples': ('delay_samples', _T.INTEGER, 'wavelet read-out delay (Tdot samples)'),
+    'iir_order': ('iir_order', _T.INTEGER, 'Butterworth order'),
+    'iir_cutoff_hz': ('iir_cutoff_hz', _T.DOUBLE, 'Butterworth cut-off (Hz)'),
 }
+_GUARD_DEFAULTS = GuardSettings()
+#: input guards: name -> (default, text)
+GUARD_PARAMETERS: dict[str, tuple[Any, str]] = {
+    'temperature_timeout_s': (
+        _GUARD_DEFAULTS.temperature_timeout_s,
+        'temperature older than this (s) relative to a gyro stamp is stale',
+    ),
+    'stale_policy': (
+        _GUARD_DEFAULTS.stale_policy,
+        f'with stale temperature, one of {STALE_POLICIES}: hold the last correction or none',
+    ),
+    'clamp_temperature': (
+        _GUARD_DEFAULTS.clamp_temperature,
+        'clamp temperature to the calibrated range (else extrapolate, reported)',
+    ),
+    'clamp_tdot': (
+        _GUARD_DEFAULTS.clamp_tdot,
+        'clamp Tdot to the calibrated range (else extrapolate the linear term, reported)',
+    ),
+    'time_jump_threshold_s': (
+        _GUARD_DEFAULTS.time_jump_threshold_s,
+        'a stamp this far (s) behind the previous one resets the filter (bag loop, sim reset)',
+    ),
+    'max_temperature_step_degC': (
+        _GUARD_DEFAULTS.max_temperature_step_degC,
+        'temperature jump (degC) beyond which a sample is a glitch unless confirmed',
+    ),
+    'max_temperature_rate_degC_per_min': (
+        _GUARD_DEFAULTS.max_temperature_rate_degC_per_min,
+        'plausible temperature rate (degC/min) added to the glitch threshold',
+    ),
+}
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything the compensator is built from."""
+
+    coefficients_file: str
+    coefficients: Coefficients
+    settings: DenoiseSettings
+    guard: GuardSettings
 
 
 def resolve_path(path: str) -> str:
@@ -105,38 +132,14 @@ class CompensatorNode(Node):
 
     def __init__(self, node_name: str = 'fog_temp_compensator', **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        self.declare_parameter(
-            'coefficients_file',
-            '',
-            ParameterDescriptor(
-                description='coefficients YAML written by `fog-temp-comp calibrate` (required; '
-                'a path, or package://<pkg>/<path in its share directory>)',
-                read_only=True,
-            ),
+        self._declare_parameters()
+        self.config = self._build_config({})
+        self.compensator = Compensator(
+            self.config.coefficients.model, self.config.settings, self.config.guard
         )
-        for name, (_, ptype, text) in FILTER_PARAMETERS.items():
-            descriptor = ParameterDescriptor(
-                description=text + '; unset = as stored in the coefficients file',
-                read_only=True,
-            )
-            if name in ('tdot_period_s', 'iir_cutoff_hz'):
-                descriptor.floating_point_range = [
-                    FloatingPointRange(from_value=0.0, to_value=3600.0, step=0.0)
-                ]
-            if ptype == Parameter.Type.INTEGER:
-                descriptor.integer_range = [IntegerRange(from_value=0, to_value=1 << 20, step=1)]
-            self.declare_parameter(name, ptype, descriptor)
-
-        path = self.get_parameter('coefficients_file').value
-        if not path:
-            raise CoefficientsError('parameter coefficients_file is not set')
-        self.coefficients: Coefficients = load(resolve_path(path))
-        self.settings = self._settings_from_parameters(self.coefficients.denoise)
-        self.compensator = Compensator(self.coefficients.model, self.settings)
-        self.get_logger().info(
-            f'coefficients {path} (frame {self.coefficients.frame_id or "any"}), Tdot denoise '
-            f'{self.settings.method}'
-        )
+        self.reconfigurations = 0
+        self.frame_mismatches = 0
+        self._log_config('started')
 
         qos_options = QoSOverridingOptions.with_default_policies()
         self._publisher = self.create_publisher(
@@ -156,18 +159,122 @@ class CompensatorNode(Node):
             qos_profile_sensor_data,
             qos_overriding_options=qos_options,
         )
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._last_counters = dataclasses.replace(self.compensator.status.counters)
+        self._last_report_time = time.monotonic()
+        period = self.get_parameter('diagnostics_period_s').value
+        self._diag_timer = self.create_timer(period, self.publish_diagnostics)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
 
-    def _settings_from_parameters(self, base: DenoiseSettings) -> DenoiseSettings:
+    # ------------------------------------------------------------------ parameters
+    def _declare_parameters(self) -> None:
+        self.declare_parameter(
+            'coefficients_file',
+            '',
+            ParameterDescriptor(
+                description='coefficients YAML from `fog-temp-comp calibrate` (required): a '
+                'path, or package://<pkg>/<path in its share directory>; setting it reloads'
+            ),
+        )
+        for name, (_, ptype, text) in FILTER_PARAMETERS.items():
+            descriptor = ParameterDescriptor(
+                description=text + '; unset = as in the coefficients file; changing it '
+                'restarts the Tdot filter'
+            )
+            if ptype == _T.DOUBLE:
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=0.0, to_value=3600.0, step=0.0)
+                ]
+            if ptype == _T.INTEGER:
+                descriptor.integer_range = [IntegerRange(from_value=0, to_value=1 << 20, step=1)]
+            self.declare_parameter(name, ptype, descriptor)
+        for name, (default, text) in GUARD_PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=text)
+            if isinstance(default, float):
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=0.001, to_value=1e6, step=0.0)
+                ]
+            self.declare_parameter(name, default, descriptor)
+        self.declare_parameter(
+            'require_frame_id_match',
+            False,
+            ParameterDescriptor(
+                description='pass gyro messages whose frame_id differs from the calibrated '
+                'one through uncorrected (else correct them and warn)'
+            ),
+        )
+        self.declare_parameter(
+            'inflate_covariance',
+            False,
+            ParameterDescriptor(
+                description='add the calibration residual variance to the angular velocity '
+                'covariance diagonal (when the covariance is known)'
+            ),
+        )
+        self.declare_parameter(
+            'diagnostics_period_s',
+            1.0,
+            ParameterDescriptor(
+                description='period of /diagnostics (s)',
+                read_only=True,
+                floating_point_range=[FloatingPointRange(from_value=0.01, to_value=60.0)],
+            ),
+        )
+
+    def _value(self, name: str, changes: dict[str, Parameter]) -> Any:
+        if name in changes:
+            return changes[name].value
+        try:
+            return self.get_parameter(name).value
+        except ParameterUninitializedException:
+            return None
+
+    def _build_config(self, changes: dict[str, Parameter]) -> Config:
+        """Config from the current parameters with ``changes`` applied; raises on bad values."""
+        path = self._value('coefficients_file', changes)
+        if not path:
+            raise CoefficientsError('parameter coefficients_file is not set')
+        coefficients = load(resolve_path(path))
         overrides = {}
         for name, (field, _, _) in FILTER_PARAMETERS.items():
-            try:
-                value = self.get_parameter(name).value
-            except ParameterUninitializedException:
-                continue
+            value = self._value(name, changes)
             if value is not None:
                 overrides[field] = value
-        return dataclasses.replace(base, **overrides)
+        settings = dataclasses.replace(coefficients.denoise, **overrides)
+        guard = GuardSettings(**{name: self._value(name, changes) for name in GUARD_PARAMETERS})
+        return Config(path, coefficients, settings, guard)
 
+    def _on_set_parameters(self, params: Sequence[Parameter]) -> SetParametersResult:
+        changes = {p.name: p for p in params}
+        rebuild = set(changes) & ({'coefficients_file'} | set(FILTER_PARAMETERS))
+        guard_change = set(changes) & set(GUARD_PARAMETERS)
+        if not (rebuild or guard_change):
+            return SetParametersResult(successful=True)
+        try:
+            config = self._build_config(changes)
+        except (CoefficientsError, ValueError, TypeError) as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        self.config = config
+        if rebuild:
+            counters = self.compensator.status.counters
+            self.compensator = Compensator(
+                config.coefficients.model, config.settings, config.guard
+            )
+            self.compensator.status.counters = counters
+            self.reconfigurations += 1
+            self._log_config(f'reconfigured ({", ".join(sorted(rebuild))})')
+        else:
+            self.compensator.guard = config.guard
+        return SetParametersResult(successful=True)
+
+    def _log_config(self, what: str) -> None:
+        cfg = self.config
+        self.get_logger().info(
+            f'{what}: coefficients {cfg.coefficients_file} '
+            f'(frame {cfg.coefficients.frame_id or "any"}), Tdot denoise {cfg.settings.method}'
+        )
+
+    # ------------------------------------------------------------------ data
     def _on_temperature(self, msg: Temperature) -> None:
         stamp = msg.header.stamp
         self.compensator.add_temperature(stamp.sec + stamp.nanosec * 1e-9, msg.temperature)
@@ -175,9 +282,60 @@ class CompensatorNode(Node):
     def _on_imu(self, msg: Imu) -> None:
         stamp = msg.header.stamp
         w = msg.angular_velocity
+        expected_frame = self.config.coefficients.frame_id
+        if expected_frame and msg.header.frame_id != expected_frame:
+            self.frame_mismatches += 1
+            if self.get_parameter('require_frame_id_match').value:
+                self._publisher.publish(msg)
+                return
         rate = self.compensator.correct(stamp.sec + stamp.nanosec * 1e-9, (w.x, w.y, w.z))
+        if rate is None:  # duplicate stamp: dropped and counted
+            return
         w.x, w.y, w.z = float(rate[0]), float(rate[1]), float(rate[2])
+        if self.get_parameter('inflate_covariance').value:
+            self._inflate(msg)
         self._publisher.publish(msg)
+
+    def _inflate(self, msg: Imu) -> None:
+        cov = msg.angular_velocity_covariance
+        if cov[0] < 0:  # -1: covariance unknown, leave the convention alone
+            return
+        fit = self.config.coefficients.fit
+        for j, axis in enumerate(AXES):
+            std_deg_h = float(fit.get(axis, {}).get('residual_std_deg_h', 0.0))
+            cov[4 * j] += (std_deg_h * RAD_S_PER_DEG_H) ** 2
+
+    # ------------------------------------------------------------------ diagnostics
+    def publish_diagnostics(self) -> None:
+        """Publish one DiagnosticArray with the compensator's health."""
+        now = time.monotonic()
+        elapsed = max(now - self._last_report_time, 1e-9)
+        counters = self.compensator.status.counters
+        previous = self._last_counters
+        report = build_report(
+            self.compensator.status,
+            previous,
+            coefficients=self.config.coefficients,
+            coefficients_file=self.config.coefficients_file,
+            method=self.config.settings.method,
+            imu_rate_hz=(counters.imu_total - previous.imu_total) / elapsed,
+            temperature_rate_hz=(counters.temperature_total - previous.temperature_total)
+            / elapsed,
+            frame_mismatches=self.frame_mismatches,
+            require_frame_match=self.get_parameter('require_frame_id_match').value,
+        )
+        self._last_counters = dataclasses.replace(counters)
+        self._last_report_time = now
+        status = DiagnosticStatus(
+            level=bytes([report.level]),
+            name=f'{self.get_name()}: FOG temperature compensation',
+            message=report.message,
+            hardware_id=self.config.coefficients.frame_id,
+            values=[KeyValue(key=k, value=v) for k, v in report.values],
+        )
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._diag_pub.publish(array)
 
 
 def main(args: Sequence[str] | None = None) -> int:

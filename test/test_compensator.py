@@ -45,10 +45,14 @@ def test_steady_ramp_is_compensated_with_its_tdot(model: DriftModel, method: str
     t0 = 1.7e9
     for k in range(0, 7200):
         comp.add_temperature(t0 + k, 0.0 + 0.5 / 60 * k)
+    out = comp.correct(t0 + 7199.5, np.zeros(3))
     status = comp.status
     assert_allclose(status.tdot_degC_per_min, 0.5, rtol=1e-6)
-    expected = model.drift_deg_h(status.temperature_degC, 0.5)
+    # temperature extrapolated from the last bin to the gyro stamp with Tdot
+    assert_allclose(status.temperature_used_degC, 0.5 / 60 * 7199.5, rtol=1e-6)
+    expected = model.drift_deg_h(status.temperature_used_degC, 0.5)
     assert_allclose(status.correction_deg_h, expected, rtol=1e-6)
+    assert_allclose(out, -expected * RAD_S_PER_DEG_H, rtol=1e-6)
 
 
 def test_replay_equals_one_message_at_a_time(short_cycle: SimulatedRun) -> None:
@@ -115,8 +119,8 @@ def test_compensation_removes_true_drift(short_cycle: SimulatedRun) -> None:
 
 def test_bad_temperature_is_rejected_and_counted(model: DriftModel) -> None:
     comp = Compensator(model, DenoiseSettings())
-    assert comp.add_temperature(0.0, 20.0)
-    assert not comp.add_temperature(1.0, math.nan)
+    assert comp.add_temperature(1.0, 20.0)
+    assert not comp.add_temperature(1.5, math.nan)
     assert not comp.add_temperature(2.0, math.inf)
     assert not comp.add_temperature(math.nan, 20.0)
     assert comp.status.counters.temperature_rejected == 3
@@ -146,11 +150,12 @@ def test_backwards_stamp_resets_filter_state(model: DriftModel) -> None:
     for k in range(1, 100):
         comp.add_temperature(10.0 + k, 30.0 - k / 120.0)
         fresh.add_temperature(10.0 + k, 30.0 - k / 120.0)
-    assert_array_equal(comp.correction_rad_s, fresh.correction_rad_s)
+    assert_array_equal(comp.correct(109.5, np.zeros(3)), fresh.correct(109.5, np.zeros(3)))
 
 
 def test_temperature_is_clamped_to_calibrated_range(model: DriftModel) -> None:
     comp = Compensator(model, DenoiseSettings())
-    comp.add_temperature(0.0, 85.0)
+    comp.add_temperature(1.0, 85.0)
+    comp.correct(1.5, np.zeros(3))
     assert comp.status.temperature_clamped
     assert_allclose(comp.status.correction_deg_h, model.drift_deg_h(60.0, 0.0))

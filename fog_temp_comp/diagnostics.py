@@ -1,0 +1,124 @@
+"""Health report of a compensator, as plain data (the node turns it into DiagnosticStatus)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from fog_temp_comp.coefficients import Coefficients
+from fog_temp_comp.compensator import CompensatorCounters, CompensatorStatus
+from fog_temp_comp.units import AXES
+
+OK, WARN, ERROR = 0, 1, 2
+
+#: counters whose increase since the previous report is a warning
+_WARN_COUNTERS = {
+    'imu_duplicate': 'duplicate gyro stamps dropped',
+    'imu_out_of_order': 'out-of-order gyro stamps',
+    'imu_nonfinite': 'non-finite gyro rates',
+    'imu_zero_stamp': 'gyro messages without stamp',
+    'temperature_rejected': 'non-finite temperature rejected',
+    'temperature_duplicate': 'duplicate temperature stamps',
+    'temperature_out_of_order': 'out-of-order temperature rejected',
+    'temperature_glitches': 'temperature glitches rejected',
+    'temperature_steps': 'temperature step, Tdot restarted',
+    'temperature_gaps': 'temperature gap, Tdot restarted',
+    'time_jumps': 'time jump, filter reset',
+}
+
+
+@dataclass(frozen=True)
+class Report:
+    """Level (OK/WARN/ERROR), one-line message and key/value pairs (all strings)."""
+
+    level: int
+    message: str
+    values: list[tuple[str, str]]
+
+
+def build_report(
+    status: CompensatorStatus,
+    previous: CompensatorCounters,
+    *,
+    coefficients: Coefficients,
+    coefficients_file: str,
+    method: str,
+    imu_rate_hz: float,
+    temperature_rate_hz: float,
+    frame_mismatches: int = 0,
+    require_frame_match: bool = False,
+) -> Report:
+    """Summarise ``status``; ``previous`` are the counters at the last report (for deltas)."""
+    counters = status.counters
+    reasons: list[tuple[int, str]] = []
+    if not status.has_temperature:
+        if counters.imu_total:
+            reasons.append((ERROR, 'no temperature received: gyro passed through uncorrected'))
+        else:
+            reasons.append((WARN, 'waiting for gyro and temperature messages'))
+    else:
+        if status.temperature_stale:
+            reasons.append((WARN, 'temperature stale: ' + _stale_action(counters, previous)))
+        if not status.estimator_ready:
+            reasons.append((WARN, 'Tdot filter warming up'))
+        if status.temperature_clamped:
+            reasons.append((WARN, 'temperature outside calibrated range, clamped'))
+        elif status.temperature_out_of_range:
+            reasons.append((WARN, 'temperature outside calibrated range, extrapolating'))
+        if status.tdot_clamped:
+            reasons.append((WARN, 'Tdot outside calibrated range, clamped'))
+        elif status.tdot_out_of_range:
+            reasons.append((WARN, 'Tdot outside calibrated range, extrapolating'))
+    for name, text in _WARN_COUNTERS.items():
+        delta = getattr(counters, name) - getattr(previous, name)
+        if delta > 0:
+            reasons.append((WARN, f'{text} ({delta})'))
+    if frame_mismatches:
+        level = ERROR if require_frame_match else WARN
+        action = 'passed through uncorrected' if require_frame_match else 'corrected anyway'
+        reasons.append((level, f'gyro frame_id differs from calibrated one ({action})'))
+    level = max((lvl for lvl, _ in reasons), default=OK)
+    message = '; '.join(text for _, text in reasons) or 'compensating'
+    values = [
+        ('temperature_degC', _num(status.temperature_degC)),
+        ('tdot_degC_per_min', _num(status.tdot_degC_per_min)),
+        ('tdot_raw_degC_per_min', _num(status.tdot_raw_degC_per_min)),
+        ('temperature_used_degC', _num(status.temperature_used_degC)),
+        ('tdot_used_degC_per_min', _num(status.tdot_used_degC_per_min)),
+    ]
+    values += [
+        (f'correction_{axis}_deg_h', _num(float(status.correction_deg_h[j])))
+        for j, axis in enumerate(AXES)
+    ]
+    model = coefficients.model
+    values += [
+        ('imu_rate_hz', _num(imu_rate_hz)),
+        ('temperature_rate_hz', _num(temperature_rate_hz)),
+        ('denoise', method),
+        ('filter_ready', str(status.estimator_ready)),
+        (
+            'calibrated_temperature_degC',
+            f'[{model.temperature_range_degC.low:.3f}, {model.temperature_range_degC.high:.3f}]',
+        ),
+        (
+            'calibrated_tdot_degC_per_min',
+            f'[{model.tdot_range_degC_per_min.low:.4f}, {model.tdot_range_degC_per_min.high:.4f}]',
+        ),
+        ('coefficients_file', coefficients_file),
+        ('coefficients_frame_id', coefficients.frame_id),
+        ('coefficients_created_utc', str(coefficients.provenance.get('created_utc', ''))),
+        ('coefficients_bags', ', '.join(map(str, coefficients.provenance.get('bags', [])))),
+        ('frame_id_mismatches', str(frame_mismatches)),
+    ]
+    values += [(name, str(value)) for name, value in dataclasses.asdict(counters).items()]
+    return Report(level, message, values)
+
+
+def _stale_action(counters: CompensatorCounters, previous: CompensatorCounters) -> str:
+    if counters.imu_held > previous.imu_held:
+        return 'holding last correction'
+    return 'gyro passed through uncorrected'
+
+
+def _num(value: float) -> str:
+    return f'{value:.6g}'
