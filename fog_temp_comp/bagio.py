@@ -6,7 +6,8 @@ with the path in the message.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+import math
+from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from functools import cache
 from pathlib import Path
@@ -47,8 +48,16 @@ def stamp_to_s(stamp: Any) -> float:
 
 
 def s_to_stamp_ns(stamp_s: float) -> int:
-    """Float seconds to integer nanoseconds (rounded)."""
-    return round(stamp_s * NS_PER_S)
+    """Float seconds to the nearest integer nanosecond (whole seconds split off first)."""
+    sec = math.floor(stamp_s)
+    return sec * NS_PER_S + round((stamp_s - sec) * NS_PER_S)
+
+
+def s_to_stamp_ns_array(stamps_s: FloatArray) -> NDArray[np.int64]:
+    """Vectorised :func:`s_to_stamp_ns`."""
+    t = np.asarray(stamps_s, dtype=np.float64)
+    sec = np.floor(t)
+    return sec.astype(np.int64) * NS_PER_S + np.round((t - sec) * NS_PER_S).astype(np.int64)
 
 
 @contextmanager
@@ -112,6 +121,23 @@ def resolve_topic(reader: AnyReader, topic: str | None, msgtype: str, flag: str)
     if not candidates:
         raise BagError(f'no {msgtype} topic in bag (topics: {sorted(topics) or "none"})')
     raise BagError(f'several {msgtype} topics: {candidates}; choose one with {flag}')
+
+
+def temperature_first(
+    messages: Iterable[tuple[Connection, int, bytes]], temp_topic: str
+) -> Iterator[tuple[Connection, int, bytes]]:
+    """Reorder messages sharing a log time so that temperature comes first (as in a replay).
+
+    Readers break ties by connection order, which depends on the writer; a gyro sample and the
+    temperature stamped with it must reach the compensator in a fixed order.
+    """
+    group: list[tuple[Connection, int, bytes]] = []
+    for item in messages:
+        if group and item[1] != group[0][1]:
+            yield from sorted(group, key=lambda m: m[0].topic != temp_topic)
+            group = []
+        group.append(item)
+    yield from sorted(group, key=lambda m: m[0].topic != temp_topic)
 
 
 def read_record(
@@ -221,6 +247,11 @@ class BagWriter:
         self._writer.write(conn, log_time_ns, data)
 
     @property
+    def topics(self) -> set[str]:
+        """Topics registered so far."""
+        return set(self._connections)
+
+    @property
     def is_ros1(self) -> bool:
         """Whether messages are ROS 1 serialized."""
         return self._ros1
@@ -276,15 +307,16 @@ def write_chamber_bag(
     compress: bool = False,
 ) -> None:
     """Write gyro and temperature streams as a bag; log time = header stamp, merged in order."""
-    imu_ns = np.round(np.asarray(imu_stamps_s) * NS_PER_S).astype(np.int64)
-    temp_ns = np.round(np.asarray(temp_stamps_s) * NS_PER_S).astype(np.int64)
+    imu_ns = s_to_stamp_ns_array(imu_stamps_s)
+    temp_ns = s_to_stamp_ns_array(temp_stamps_s)
     # temperature first on equal stamps, as a sensor driver publishing both would
     order = np.lexsort(
         (np.r_[np.ones(imu_ns.size), np.zeros(temp_ns.size)], np.r_[imu_ns, temp_ns])
     )
     with BagWriter(path, fmt, compress=compress) as writer:
-        writer.add_topic(imu_topic, IMU_TYPE)
+        # temperature registered first: readers break log-time ties by connection order
         writer.add_topic(temp_topic, TEMPERATURE_TYPE)
+        writer.add_topic(imu_topic, IMU_TYPE)
         n_imu = imu_ns.size
         for k in order.tolist():
             if k < n_imu:

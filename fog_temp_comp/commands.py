@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import shutil
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -18,7 +19,7 @@ from fog_temp_comp.coefficients import Coefficients, CoefficientsError, load, sa
 from fog_temp_comp.compensator import Compensator, GuardSettings
 from fog_temp_comp.denoise import DenoiseSettings
 from fog_temp_comp.evaluate import compensate_record, format_scores, score_record
-from fog_temp_comp.simulate import SimulationConfig, paper_plan, simulate_run, true_model
+from fog_temp_comp.simulate import SimulationConfig, paper_plan, simulate_run
 from fog_temp_comp.units import AXES
 
 #: errors that end a command with one ``ERROR:`` line and exit code 1
@@ -40,9 +41,10 @@ def simulate_command(
     compress: bool = True,
     runs: Sequence[tuple[str, float]] | None = None,
     config: SimulationConfig | None = None,
-    stdout: TextIO = sys.stdout,
+    stdout: TextIO | None = None,
 ) -> int:
     """Write the paper's chamber runs as bags plus ``<run>.truth.npz`` and ``manifest.yaml``."""
+    stdout = stdout or sys.stdout
     cfg = config or SimulationConfig(imu_hz=imu_hz, temp_hz=temp_hz)
     out_dir.mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
@@ -55,7 +57,7 @@ def simulate_command(
             axis: dict(
                 zip(
                     ('d0_deg_h', 'dt_deg_h_per_degC', 'dtdot_deg_h_per_degC_per_min'),
-                    map(float, true_model().coefficients[:, j]),
+                    map(float, cfg.coefficients[:, j]),
                     strict=True,
                 )
             )
@@ -109,9 +111,10 @@ def calibrate_command(
     gyro_topic: str | None = None,
     temp_topic: str | None = None,
     settings: DenoiseSettings | None = None,
-    stdout: TextIO = sys.stdout,
+    stdout: TextIO | None = None,
 ) -> int:
     """Fit coefficients on ``bags`` and write them to ``output`` (YAML)."""
+    stdout = stdout or sys.stdout
     settings = settings or DenoiseSettings()
     records = [read_record(b, gyro_topic=gyro_topic, temp_topic=temp_topic) for b in bags]
     coeffs = calibrate(records, settings)
@@ -151,12 +154,13 @@ def compensate_command(
     output_topic: str = '/imu/data',
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
-    stdout: TextIO = sys.stdout,
+    stdout: TextIO | None = None,
 ) -> int:
     """Replay ``in_bag`` through a :class:`Compensator`; write all inputs plus corrected Imu.
 
     Messages are processed in the bag's log-time order, i.e. the order a node sees on replay.
     """
+    stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
     if out_bag.exists():
         raise FileExistsError(f'{out_bag}: exists already, not overwriting')
@@ -173,10 +177,11 @@ def compensate_command(
         try:
             with BagWriter(out_bag, fmt) as writer:
                 for conn in reader.connections:
-                    if conn.topic not in writer_topics(writer):
+                    if conn.topic not in writer.topics:
                         writer.add_topic(conn.topic, conn.msgtype, like=conn)
                 writer.add_topic(output_topic, bagio.IMU_TYPE)
-                for conn, log_ns, raw in reader.messages():
+                messages = bagio.temperature_first(reader.messages(), temp_name)
+                for conn, log_ns, raw in messages:
                     writer.write_raw(conn.topic, log_ns, raw)
                     if conn.topic == temp_name:
                         msg: Any = reader.deserialize(raw, conn.msgtype)
@@ -194,9 +199,10 @@ def compensate_command(
                         w.x, w.y, w.z = float(rate[0]), float(rate[1]), float(rate[2])
                         writer.write(output_topic, log_ns, msg)
                         n_out += 1
-        except BagError:
-            raise
         except Exception as err:
+            remove_bag(out_bag)  # no half-written output
+            if isinstance(err, BagError):
+                raise
             raise BagError(f'{in_bag}: failed while replaying (truncated bag?): {err}') from err
     counters = compensator.status.counters
     print(
@@ -214,9 +220,12 @@ def effective_settings(coeffs: Coefficients, denoise_method: str | None) -> Deno
     return dataclasses.replace(coeffs.denoise, method=denoise_method)
 
 
-def writer_topics(writer: BagWriter) -> set[str]:
-    """Topics already registered in ``writer``."""
-    return set(writer._connections)
+def remove_bag(path: Path) -> None:
+    """Delete a bag file or directory if it exists."""
+    if path.is_dir():
+        shutil.rmtree(path)
+    elif path.exists():
+        path.unlink()
 
 
 def evaluate_command(
@@ -227,9 +236,10 @@ def evaluate_command(
     temp_topic: str | None = None,
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
-    stdout: TextIO = sys.stdout,
+    stdout: TextIO | None = None,
 ) -> int:
     """Print stability and range before/after compensation for each bag and axis."""
+    stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
     scores = []
     for bag in bags:

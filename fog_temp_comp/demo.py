@@ -39,8 +39,9 @@ class DemoRow:
     range_after: dict[str, float]
 
 
-def run_demo(bags_dir: Path, out_dir: Path, *, stdout: TextIO = sys.stdout) -> list[DemoRow]:
+def run_demo(bags_dir: Path, out_dir: Path, *, stdout: TextIO | None = None) -> list[DemoRow]:
     """Calibrate with each method on the training run and score all other runs at 10 s."""
+    stdout = stdout or sys.stdout
     manifest = yaml.safe_load((bags_dir / 'manifest.yaml').read_text())
     runs = {r['name']: bags_dir / r['bag'] for r in manifest['runs']}
     if TRAINING_RUN not in runs:
@@ -99,8 +100,9 @@ def format_table(rows: list[DemoRow]) -> str:
     return '\n'.join(lines)
 
 
-def demo_command(*, bags_dir: Path | None, out_dir: Path, stdout: TextIO = sys.stdout) -> int:
+def demo_command(*, bags_dir: Path | None, out_dir: Path, stdout: TextIO | None = None) -> int:
     """Run the demo; exit code 1 if compensation fails to improve any cycle run's stability."""
+    stdout = stdout or sys.stdout
     if bags_dir is None:
         bags_dir = out_dir / 'bags'
         if not (bags_dir / 'manifest.yaml').exists():

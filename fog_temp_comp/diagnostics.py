@@ -121,4 +121,4 @@ def _stale_action(counters: CompensatorCounters, previous: CompensatorCounters) 
 
 
 def _num(value: float) -> str:
-    return f'{value:.6g}'
+    return f'{value:.10g}'

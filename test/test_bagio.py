@@ -1,0 +1,449 @@
+"""Bag input/output (fog_temp_comp.bagio) against rosbags' own reader, on real bags in tmp_path."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from fractions import Fraction
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+
+from fog_temp_comp import bagio
+from fog_temp_comp.bagio import (
+    FORMATS,
+    IMU_TYPE,
+    TEMPERATURE_TYPE,
+    BagError,
+    BagWriter,
+    bag_format,
+    make_imu,
+    make_temperature,
+    open_bag,
+    read_record,
+    resolve_topic,
+    write_chamber_bag,
+)
+from fog_temp_comp.record import ChamberRecord
+from fog_temp_comp.simulate import SimulatedRun, SimulationConfig, simulate_run
+
+# a small chamber: 15..25 degC at 1 degC/min with 2 min soaks (~26 min at 1 Hz gyro, 0.5 Hz temp)
+TINY = SimulationConfig(
+    imu_hz=1.0,
+    temp_hz=0.5,
+    low_degC=15.0,
+    high_degC=25.0,
+    start_degC=20.0,
+    cycle_soak_s=120.0,
+    soak_duration_s=300.0,
+)
+FRAME = 'fog_link'
+STRING_TYPE = 'std_msgs/msg/String'
+
+
+def bag_path(directory: Path, name: str, fmt: str) -> Path:
+    """Where a bag called ``name`` goes: ROS 1 bags are ``.bag`` files, ROS 2 bags directories."""
+    return directory / (name + '.bag' if fmt == 'ros1' else name)
+
+
+def write_run(path: Path, fmt: str, run: SimulatedRun, **kwargs: Any) -> Path:
+    """Write ``run`` with :func:`write_chamber_bag`."""
+    write_chamber_bag(
+        path,
+        fmt,
+        imu_stamps_s=run.imu_stamps_s,
+        rates_rad_s=run.rates_rad_s,
+        temp_stamps_s=run.temp_stamps_s,
+        temperature_degC=run.temperature_degC,
+        **kwargs,
+    )
+    return path
+
+
+def storage_file(path: Path, fmt: str) -> Path:
+    """The file holding the data of a bag (the bag itself for ROS 1)."""
+    if fmt == 'ros1':
+        return path
+    (found,) = path.glob('*.mcap' if fmt == 'mcap' else '*.db3')
+    return found
+
+
+def exact_ns(stamps_s: np.ndarray) -> list[int]:
+    """Nearest integer nanosecond of each float stamp, computed exactly with rationals."""
+    return [round(Fraction(float(s)) * 10**9) for s in stamps_s]
+
+
+def plain_read(path: Path) -> dict[str, list[tuple[int, Any]]]:
+    """Every message of a bag deserialized with a plain rosbags AnyReader loop, per topic."""
+    out: dict[str, list[tuple[int, Any]]] = {}
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        for conn, log_ns, raw in reader.messages():
+            out.setdefault(conn.topic, []).append((log_ns, reader.deserialize(raw, conn.msgtype)))
+    return out
+
+
+def header_ns(msg: Any) -> int:
+    """Header stamp of a message as integer nanoseconds."""
+    return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+
+
+def write_messages(
+    path: Path,
+    fmt: str,
+    topics: Sequence[tuple[str, str]],
+    messages: Sequence[tuple[str, int, Any]] = (),
+) -> Path:
+    """A bag with the given (topic, type) connections and (topic, log ns, message) messages."""
+    with BagWriter(path, fmt) as writer:
+        for topic, msgtype in topics:
+            writer.add_topic(topic, msgtype)
+        for topic, log_ns, msg in messages:
+            writer.write(topic, log_ns, msg)
+    return path
+
+
+def snapshot(path: Path) -> dict[str, bytes]:
+    """Contents of a bag file or of the files in a bag directory."""
+    files = [path] if path.is_file() else sorted(path.iterdir())
+    return {f.name: f.read_bytes() for f in files}
+
+
+def few_messages(topics: Sequence[tuple[str, str]], n: int = 3) -> list[tuple[str, int, Any]]:
+    """``n`` messages on each topic, 1 s apart."""
+    t0 = 1_700_000_000 * 10**9
+    string = get_typestore(Stores.ROS2_JAZZY).types[STRING_TYPE]
+    out = []
+    for k in range(n):
+        ns = t0 + k * 10**9
+        for topic, msgtype in topics:
+            if msgtype == IMU_TYPE:
+                out.append((topic, ns, make_imu(ns, FRAME, (0.1 * k, 0.2, 0.3))))
+            elif msgtype == TEMPERATURE_TYPE:
+                out.append((topic, ns, make_temperature(ns, FRAME, 20.0 + k)))
+            else:
+                out.append((topic, ns, string(data=f'note {k}')))
+    return out
+
+
+@pytest.fixture(scope='module')
+def tiny_run() -> SimulatedRun:
+    return simulate_run('cycle', 1.0, TINY, seed=5)
+
+
+# --------------------------------------------------------------------------------------------
+# Round trips
+# --------------------------------------------------------------------------------------------
+
+
+def assert_record_matches_run(record: ChamberRecord, run: SimulatedRun) -> None:
+    assert_array_equal(record.imu_stamps_s, run.imu_stamps_s)
+    assert_array_equal(record.temp_stamps_s, run.temp_stamps_s)
+    assert_array_equal(record.rates_rad_s, run.rates_rad_s)
+    assert_array_equal(record.temperature_degC, run.temperature_degC)
+
+
+@pytest.mark.parametrize('fmt', FORMATS)
+def test_round_trip_is_bit_identical(tmp_path: Path, tiny_run: SimulatedRun, fmt: str) -> None:
+    path = write_run(bag_path(tmp_path, 'run', fmt), fmt, tiny_run, frame_id=FRAME)
+    assert bag_format(path) == fmt
+    record = read_record(path)
+
+    assert record.path == path
+    assert record.imu_topic == '/imu/data_raw'
+    assert record.temp_topic == '/imu/temperature'
+    assert record.frame_id == FRAME
+    assert record.rates_rad_s.shape == (tiny_run.imu_stamps_s.size, 3)
+    assert_record_matches_run(record, tiny_run)
+
+    # the same bag through a plain rosbags loop, independent of read_record
+    plain = plain_read(path)
+    assert set(plain) == {'/imu/data_raw', '/imu/temperature'}
+    imu, temp = plain['/imu/data_raw'], plain['/imu/temperature']
+    assert len(imu) == tiny_run.imu_stamps_s.size
+    assert len(temp) == tiny_run.temp_stamps_s.size
+    imu_ns = [header_ns(m) for _, m in imu]
+    temp_ns = [header_ns(m) for _, m in temp]
+    # header stamps are the nearest nanosecond of the written float stamps, and log time = stamp
+    assert imu_ns == exact_ns(tiny_run.imu_stamps_s)
+    assert temp_ns == exact_ns(tiny_run.temp_stamps_s)
+    assert [t for t, _ in imu] == imu_ns
+    assert [t for t, _ in temp] == temp_ns
+    # read_record's float stamps are the correctly rounded seconds of those nanoseconds
+    assert record.imu_stamps_s.tolist() == [float(Fraction(ns, 10**9)) for ns in imu_ns]
+    assert record.temp_stamps_s.tolist() == [float(Fraction(ns, 10**9)) for ns in temp_ns]
+    rates = [(m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z) for _, m in imu]
+    assert_array_equal(record.rates_rad_s, np.array(rates))
+    assert_array_equal(record.temperature_degC, np.array([m.temperature for _, m in temp]))
+    assert {m.header.frame_id for _, m in imu + temp} == {FRAME}
+
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        topics = {name: (info.msgtype, info.msgcount) for name, info in reader.topics.items()}
+    assert topics == {
+        '/imu/data_raw': (IMU_TYPE, tiny_run.imu_stamps_s.size),
+        '/imu/temperature': (TEMPERATURE_TYPE, tiny_run.temp_stamps_s.size),
+    }
+
+
+@pytest.mark.parametrize('fmt', FORMATS)
+def test_custom_topics_and_frame_round_trip(
+    tmp_path: Path, tiny_run: SimulatedRun, fmt: str
+) -> None:
+    path = write_run(
+        bag_path(tmp_path, 'custom', fmt),
+        fmt,
+        tiny_run,
+        imu_topic='/fog/rate',
+        temp_topic='/fog/coil_temperature',
+        frame_id='',
+    )
+    record = read_record(path)
+    assert (record.imu_topic, record.temp_topic) == ('/fog/rate', '/fog/coil_temperature')
+    assert record.frame_id == ''
+    assert_record_matches_run(record, tiny_run)
+
+
+def test_fractional_stamps_round_trip_to_the_nanosecond(tmp_path: Path) -> None:
+    # A driver stamps at arbitrary nanoseconds; at epoch scale (1.7e9 s) a float64 second holds
+    # ~240 ns steps, so the nearest nanosecond of each float is unambiguous and reading it back
+    # gives the same float. Computing stamp_s * 1e9 in float64 (~256 ns steps at 1.7e18) does not.
+    rng = np.random.default_rng(42)
+    imu_s = 1.7e9 + np.sort(rng.uniform(0.0, 600.0, 400))
+    temp_s = 1.7e9 + np.sort(rng.uniform(0.0, 600.0, 60))
+    write_chamber_bag(
+        tmp_path / 'jitter',
+        'mcap',
+        imu_stamps_s=imu_s,
+        rates_rad_s=rng.normal(0.0, 1e-5, (imu_s.size, 3)),
+        temp_stamps_s=temp_s,
+        temperature_degC=rng.uniform(15.0, 25.0, temp_s.size),
+    )
+    plain = plain_read(tmp_path / 'jitter')
+    assert [header_ns(m) for _, m in plain['/imu/data_raw']] == exact_ns(imu_s)
+    assert [header_ns(m) for _, m in plain['/imu/temperature']] == exact_ns(temp_s)
+    record = read_record(tmp_path / 'jitter')
+    assert_array_equal(record.imu_stamps_s, imu_s)
+    assert_array_equal(record.temp_stamps_s, temp_s)
+
+
+def test_s_to_stamp_ns_is_the_nearest_nanosecond() -> None:
+    rng = np.random.default_rng(7)
+    stamps = np.r_[1.7e9 + rng.uniform(0.0, 1e5, 200), rng.uniform(0.0, 10.0, 50)]
+    assert [bagio.s_to_stamp_ns(float(s)) for s in stamps] == exact_ns(stamps)
+
+
+@pytest.mark.parametrize('fmt', ['mcap', 'ros1'])
+def test_compressed_bags_read_back_identically(
+    tmp_path: Path, tiny_run: SimulatedRun, fmt: str
+) -> None:
+    plain = write_run(bag_path(tmp_path, 'plain', fmt), fmt, tiny_run)
+    packed = write_run(bag_path(tmp_path, 'packed', fmt), fmt, tiny_run, compress=True)
+    a, b = read_record(plain), read_record(packed)
+    assert_record_matches_run(b, tiny_run)
+    for field in ('imu_stamps_s', 'rates_rad_s', 'temp_stamps_s', 'temperature_degC'):
+        assert_array_equal(getattr(a, field), getattr(b, field))
+    assert (a.imu_topic, a.temp_topic, a.frame_id) == (b.imu_topic, b.temp_topic, b.frame_id)
+    # the Imu messages are mostly zero covariances: compression must shrink the stored data
+    assert storage_file(packed, fmt).stat().st_size < storage_file(plain, fmt).stat().st_size
+
+
+# --------------------------------------------------------------------------------------------
+# Formats and paths
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize('fmt', FORMATS)
+def test_bag_format_of_written_bags(tmp_path: Path, tiny_run: SimulatedRun, fmt: str) -> None:
+    path = write_run(bag_path(tmp_path, 'run', fmt), fmt, tiny_run)
+    assert bag_format(path) == fmt
+    assert bag_format(storage_file(path, fmt)) == fmt
+
+
+@pytest.mark.parametrize(('fmt', 'suffix'), [('mcap', '.mcap'), ('sqlite3', '.db3')])
+def test_single_storage_file_reads_like_its_directory(
+    tmp_path: Path, tiny_run: SimulatedRun, fmt: str, suffix: str
+) -> None:
+    path = write_run(tmp_path / 'run', fmt, tiny_run, frame_id=FRAME)
+    file = storage_file(path, fmt)
+    assert file.suffix == suffix
+    from_file, from_dir = read_record(file), read_record(path)
+    assert from_file.path == file
+    assert from_file.frame_id == from_dir.frame_id == FRAME
+    assert (from_file.imu_topic, from_file.temp_topic) == (from_dir.imu_topic, from_dir.temp_topic)
+    assert_record_matches_run(from_file, tiny_run)
+
+
+def test_bag_format_refuses_what_is_not_a_bag(tmp_path: Path) -> None:
+    (tmp_path / 'empty_dir').mkdir()
+    (tmp_path / 'notes.txt').write_text('not a bag\n')
+    for path in (tmp_path / 'empty_dir', tmp_path / 'notes.txt'):
+        with pytest.raises(BagError, match='not a recognised bag') as info:
+            bag_format(path)
+        assert str(path) in str(info.value)
+
+
+# --------------------------------------------------------------------------------------------
+# Topic selection
+# --------------------------------------------------------------------------------------------
+
+IMU = ('/imu/data_raw', IMU_TYPE)
+IMU2 = ('/imu2/data_raw', IMU_TYPE)
+TEMP = ('/imu/temperature', TEMPERATURE_TYPE)
+NOTE = ('/notes', STRING_TYPE)
+
+
+@pytest.mark.parametrize('fmt', FORMATS)
+def test_auto_detects_the_only_imu_and_temperature_topics(tmp_path: Path, fmt: str) -> None:
+    topics = [NOTE, IMU, TEMP]
+    path = write_messages(bag_path(tmp_path, 'bag', fmt), fmt, topics, few_messages(topics))
+    with open_bag(path) as reader:
+        assert resolve_topic(reader, None, IMU_TYPE, '--gyro-topic') == IMU[0]
+        assert resolve_topic(reader, None, TEMPERATURE_TYPE, '--temp-topic') == TEMP[0]
+    record = read_record(path)
+    assert (record.imu_topic, record.temp_topic) == (IMU[0], TEMP[0])
+    assert_array_equal(record.rates_rad_s[:, 0], [0.0, 0.1, 0.2])
+    assert_array_equal(record.temperature_degC, [20.0, 21.0, 22.0])
+
+
+def test_two_imu_topics_need_a_choice(tmp_path: Path) -> None:
+    topics = [IMU, IMU2, TEMP]
+    path = write_messages(tmp_path / 'two', 'mcap', topics, few_messages(topics))
+    with pytest.raises(BagError) as info:
+        read_record(path)
+    message = str(info.value)
+    assert IMU[0] in message
+    assert IMU2[0] in message
+    assert '--gyro-topic' in message
+    # naming one resolves it, with or without the leading slash
+    assert read_record(path, gyro_topic=IMU2[0]).imu_topic == IMU2[0]
+    assert read_record(path, gyro_topic=IMU2[0].lstrip('/')).imu_topic == IMU2[0]
+
+
+def test_no_temperature_topic(tmp_path: Path) -> None:
+    topics = [IMU, NOTE]
+    path = write_messages(tmp_path / 'notemp', 'mcap', topics, few_messages(topics))
+    with pytest.raises(BagError, match=TEMPERATURE_TYPE) as info:
+        read_record(path)
+    assert IMU[0] in str(info.value)
+
+
+def test_explicit_topics_without_leading_slash(tmp_path: Path) -> None:
+    topics = [IMU, IMU2, TEMP]
+    path = write_messages(tmp_path / 'bag', 'sqlite3', topics, few_messages(topics))
+    record = read_record(path, gyro_topic='imu/data_raw', temp_topic='imu/temperature')
+    assert (record.imu_topic, record.temp_topic) == (IMU[0], TEMP[0])
+    assert record.rates_rad_s.shape == (3, 3)
+
+
+def test_explicit_topic_missing_lists_the_topics(tmp_path: Path) -> None:
+    topics = [IMU, TEMP]
+    path = write_messages(tmp_path / 'bag', 'mcap', topics, few_messages(topics))
+    with pytest.raises(BagError) as info:
+        read_record(path, gyro_topic='/fog/rate')
+    message = str(info.value)
+    assert '--gyro-topic' in message
+    assert '/fog/rate' in message
+    assert IMU[0] in message
+    assert TEMP[0] in message
+    with pytest.raises(BagError, match='--temp-topic') as info:
+        read_record(path, temp_topic='/nope')
+    assert TEMP[0] in str(info.value)
+
+
+def test_explicit_topic_of_the_wrong_type(tmp_path: Path) -> None:
+    topics = [IMU, TEMP]
+    path = write_messages(tmp_path / 'bag.bag', 'ros1', topics, few_messages(topics))
+    with pytest.raises(BagError) as info:
+        read_record(path, gyro_topic=TEMP[0])
+    message = str(info.value)
+    assert TEMPERATURE_TYPE in message
+    assert IMU_TYPE in message
+    with pytest.raises(BagError) as info:
+        read_record(path, temp_topic=IMU[0])
+    assert TEMPERATURE_TYPE in str(info.value)
+    assert IMU_TYPE in str(info.value)
+
+
+# --------------------------------------------------------------------------------------------
+# Broken input
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize('fmt', FORMATS)
+def test_empty_bag(tmp_path: Path, fmt: str) -> None:
+    path = write_messages(bag_path(tmp_path, 'empty', fmt), fmt, [IMU, TEMP])
+    with pytest.raises(BagError, match='no messages') as info:
+        read_record(path)
+    assert str(path) in str(info.value)
+
+
+def test_temperature_topic_without_messages(tmp_path: Path) -> None:
+    path = write_messages(tmp_path / 'bag', 'mcap', [IMU, TEMP], few_messages([IMU]))
+    with pytest.raises(BagError, match='no messages') as info:
+        read_record(path)
+    assert TEMP[0] in str(info.value)
+
+
+def test_missing_path(tmp_path: Path) -> None:
+    missing = tmp_path / 'nothing_here'
+    with pytest.raises(BagError) as info:
+        read_record(missing)
+    assert str(missing) in str(info.value)
+
+
+def test_directory_that_is_not_a_bag(tmp_path: Path) -> None:
+    directory = tmp_path / 'just_a_dir'
+    directory.mkdir()
+    (directory / 'readme.txt').write_text('no metadata.yaml here\n')
+    with pytest.raises(BagError) as info:
+        read_record(directory)
+    assert str(directory) in str(info.value)
+
+
+@pytest.mark.parametrize('fmt', ['mcap', 'ros1'])
+@pytest.mark.parametrize('compress', [False, True])
+def test_truncated_bag(tmp_path: Path, tiny_run: SimulatedRun, fmt: str, compress: bool) -> None:
+    path = write_run(bag_path(tmp_path, 'cut', fmt), fmt, tiny_run, compress=compress)
+    file = storage_file(path, fmt)
+    os.truncate(file, file.stat().st_size // 2)
+    for target in (path, file):
+        with pytest.raises(BagError) as info:
+            read_record(target)
+        assert str(target) in str(info.value)
+
+
+def test_garbage_file_with_bag_suffix(tmp_path: Path) -> None:
+    for name in ('junk.bag', 'junk.mcap'):
+        path = tmp_path / name
+        path.write_bytes(np.random.default_rng(3).bytes(4096))
+        with pytest.raises(BagError) as info:
+            read_record(path)
+        assert str(path) in str(info.value)
+
+
+# --------------------------------------------------------------------------------------------
+# Writer
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize('fmt', FORMATS)
+def test_writer_refuses_an_existing_path(tmp_path: Path, tiny_run: SimulatedRun, fmt: str) -> None:
+    path = write_run(bag_path(tmp_path, 'run', fmt), fmt, tiny_run)
+    before = snapshot(path)
+    with pytest.raises(BagError, match='exists') as info:
+        BagWriter(path, fmt)
+    assert str(path) in str(info.value)
+    with pytest.raises(BagError):
+        write_run(path, fmt, tiny_run)
+    assert snapshot(path) == before
+    assert_record_matches_run(read_record(path), tiny_run)
+
+
+def test_writer_refuses_an_unknown_format(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match='ros2'):
+        BagWriter(tmp_path / 'x', 'ros2')
+    assert not (tmp_path / 'x').exists()

@@ -1,0 +1,766 @@
+"""The fog-temp-comp command line, in-process on real bags and YAML files in tmp_path."""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import os
+import subprocess
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from numpy.testing import assert_allclose, assert_array_equal
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import Writer as Rosbag2Writer
+from rosbags.rosbag2.enums import StoragePlugin
+from rosbags.typesys import Stores, get_typestore
+
+from fog_temp_comp import cli, commands
+from fog_temp_comp.bagio import (
+    FORMATS,
+    IMU_TYPE,
+    TEMPERATURE_TYPE,
+    BagWriter,
+    bag_format,
+    make_imu,
+    make_temperature,
+    read_record,
+    write_chamber_bag,
+)
+from fog_temp_comp.coefficients import load
+from fog_temp_comp.denoise import METHODS
+from fog_temp_comp.evaluate import compensate_record
+from fog_temp_comp.model import PAPER_TERMS, coefficient_key
+from fog_temp_comp.simulate import (
+    TRUE_COEFFICIENTS,
+    SimulatedRun,
+    SimulationConfig,
+    run_name,
+    simulate_run,
+    true_model,
+)
+from fog_temp_comp.units import AXES, DEG_H_PER_RAD_S
+
+from simdata import SHORT_CHAMBER
+
+REPO = Path(__file__).resolve().parents[1]
+TDOT_KEY = coefficient_key('Tdot')
+# a small chamber for the simulate command and the message-level compensate checks
+SMALL = SimulationConfig(
+    imu_hz=0.5,
+    temp_hz=0.5,
+    low_degC=15.0,
+    high_degC=25.0,
+    start_degC=20.0,
+    cycle_soak_s=300.0,
+    soak_duration_s=600.0,
+)
+STRING_TYPE = 'std_msgs/msg/String'
+
+
+def bag_path(directory: Path, name: str, fmt: str) -> Path:
+    """ROS 1 bags are ``.bag`` files, ROS 2 bags directories."""
+    return directory / (name + '.bag' if fmt == 'ros1' else name)
+
+
+def write_run(path: Path, fmt: str, run: SimulatedRun, **kwargs: Any) -> Path:
+    """Write ``run`` as a bag with :func:`write_chamber_bag`."""
+    write_chamber_bag(
+        path,
+        fmt,
+        imu_stamps_s=run.imu_stamps_s,
+        rates_rad_s=run.rates_rad_s,
+        temp_stamps_s=run.temp_stamps_s,
+        temperature_degC=run.temperature_degC,
+        **kwargs,
+    )
+    return path
+
+
+def plain_read(path: Path) -> dict[str, list[tuple[int, bytes, Any]]]:
+    """(log ns, raw bytes, message) of every message, per topic, with a plain AnyReader loop."""
+    out: dict[str, list[tuple[int, bytes, Any]]] = {}
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        for conn, log_ns, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            out.setdefault(conn.topic, []).append((log_ns, bytes(raw), msg))
+    return out
+
+
+def topic_types(path: Path) -> dict[str, str]:
+    """Topic -> message type of a bag."""
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        return {name: info.msgtype for name, info in reader.topics.items()}
+
+
+def stamp_ns(msg: Any) -> int:
+    """Header stamp in integer nanoseconds."""
+    return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+
+
+def rates_of(messages: Sequence[tuple[int, bytes, Any]]) -> np.ndarray:
+    """Angular velocities (N, 3) of Imu messages."""
+    return np.array(
+        [
+            (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z)
+            for _, _, m in messages
+        ]
+    )
+
+
+def error_line(capsys: pytest.CaptureFixture[str]) -> str:
+    """The single ``ERROR:`` line a failing command prints on stderr."""
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1, lines
+    assert lines[0].startswith('ERROR: ')
+    return lines[0]
+
+
+def write_streams(
+    path: Path,
+    fmt: str,
+    run: SimulatedRun,
+    imu_rates: dict[str, np.ndarray],
+    *,
+    rng: np.random.Generator | None = None,
+    notes: bool = False,
+) -> Path:
+    """A chamber bag with several Imu topics (and optionally randomized non-gyro Imu fields).
+
+    Topics are registered Imu first, then temperature, as :func:`write_chamber_bag` does; on
+    equal stamps the temperature is written first.
+    """
+    imu_ns = np.round(run.imu_stamps_s * 1e9).astype(np.int64).tolist()
+    temp_ns = np.round(run.temp_stamps_s * 1e9).astype(np.int64).tolist()
+    string = get_typestore(Stores.ROS2_JAZZY).types[STRING_TYPE]
+    events: list[tuple[int, int, str, Any]] = []
+    for k, ns in enumerate(temp_ns):
+        msg = make_temperature(ns, 'fog_link', run.temperature_degC[k])
+        events.append((ns, 0, '/imu/temperature', msg))
+    for topic, rates in imu_rates.items():
+        for k, ns in enumerate(imu_ns):
+            msg = make_imu(ns, 'fog_link', rates[k])
+            if rng is not None:
+                q = rng.normal(size=4)
+                q /= np.linalg.norm(q)
+                msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = q
+                msg.orientation_covariance = rng.uniform(0.0, 1e-3, 9)
+                msg.angular_velocity_covariance = rng.uniform(0.0, 1e-9, 9)
+                acc = rng.normal(0.0, 0.1, 3) + np.array([0.0, 0.0, 9.81])
+                a = msg.linear_acceleration
+                a.x, a.y, a.z = float(acc[0]), float(acc[1]), float(acc[2])
+                msg.linear_acceleration_covariance = rng.uniform(0.0, 1e-4, 9)
+            events.append((ns, 1, topic, msg))
+    if notes:
+        for k, ns in enumerate(imu_ns[::50]):
+            events.append((ns, 2, '/notes', string(data=f'note {k}')))
+    events.sort(key=lambda e: (e[0], e[1]))
+    with BagWriter(path, fmt) as writer:
+        for topic in imu_rates:
+            writer.add_topic(topic, IMU_TYPE)
+        writer.add_topic('/imu/temperature', TEMPERATURE_TYPE)
+        if notes:
+            writer.add_topic('/notes', STRING_TYPE)
+        for ns, _, topic, msg in events:
+            writer.write(topic, ns, msg)
+    return path
+
+
+# --------------------------------------------------------------------------------------------
+# Shared bags and coefficient files
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope='module')
+def data_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp('cli_data')
+
+
+@pytest.fixture(scope='module')
+def cal_bag(data_dir: Path, short_cycle: SimulatedRun) -> Path:
+    return write_run(data_dir / 'cal_cycle', 'mcap', short_cycle)
+
+
+@pytest.fixture(scope='module')
+def fast_bag(data_dir: Path, short_cycle_fast: SimulatedRun) -> Path:
+    return write_run(data_dir / 'fast_cycle', 'mcap', short_cycle_fast)
+
+
+@pytest.fixture(scope='module')
+def coeffs_yaml(data_dir: Path, cal_bag: Path) -> Path:
+    path = data_dir / 'coeffs_wavelet.yaml'
+    assert commands.calibrate_command([cal_bag], path, stdout=io.StringIO()) == 0
+    return path
+
+
+@pytest.fixture(scope='module')
+def small_run() -> SimulatedRun:
+    return simulate_run('cycle', 1.0, SMALL, seed=21)
+
+
+# --------------------------------------------------------------------------------------------
+# simulate
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize('fmt', FORMATS)
+def test_simulate_command_writes_bags_truth_and_manifest(tmp_path: Path, fmt: str) -> None:
+    out = tmp_path / 'sim'
+    runs = [('cycle', 1.0), ('soak', 10.0)]
+    stdout = io.StringIO()
+    assert commands.simulate_command(out, runs=runs, config=SMALL, fmt=fmt, stdout=stdout) == 0
+
+    manifest = yaml.safe_load((out / 'manifest.yaml').read_text())
+    assert manifest['format'] == fmt
+    assert (manifest['imu_hz'], manifest['temp_hz']) == (SMALL.imu_hz, SMALL.temp_hz)
+    assert manifest['seed'] == 0
+    for j, axis in enumerate(AXES):
+        entry = manifest['true_coefficients'][axis]
+        assert entry == {
+            coefficient_key(t): float(TRUE_COEFFICIENTS[i, j]) for i, t in enumerate(PAPER_TERMS)
+        }
+    assert [r['name'] for r in manifest['runs']] == [run_name(k, s) for k, s in runs]
+    assert [r['kind'] for r in manifest['runs']] == ['cycle', 'soak']
+    assert manifest['runs'][0]['setpoint_degC_per_min'] == 1.0
+    assert manifest['runs'][1]['setpoint_degC'] == 10.0
+    assert len(stdout.getvalue().splitlines()) == len(runs)
+
+    sigma_white = SMALL.arw_10s_deg_h * np.sqrt(10.0 * SMALL.imu_hz)
+    sigma_total = np.hypot(sigma_white, SMALL.bias_instability_deg_h)
+    for entry in manifest['runs']:
+        bag = out / entry['bag']
+        assert bag.exists()
+        assert bag_format(bag) == fmt
+        assert bag.name == (entry['name'] + '.bag' if fmt == 'ros1' else entry['name'])
+        with np.load(out / entry['truth']) as npz:
+            truth = {k: npz[k] for k in npz.files}
+        stamps = truth['imu_stamps_s']
+        assert entry['duration_s'] == pytest.approx(stamps[-1] - stamps[0], abs=1e-6)
+        expected = true_model().drift_deg_h(
+            truth['true_temperature_degC'], truth['true_tdot_degC_per_min']
+        )
+        assert_allclose(truth['true_drift_deg_h'], expected, rtol=1e-12, atol=1e-12)
+
+        record = read_record(bag)
+        assert_array_equal(record.imu_stamps_s, stamps)
+        # gyro output = drift + white noise + Gauss-Markov bias: the residual std must match
+        # the configured noise (N ~ 500-1000 samples: std of a sample std ~3 %; allow 25 %)
+        residual = record.rates_rad_s * DEG_H_PER_RAD_S - truth['true_drift_deg_h']
+        assert_allclose(residual.std(axis=0), sigma_total, rtol=0.25)
+        # imu and temperature share the 0.5 Hz grid here, so the measured temperature is the
+        # true one plus white noise and 1/16 degC quantization (6 sigma + half a quantum)
+        assert_array_equal(record.temp_stamps_s, stamps)
+        bound = 6 * SMALL.temp_noise_degC + SMALL.temp_quantum_degC / 2
+        assert np.all(np.abs(record.temperature_degC - truth['true_temperature_degC']) <= bound)
+        if entry['kind'] == 'soak':
+            # the coil lags the chamber's small oscillation around the setpoint
+            deviation = np.abs(truth['true_temperature_degC'] - entry['setpoint_degC'])
+            assert deviation.max() <= SMALL.soak_oscillation_degC + 1e-9
+
+
+def test_simulate_manifest_reports_the_simulated_coefficients(tmp_path: Path) -> None:
+    # with other coefficients in the config, the manifest must describe what was simulated
+    cfg = dataclasses.replace(SMALL, coefficients=2.0 * TRUE_COEFFICIENTS)
+    out = tmp_path / 'sim'
+    rc = commands.simulate_command(out, runs=[('cycle', 1.0)], config=cfg, stdout=io.StringIO())
+    assert rc == 0
+    manifest = yaml.safe_load((out / 'manifest.yaml').read_text())
+    matrix = np.array(
+        [[manifest['true_coefficients'][a][coefficient_key(t)] for a in AXES] for t in PAPER_TERMS]
+    )
+    with np.load(out / manifest['runs'][0]['truth']) as npz:
+        drift = npz['true_drift_deg_h']
+        regressors = np.stack(
+            [
+                np.ones_like(npz['true_temperature_degC']),
+                npz['true_temperature_degC'],
+                npz['true_tdot_degC_per_min'],
+            ],
+            axis=1,
+        )
+    assert_allclose(regressors @ matrix, drift, rtol=1e-12)
+
+
+def test_simulate_parser() -> None:
+    parser = cli.build_parser()
+    argv = ['simulate', 'out', '--format', 'ros1', '--imu-hz', '2.5', '--temp-hz', '0.5']
+    args = parser.parse_args([*argv, '--seed', '7'])
+    assert (args.command, args.out_dir, args.fmt) == ('simulate', Path('out'), 'ros1')
+    assert (args.imu_hz, args.temp_hz, args.seed) == (2.5, 0.5, 7)
+    defaults = parser.parse_args(['simulate', 'out'])
+    assert defaults.fmt == 'mcap'
+    assert (defaults.imu_hz, defaults.temp_hz) == (
+        SimulationConfig().imu_hz,
+        SimulationConfig().temp_hz,
+    )
+    assert defaults.seed == 0
+    for fmt in FORMATS:
+        assert parser.parse_args(['simulate', 'o', '--format', fmt]).fmt == fmt
+    with pytest.raises(SystemExit) as info:
+        parser.parse_args(['simulate', 'out', '--format', 'ros2'])
+    assert info.value.code == 2
+    with pytest.raises(SystemExit):
+        parser.parse_args(['simulate', 'out', '--imu-hz', 'fast'])
+
+
+# --------------------------------------------------------------------------------------------
+# calibrate
+# --------------------------------------------------------------------------------------------
+
+
+def tdot_tolerance(fit: dict[str, Any], axis: str, true_value: float) -> float:
+    """Allowed |fitted - true| for a Tdot coefficient.
+
+    The OLS standard errors assume independent residuals, but the residuals hold a Gauss-Markov
+    bias (600 s correlation) and the denoised Tdot has correlated errors, so the real spread is a
+    few times larger: 6 sigma. Residual Tdot noise attenuates the slope (errors in variables) and
+    the causal IIR lags; both are systematic, a few percent of the value: 3 %.
+    """
+    return 6.0 * fit[axis]['standard_errors'][TDOT_KEY] + 0.03 * abs(true_value)
+
+
+@pytest.mark.parametrize('method', METHODS)
+def test_calibrate_each_denoise_method(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], cal_bag: Path, method: str
+) -> None:
+    out = tmp_path / 'coeffs.yaml'
+    assert cli.main(['calibrate', str(cal_bag), '-o', str(out), '--denoise', method]) == 0
+    assert capsys.readouterr().err == ''
+    coeffs = load(out)
+    assert coeffs.denoise.method == method
+    assert coeffs.model.terms == PAPER_TERMS
+    assert coeffs.frame_id == 'imu_link'
+    assert coeffs.provenance['bags'] == [str(cal_bag)]
+    assert coeffs.provenance['gyro_topics'] == ['/imu/data_raw']
+    t_range = coeffs.model.temperature_range_degC
+    # bin means of the coil temperature stay inside the chamber's swing (+ sensor noise)
+    assert (
+        SHORT_CHAMBER.low_degC - 0.5 < t_range.low < t_range.high < SHORT_CHAMBER.high_degC + 0.5
+    )
+    assert t_range.high - t_range.low > 5.0
+    tdot = coeffs.model.coefficient('Tdot')
+    assert np.all(np.isfinite(tdot))
+    if method == 'none':
+        return
+    for j, axis in enumerate(AXES):
+        true_value = TRUE_COEFFICIENTS[2, j]
+        assert abs(tdot[j] - true_value) <= tdot_tolerance(coeffs.fit, axis, true_value), axis
+
+
+def test_raw_tdot_fit_is_attenuated(tmp_path: Path, cal_bag: Path) -> None:
+    # noise in the raw Tdot regressor biases its coefficient towards zero (paper, Table 1)
+    fitted = {}
+    for method in ('wavelet', 'none'):
+        out = tmp_path / f'{method}.yaml'
+        assert cli.main(['calibrate', str(cal_bag), '-o', str(out), '--denoise', method]) == 0
+        fitted[method] = load(out).model.coefficient('Tdot')
+    assert abs(fitted['none'][0]) < abs(fitted['wavelet'][0])
+    assert abs(fitted['none'][0]) < abs(TRUE_COEFFICIENTS[2, 0])
+
+
+def test_calibrate_on_two_bags(tmp_path: Path, cal_bag: Path, fast_bag: Path) -> None:
+    out = tmp_path / 'both.yaml'
+    assert cli.main(['calibrate', str(cal_bag), str(fast_bag), '-o', str(out)]) == 0
+    both = load(out)
+    singles = []
+    for bag in (cal_bag, fast_bag):
+        path = tmp_path / f'{bag.name}.yaml'
+        assert commands.calibrate_command([bag], path, stdout=io.StringIO()) == 0
+        singles.append(load(path))
+    assert both.provenance['bags'] == [str(cal_bag), str(fast_bag)]
+    # the rows of both bags are stacked: counts add up and the calibrated range is the union
+    for axis in AXES:
+        assert both.fit[axis]['n_samples'] == sum(s.fit[axis]['n_samples'] for s in singles)
+    t_ranges = [s.model.temperature_range_degC for s in singles]
+    assert both.model.temperature_range_degC.low == min(r.low for r in t_ranges)
+    assert both.model.temperature_range_degC.high == max(r.high for r in t_ranges)
+    tdot = both.model.coefficient('Tdot')
+    for j, axis in enumerate(AXES):
+        true_value = TRUE_COEFFICIENTS[2, j]
+        assert abs(tdot[j] - true_value) <= tdot_tolerance(both.fit, axis, true_value), axis
+
+
+def test_calibrate_refuses_a_soak(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = simulate_run('soak', 20.0, SMALL, seed=3)
+    bag = write_run(tmp_path / 'soak', 'mcap', run)
+    out = tmp_path / 'coeffs.yaml'
+    assert cli.main(['calibrate', str(bag), '-o', str(out)]) == 1
+    line = error_line(capsys)
+    assert 'swing' in line
+    assert not out.exists()
+
+
+def test_calibrate_with_several_imu_topics(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    short_cycle_fast: SimulatedRun,
+    fast_bag: Path,
+) -> None:
+    rng = np.random.default_rng(8)
+    other = rng.normal(0.0, 1e-6, short_cycle_fast.rates_rad_s.shape)
+    bag = write_streams(
+        tmp_path / 'two_imus',
+        'mcap',
+        short_cycle_fast,
+        {'/imu/data_raw': other, '/fog/rate': short_cycle_fast.rates_rad_s},
+    )
+    out = tmp_path / 'coeffs.yaml'
+    assert cli.main(['calibrate', str(bag), '-o', str(out)]) == 1
+    line = error_line(capsys)
+    assert '/imu/data_raw' in line
+    assert '/fog/rate' in line
+    assert '--gyro-topic' in line
+    assert not out.exists()
+
+    assert cli.main(['calibrate', str(bag), '-o', str(out), '--gyro-topic', 'fog/rate']) == 0
+    coeffs = load(out)
+    assert coeffs.provenance['gyro_topics'] == ['/fog/rate']
+    # the same streams in a single-Imu bag give the very same fit
+    reference = tmp_path / 'reference.yaml'
+    assert commands.calibrate_command([fast_bag], reference, stdout=io.StringIO()) == 0
+    assert_array_equal(coeffs.model.coefficients, load(reference).model.coefficients)
+
+
+@pytest.mark.parametrize('command', ['calibrate', 'compensate', 'evaluate'])
+def test_command_output_follows_sys_stdout(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    cal_bag: Path,
+    coeffs_yaml: Path,
+    small_run: SimulatedRun,
+    command: str,
+) -> None:
+    # the summary must go to the sys.stdout of the call (capsys, contextlib.redirect_stdout)
+    if command == 'calibrate':
+        target = tmp_path / 'c.yaml'
+        argv = ['calibrate', str(cal_bag), '-o', str(target)]
+    elif command == 'compensate':
+        target = tmp_path / 'out'
+        bag = write_run(tmp_path / 'in', 'mcap', small_run)
+        argv = ['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(target)]
+    else:
+        target = cal_bag
+        argv = ['evaluate', str(cal_bag), '--coeffs', str(coeffs_yaml)]
+    assert cli.main(argv) == 0
+    captured = capsys.readouterr()
+    assert captured.err == ''
+    assert target.name in captured.out
+
+
+# --------------------------------------------------------------------------------------------
+# compensate
+# --------------------------------------------------------------------------------------------
+
+IMU_FIELDS = (
+    'orientation_covariance',
+    'angular_velocity_covariance',
+    'linear_acceleration_covariance',
+)
+
+
+@pytest.mark.parametrize('fmt', FORMATS)
+def test_compensate_output_bag(
+    tmp_path: Path, coeffs_yaml: Path, small_run: SimulatedRun, fmt: str
+) -> None:
+    rng = np.random.default_rng(99)
+    in_bag = write_streams(
+        bag_path(tmp_path, 'in', fmt),
+        fmt,
+        small_run,
+        {'/imu/data_raw': small_run.rates_rad_s},
+        rng=rng,
+        notes=True,
+    )
+    out_bag = bag_path(tmp_path, 'out', fmt)
+    argv = ['compensate', str(in_bag), '--coeffs', str(coeffs_yaml), '-o', str(out_bag)]
+    assert cli.main(argv) == 0
+    assert bag_format(out_bag) == fmt
+
+    src, dst = plain_read(in_bag), plain_read(out_bag)
+    assert set(dst) == {*src, '/imu/data'}
+    assert topic_types(out_bag) == {**topic_types(in_bag), '/imu/data': IMU_TYPE}
+    for topic, messages in src.items():
+        # every input message copied untouched, at its log time
+        assert [(t, raw) for t, raw, _ in dst[topic]] == [(t, raw) for t, raw, _ in messages]
+
+    raw_in, corrected = src['/imu/data_raw'], dst['/imu/data']
+    assert len(corrected) == len(raw_in) == small_run.imu_stamps_s.size
+    assert [t for t, _, _ in corrected] == [t for t, _, _ in raw_in]
+    assert [stamp_ns(m) for _, _, m in corrected] == [stamp_ns(m) for _, _, m in raw_in]
+    assert {m.header.frame_id for _, _, m in corrected} == {'fog_link'}
+    for (_, _, a), (_, _, b) in zip(raw_in, corrected, strict=True):
+        for name in IMU_FIELDS:
+            assert_array_equal(getattr(b, name), getattr(a, name))
+        for vec in ('orientation', 'linear_acceleration'):
+            va, vb = getattr(a, vec), getattr(b, vec)
+            assert [getattr(vb, c) for c in 'xyzw' if hasattr(vb, c)] == [
+                getattr(va, c) for c in 'xyzw' if hasattr(va, c)
+            ]
+
+    # the subtracted correction is the modelled drift: on average it matches the simulator's
+    # true drift to within a few hundredths of a deg/h (fit standard errors ~0.003 deg/h, plus
+    # the online filter's start-up); the drift itself is ~10 deg/h on x
+    removed = (rates_of(raw_in) - rates_of(corrected)) * DEG_H_PER_RAD_S
+    assert_allclose(removed.mean(axis=0), small_run.true_drift_deg_h.mean(axis=0), atol=0.05)
+
+
+@pytest.mark.parametrize('fmt', FORMATS)
+def test_compensate_matches_the_offline_core(
+    tmp_path: Path, coeffs_yaml: Path, short_cycle_fast: SimulatedRun, fmt: str
+) -> None:
+    in_bag = write_run(bag_path(tmp_path, 'in', fmt), fmt, short_cycle_fast)
+    out_bag = bag_path(tmp_path, 'out', fmt)
+    argv = ['compensate', str(in_bag), '--coeffs', str(coeffs_yaml), '-o', str(out_bag)]
+    assert cli.main(argv) == 0
+    expected = compensate_record(read_record(in_bag), load(coeffs_yaml))
+    got = rates_of(plain_read(out_bag)['/imu/data'])
+    assert got.shape == expected.shape
+    assert_allclose(got, expected, rtol=1e-15, atol=0.0)
+
+
+def copy_prefix(src: Path, dst: Path, cut_ns: int) -> int:
+    """Copy the messages logged before ``cut_ns`` into a new MCAP bag; return how many."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    count = 0
+    with AnyReader([src], default_typestore=store) as reader:
+        writer = Rosbag2Writer(dst, version=9, storage_plugin=StoragePlugin.MCAP)
+        with writer:
+            conns = {
+                c.id: writer.add_connection(c.topic, c.msgtype, typestore=store)
+                for c in reader.connections
+            }
+            for conn, log_ns, raw in reader.messages():
+                if log_ns < cut_ns:
+                    writer.write(conns[conn.id], log_ns, raw)
+                    count += 1
+    return count
+
+
+@pytest.mark.parametrize('method', ['wavelet', 'iir'])
+def test_compensate_is_causal(
+    tmp_path: Path, coeffs_yaml: Path, fast_bag: Path, short_cycle_fast: SimulatedRun, method: str
+) -> None:
+    stamps = short_cycle_fast.imu_stamps_s
+    # mid-record, on a ramp, between two samples and not on a 10 s grid boundary
+    cut_s = stamps[0] + 0.55 * (stamps[-1] - stamps[0]) + 3.5
+    cut_bag = tmp_path / 'cut'
+    n_copied = copy_prefix(fast_bag, cut_bag, round(cut_s * 1e9))
+    assert 0 < n_copied < 2 * stamps.size
+
+    outputs = {}
+    for name, bag in (('full', fast_bag), ('cut', cut_bag)):
+        out = tmp_path / f'out_{name}'
+        argv = ['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(out)]
+        assert cli.main([*argv, '--denoise', method]) == 0
+        outputs[name] = plain_read(out)['/imu/data']
+    full, cut = outputs['full'], outputs['cut']
+    assert len(cut) == int(np.sum(stamps < cut_s))
+    assert 0 < len(cut) < len(full)
+    assert [stamp_ns(m) for _, _, m in cut] == [stamp_ns(m) for _, _, m in full[: len(cut)]]
+    assert_array_equal(rates_of(cut), rates_of(full[: len(cut)]))
+
+
+def test_compensate_denoise_override(
+    tmp_path: Path, coeffs_yaml: Path, small_run: SimulatedRun
+) -> None:
+    bag = write_run(tmp_path / 'in', 'mcap', small_run)
+    outputs = {}
+    for method in ('wavelet', 'iir'):
+        out = tmp_path / f'out_{method}'
+        argv = ['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(out)]
+        assert cli.main([*argv, '--denoise', method]) == 0
+        outputs[method] = rates_of(plain_read(out)['/imu/data'])
+        coeffs = load(coeffs_yaml)
+        record = read_record(bag)
+        settings = commands.effective_settings(coeffs, method)
+        assert settings.method == method
+        assert_allclose(outputs[method], compensate_record(record, coeffs, settings), rtol=1e-15)
+    assert not np.array_equal(outputs['wavelet'], outputs['iir'])
+
+
+def test_compensate_refuses_an_existing_output(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], coeffs_yaml: Path, small_run: SimulatedRun
+) -> None:
+    bag = write_run(tmp_path / 'in', 'mcap', small_run)
+    out = tmp_path / 'taken'
+    out.mkdir()
+    (out / 'keep.txt').write_text('precious\n')
+    assert cli.main(['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(out)]) == 1
+    line = error_line(capsys)
+    assert str(out) in line
+    assert 'exists' in line
+    assert [p.name for p in out.iterdir()] == ['keep.txt']
+    assert (out / 'keep.txt').read_text() == 'precious\n'
+
+
+@pytest.mark.parametrize('topic', ['/imu/data_raw', 'imu/temperature'])
+def test_compensate_refuses_an_existing_output_topic(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    coeffs_yaml: Path,
+    small_run: SimulatedRun,
+    topic: str,
+) -> None:
+    bag = write_run(tmp_path / 'in', 'mcap', small_run)
+    out = tmp_path / 'out'
+    argv = ['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(out)]
+    assert cli.main([*argv, '--output-topic', topic]) == 1
+    line = error_line(capsys)
+    assert '--output-topic' in line
+    assert '/' + topic.lstrip('/') in line
+    assert not out.exists()
+
+
+def test_compensate_custom_output_topic(
+    tmp_path: Path, coeffs_yaml: Path, small_run: SimulatedRun
+) -> None:
+    bag = write_run(tmp_path / 'in', 'sqlite3', small_run)
+    out = tmp_path / 'out'
+    argv = ['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(out)]
+    assert cli.main([*argv, '--output-topic', 'fog/corrected']) == 0
+    assert topic_types(out) == {**topic_types(bag), '/fog/corrected': IMU_TYPE}
+
+
+def test_compensate_missing_coefficients(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], small_run: SimulatedRun
+) -> None:
+    bag = write_run(tmp_path / 'in', 'mcap', small_run)
+    missing = tmp_path / 'no_such_coeffs.yaml'
+    out = tmp_path / 'out'
+    assert cli.main(['compensate', str(bag), '--coeffs', str(missing), '-o', str(out)]) == 1
+    assert str(missing) in error_line(capsys)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    'key', ['axes.y.dtdot_deg_h_per_degC_per_min', 'calibrated_range', 'denoise', 'terms']
+)
+def test_compensate_malformed_coefficients(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    coeffs_yaml: Path,
+    small_run: SimulatedRun,
+    key: str,
+) -> None:
+    data = yaml.safe_load(coeffs_yaml.read_text())
+    *parents, last = key.split('.')
+    node = data
+    for part in parents:
+        node = node[part]
+    del node[last]
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(yaml.safe_dump(data))
+    bag = write_run(tmp_path / 'in', 'mcap', small_run)
+    out = tmp_path / 'out'
+    assert cli.main(['compensate', str(bag), '--coeffs', str(bad), '-o', str(out)]) == 1
+    line = error_line(capsys)
+    assert str(bad) in line
+    assert key in line
+    assert 'missing' in line
+    assert not out.exists()
+
+
+@pytest.mark.parametrize('fmt', ['mcap', 'ros1'])
+def test_compensate_truncated_input(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    coeffs_yaml: Path,
+    small_run: SimulatedRun,
+    fmt: str,
+) -> None:
+    bag = write_run(bag_path(tmp_path, 'in', fmt), fmt, small_run)
+    file = bag if fmt == 'ros1' else next(bag.glob('*.mcap'))
+    os.truncate(file, file.stat().st_size // 2)
+    out = bag_path(tmp_path, 'out', fmt)
+    assert cli.main(['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(out)]) == 1
+    assert str(bag) in error_line(capsys)
+
+
+# --------------------------------------------------------------------------------------------
+# evaluate
+# --------------------------------------------------------------------------------------------
+
+
+def parse_table(text: str) -> dict[tuple[str, str, float], list[float]]:
+    """Rows of the evaluate table keyed by (run, axis, tau): the seven numeric columns."""
+    lines = text.strip().splitlines()
+    assert lines[0].split()[:3] == ['run', 'axis', 'tau_s']
+    assert set(lines[1]) == {'-'}
+    assert lines[-1].startswith('(deg/h')
+    rows = {}
+    for line in lines[2:-1]:
+        run, axis, tau, *values = line.split()
+        assert len(values) == 6
+        rows[run, axis, float(tau)] = [float(v) for v in values]
+    assert len(rows) == len(lines) - 3
+    return rows
+
+
+def stability_of(stamps: np.ndarray, rates_rad_s: np.ndarray, tau: float) -> np.ndarray:
+    """Std (ddof 1) of consecutive tau-s means, for a gapless record whose length is a multiple."""
+    per_window = round(tau / float(np.median(np.diff(stamps))))
+    assert rates_rad_s.shape[0] % per_window == 0
+    means = (rates_rad_s * DEG_H_PER_RAD_S).reshape(-1, per_window, 3).mean(axis=1)
+    return means.std(axis=0, ddof=1)
+
+
+def test_evaluate_table(cal_bag: Path, fast_bag: Path, coeffs_yaml: Path) -> None:
+    stdout = io.StringIO()
+    rc = commands.evaluate_command([fast_bag, cal_bag], coeffs_yaml, stdout=stdout)
+    assert rc == 0
+    rows = parse_table(stdout.getvalue())
+    taus = (10.0, 100.0)
+    assert set(rows) == {
+        (bag.name, axis, tau) for bag in (fast_bag, cal_bag) for axis in AXES for tau in taus
+    }
+    record = read_record(fast_bag)
+    for tau in taus:
+        before = stability_of(record.imu_stamps_s, record.rates_rad_s, tau)
+        for j, axis in enumerate(AXES):
+            stab_before, stab_after, ratio, *_ = rows[fast_bag.name, axis, tau]
+            assert stab_before == pytest.approx(before[j], abs=6e-5)  # printed to 4 decimals
+            assert ratio == pytest.approx(stab_after / stab_before, abs=0.01)
+    # held-out run (1 degC/min) with coefficients from the 0.5 degC/min run: drift removed
+    for axis in AXES:
+        stab_before, stab_after, *_ = rows[fast_bag.name, axis, 10.0]
+        assert stab_after < stab_before, axis
+
+
+def test_evaluate_cli(
+    capsys: pytest.CaptureFixture[str], fast_bag: Path, coeffs_yaml: Path
+) -> None:
+    assert cli.main(['evaluate', str(fast_bag), '--coeffs', str(coeffs_yaml)]) == 0
+    assert capsys.readouterr().err == ''
+
+
+def test_evaluate_missing_bag(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], coeffs_yaml: Path
+) -> None:
+    missing = tmp_path / 'gone'
+    assert cli.main(['evaluate', str(missing), '--coeffs', str(coeffs_yaml)]) == 1
+    assert str(missing) in error_line(capsys)
+
+
+# --------------------------------------------------------------------------------------------
+# entry point
+# --------------------------------------------------------------------------------------------
+
+
+def test_python_dash_m_help() -> None:
+    proc = subprocess.run(
+        [sys.executable, '-m', 'fog_temp_comp', '--help'],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert 'calibrate' in proc.stdout
+    assert 'compensate' in proc.stdout
+    assert proc.stdout.startswith('usage: fog-temp-comp')

@@ -1,0 +1,496 @@
+"""Bad input to the node: each case gets a diagnostic (or a clear error) and loses nothing valid.
+
+All cases run the real node in an in-process executor and talk to it over topics.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from numpy.testing import assert_allclose, assert_array_equal
+from rclpy.parameter import Parameter
+from rosharness import Harness, make_imu, rate_of, stamp_of
+
+from fog_temp_comp.coefficients import Coefficients, CoefficientsError, load, save, to_dict
+from fog_temp_comp.denoise import DenoiseSettings
+from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range
+from fog_temp_comp.node import CompensatorNode
+from fog_temp_comp.units import RAD_S_PER_DEG_H
+
+T0 = 1_700_000_000.0
+RATE = np.array([1e-4, -2e-4, 3e-4])  # rad/s
+OK, WARN, ERROR = b'\x00', b'\x01', b'\x02'
+
+
+@pytest.fixture()
+def coefficients() -> Coefficients:
+    model = DriftModel(
+        PAPER_TERMS,
+        np.array([[-12.5, 3.2, -0.85], [-8.7e-4, 2.4e-3, -1.6e-3], [0.93, -0.62, 0.45]]),
+        Range(-40.0, 60.0),
+        Range(-0.5, 0.5),
+    )
+    return Coefficients(
+        model=model,
+        denoise=DenoiseSettings(method='iir'),
+        frame_id='imu_link',
+        fit={axis: {'residual_std_deg_h': 0.02} for axis in 'xyz'},
+        provenance={'created_utc': '2026-01-01T00:00:00Z', 'bags': ['chamber_run']},
+    )
+
+
+@pytest.fixture()
+def coeffs_file(tmp_path: Path, coefficients: Coefficients) -> Path:
+    path = tmp_path / 'coeffs.yaml'
+    save(coefficients, path)
+    return path
+
+
+def start(context: object, coeffs_file: Path, **params: object) -> CompensatorNode:
+    overrides = [Parameter('coefficients_file', value=str(coeffs_file))]
+    overrides += [Parameter(k, value=v) for k, v in params.items()]
+    return CompensatorNode(context=context, parameter_overrides=overrides)
+
+
+@pytest.fixture()
+def harness(ros_context: object, coeffs_file: Path) -> Iterator[Harness]:
+    h = Harness(ros_context, start(ros_context, coeffs_file))
+    yield h
+    h.close()
+
+
+def expected_correction(coefficients: Coefficients, temperature: float, tdot: float = 0.0):
+    return coefficients.model.drift_deg_h(temperature, tdot) * RAD_S_PER_DEG_H
+
+
+def diag_values(status: object) -> dict[str, str]:
+    return {kv.key: kv.value for kv in status.values}
+
+
+# ------------------------------------------------------------------ normal operation
+def test_corrected_imu_keeps_everything_but_the_rate(
+    harness: Harness, coefficients: Coefficients
+) -> None:
+    harness.send_temperature(T0, 25.0)
+    out = harness.send_imu(T0 + 0.1, RATE)
+    assert out is not None
+    assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0), rtol=1e-12)
+    assert stamp_of(out) == pytest.approx(T0 + 0.1, abs=1e-9)
+    assert out.header.frame_id == 'imu_link'
+    assert out.orientation.w == 1.0 and out.orientation_covariance[0] == -1.0
+    assert out.linear_acceleration.z == 9.81
+    assert list(out.angular_velocity_covariance[[0, 4, 8]]) == [1e-8, 2e-8, 3e-8]
+
+
+def test_diagnostics_report_state_values_and_provenance(harness: Harness) -> None:
+    for k in range(25):  # three 10 s bins: the IIR Tdot filter has its first sample
+        harness.send_temperature(T0 + k, 25.0)
+    harness.send_imu(T0 + 24.5, RATE)
+    status = harness.diagnose()
+    values = diag_values(status)
+    assert status.level == OK, status.message
+    assert float(values['temperature_degC']) == pytest.approx(25.0)
+    assert float(values['correction_x_deg_h']) == pytest.approx(-12.5 - 8.7e-4 * 25.0)
+    assert values['coefficients_created_utc'] == '2026-01-01T00:00:00Z'
+    assert values['coefficients_bags'] == 'chamber_run'
+    assert values['denoise'] == 'iir'
+    assert values['imu_corrected'] == '1'
+    assert status.hardware_id == 'imu_link'
+
+
+def test_diagnostics_timer_publishes_periodically(ros_context: object, coeffs_file: Path) -> None:
+    h = Harness(ros_context, start(ros_context, coeffs_file, diagnostics_period_s=0.05))
+    try:
+        h.spin_until(lambda: len(h.diagnostics) >= 3)
+    finally:
+        h.close()
+
+
+# ------------------------------------------------------------------ gyro input
+@pytest.mark.parametrize('bad', [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize('axis', [0, 2])
+def test_nonfinite_rate_component_left_alone_others_corrected(
+    harness: Harness, coefficients: Coefficients, bad: float, axis: int
+) -> None:
+    harness.send_temperature(T0, 25.0)
+    rate = RATE.copy()
+    rate[axis] = bad
+    out = harness.send_imu(T0 + 0.1, rate)
+    assert out is not None
+    got = rate_of(out)
+    expected = RATE - expected_correction(coefficients, 25.0)
+    others = [j for j in range(3) if j != axis]
+    assert_allclose(got[others], expected[others], rtol=1e-12)
+    assert not math.isfinite(got[axis])
+    assert harness.node.compensator.status.counters.imu_nonfinite == 1
+    status = harness.diagnose()
+    assert status.level == WARN and 'non-finite gyro' in status.message
+
+
+def test_duplicate_gyro_stamp_is_dropped_and_reported(harness: Harness) -> None:
+    harness.send_temperature(T0, 25.0)
+    assert harness.send_imu(T0 + 0.1, RATE) is not None
+    assert harness.send_imu(T0 + 0.1, RATE) is None
+    assert harness.send_imu(T0 + 0.2, RATE) is not None
+    assert len(harness.received) == 2
+    assert 'duplicate gyro' in harness.diagnose().message
+
+
+def test_out_of_order_gyro_stamp_still_corrected(
+    harness: Harness, coefficients: Coefficients
+) -> None:
+    harness.send_temperature(T0, 25.0)
+    harness.send_imu(T0 + 0.5, RATE)
+    out = harness.send_imu(T0 + 0.3, RATE)
+    assert out is not None
+    assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0), rtol=1e-12)
+    assert harness.node.compensator.status.counters.imu_out_of_order == 1
+    assert 'out-of-order gyro' in harness.diagnose().message
+
+
+def test_zero_stamp_gyro_gets_current_correction(
+    harness: Harness, coefficients: Coefficients
+) -> None:
+    harness.send_temperature(T0, 25.0)
+    harness.send_imu(T0 + 0.1, RATE)
+    out = harness.send_imu(0.0, RATE)
+    assert out is not None and stamp_of(out) == 0.0
+    assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0), rtol=1e-12)
+    assert harness.node.compensator.status.counters.imu_zero_stamp == 1
+    assert harness.node.compensator.status.counters.time_jumps == 0
+    assert 'without stamp' in harness.diagnose().message
+
+
+def test_gyro_time_jump_backwards_resets_and_reports(harness: Harness) -> None:
+    for k in range(30):
+        harness.send_temperature(T0 + k, 20.0 + k / 60.0)
+        harness.send_imu(T0 + k + 0.5, RATE)
+    out = harness.send_imu(T0 - 3600.0, RATE)  # bag looped
+    assert out is not None
+    # after the reset there is no temperature yet: passed through, not a stale correction
+    assert_array_equal(rate_of(out), RATE)
+    assert harness.node.compensator.status.counters.time_jumps == 1
+    harness.send_temperature(T0 - 3599.0, 20.0)
+    assert harness.send_imu(T0 - 3598.5, RATE) is not None
+    assert 'time jump' in harness.diagnose().message
+
+
+def test_burst_of_10000_messages_is_survived_and_accounted_for(
+    harness: Harness, coefficients: Coefficients
+) -> None:
+    # sensor-data QoS keeps the newest 5 samples: a burst is thinned by the middleware, by
+    # design; the node must stay up, correct every message it gets and account for them
+    harness.send_temperature(T0, 25.0)
+    for k in range(10_000):
+        harness.imu_pub.publish(make_imu(T0 + 0.001 * (k + 1), RATE))
+    counters = harness.node.compensator.status.counters
+    seen = -1
+    while seen != counters.imu_total:  # spin until the node has drained what arrived
+        seen = counters.imu_total
+        harness.spin_for(50)
+    assert 1 <= counters.imu_total <= 10_000
+    assert counters.imu_corrected == counters.imu_total
+    expected = RATE - expected_correction(coefficients, 25.0)
+    assert harness.received
+    for msg in harness.received:
+        assert_allclose(rate_of(msg), expected, rtol=1e-12)
+    stamps = [stamp_of(m) for m in harness.received]
+    assert stamps == sorted(stamps)
+    # and it keeps working afterwards
+    out = harness.send_imu(T0 + 11.0, RATE)
+    assert out is not None
+    assert_allclose(rate_of(out), expected, rtol=1e-12)
+
+
+# ------------------------------------------------------------------ temperature input
+def test_no_temperature_ever_passes_through_and_errors(harness: Harness) -> None:
+    for k in range(3):
+        out = harness.send_imu(T0 + k, RATE)
+        assert out is not None
+        assert_array_equal(rate_of(out), RATE)
+    status = harness.diagnose()
+    assert status.level == ERROR and 'no temperature' in status.message
+
+
+def test_temperature_only_after_gyro_starts(harness: Harness, coefficients: Coefficients) -> None:
+    first = harness.send_imu(T0, RATE)
+    assert first is not None
+    assert_array_equal(rate_of(first), RATE)
+    harness.send_temperature(T0 + 1.0, 25.0)
+    out = harness.send_imu(T0 + 1.1, RATE)
+    assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0), rtol=1e-12)
+
+
+@pytest.mark.parametrize('policy', ['hold', 'none'])
+def test_stale_temperature_follows_policy_and_warns(
+    ros_context: object, coeffs_file: Path, coefficients: Coefficients, policy: str
+) -> None:
+    h = Harness(ros_context, start(ros_context, coeffs_file, stale_policy=policy))
+    try:
+        h.send_temperature(T0, 25.0)
+        fresh = h.send_imu(T0 + 1.0, RATE)
+        stale = h.send_imu(T0 + 60.0, RATE)  # temperature stopped 60 s ago (timeout 10 s)
+        assert fresh is not None and stale is not None
+        if policy == 'hold':
+            assert_array_equal(rate_of(stale), rate_of(fresh))
+        else:
+            assert_array_equal(rate_of(stale), RATE)
+        status = h.diagnose()
+        assert status.level == WARN and 'temperature stale' in status.message
+        # temperature comes back: correcting again, and the gap restarted the Tdot estimate
+        h.send_temperature(T0 + 61.0, 25.0)
+        back = h.send_imu(T0 + 61.5, RATE)
+        assert_allclose(rate_of(back), RATE - expected_correction(coefficients, 25.0))
+        assert h.node.compensator.status.counters.temperature_gaps == 1
+    finally:
+        h.close()
+
+
+@pytest.mark.parametrize('bad', [math.nan, math.inf])
+def test_nonfinite_temperature_is_rejected(
+    harness: Harness, coefficients: Coefficients, bad: float
+) -> None:
+    harness.send_temperature(T0, 25.0)
+    harness.send_temperature(T0 + 1, bad)
+    out = harness.send_imu(T0 + 1.5, RATE)
+    assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0), rtol=1e-12)
+    assert harness.node.compensator.status.counters.temperature_rejected == 1
+    assert 'non-finite temperature' in harness.diagnose().message
+
+
+def test_duplicate_and_out_of_order_temperature_are_ignored(
+    harness: Harness, coefficients: Coefficients
+) -> None:
+    harness.send_temperature(T0 + 1.0, 25.0)
+    harness.send_temperature(T0 + 1.0, 30.0)  # duplicate stamp
+    harness.send_temperature(T0 + 0.5, 35.0)  # slightly out of order
+    out = harness.send_imu(T0 + 1.5, RATE)
+    assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0), rtol=1e-12)
+    counters = harness.node.compensator.status.counters
+    assert counters.temperature_duplicate == 1 and counters.temperature_out_of_order == 1
+    message = harness.diagnose().message
+    assert 'duplicate temperature' in message and 'out-of-order temperature' in message
+
+
+def test_temperature_time_jump_backwards_resets(harness: Harness) -> None:
+    for k in range(40):
+        harness.send_temperature(T0 + k, 20.0 + k / 10.0)  # 6 degC/min
+    harness.send_imu(T0 + 39.5, RATE)
+    assert harness.node.compensator.status.tdot_degC_per_min > 1.0
+    harness.send_temperature(T0 - 1000.0, 20.0)
+    assert harness.node.compensator.status.counters.time_jumps == 1
+    assert harness.node.compensator.status.tdot_degC_per_min == 0.0
+
+
+def test_single_50_degC_glitch_is_rejected(harness: Harness, coefficients: Coefficients) -> None:
+    for k in range(5):
+        harness.send_temperature(T0 + k, 25.0)
+    harness.send_temperature(T0 + 5, 75.0)  # one wild sample
+    harness.send_temperature(T0 + 6, 25.0)
+    out = harness.send_imu(T0 + 6.5, RATE)
+    assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0), rtol=1e-12)
+    assert harness.node.compensator.status.counters.temperature_glitches == 1
+    assert 'glitch' in harness.diagnose().message
+
+
+def test_persistent_50_degC_step_is_accepted_after_confirmation(harness: Harness) -> None:
+    for k in range(5):
+        harness.send_temperature(T0 + k, 0.0)
+    for k in range(5, 12):
+        harness.send_temperature(T0 + k, 50.0)
+    harness.send_imu(T0 + 12.5, RATE)
+    status = harness.node.compensator.status
+    assert status.counters.temperature_steps == 1
+    assert status.temperature_used_degC == pytest.approx(50.0)
+    # the step restarted Tdot instead of producing a 300 degC/min spike
+    assert abs(status.tdot_degC_per_min) < 1e-9
+
+
+def test_temperature_far_outside_calibrated_range_is_clamped(
+    harness: Harness, coefficients: Coefficients
+) -> None:
+    harness.send_temperature(T0, 95.0)
+    out = harness.send_imu(T0 + 0.5, RATE)
+    assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 60.0), rtol=1e-12)
+    status = harness.diagnose()
+    assert status.level == WARN and 'temperature outside calibrated range, clamped' in (
+        status.message
+    )
+
+
+@pytest.mark.parametrize('clamp', [True, False])
+def test_tdot_outside_calibrated_range(
+    ros_context: object, coeffs_file: Path, coefficients: Coefficients, clamp: bool
+) -> None:
+    h = Harness(ros_context, start(ros_context, coeffs_file, clamp_tdot=clamp))
+    try:
+        for k in range(0, 61):  # 1.5 degC/min ramp, calibrated range is +-0.5
+            h.send_temperature(T0 + k, 20.0 + 1.5 * k / 60.0)
+        out = h.send_imu(T0 + 60.5, RATE)
+        status = h.node.compensator.status
+        assert status.tdot_degC_per_min == pytest.approx(1.5, rel=0.05)
+        used = 0.5 if clamp else status.tdot_degC_per_min
+        assert status.tdot_used_degC_per_min == pytest.approx(used)
+        expected = expected_correction(coefficients, status.temperature_used_degC, used)
+        assert_allclose(rate_of(out), RATE - expected, rtol=1e-12)
+        word = 'clamped' if clamp else 'extrapolating'
+        assert f'Tdot outside calibrated range, {word}' in h.diagnose().message
+    finally:
+        h.close()
+
+
+# ------------------------------------------------------------------ frame_id
+@pytest.mark.parametrize('require', [False, True])
+def test_frame_id_mismatch(
+    ros_context: object, coeffs_file: Path, coefficients: Coefficients, require: bool
+) -> None:
+    h = Harness(ros_context, start(ros_context, coeffs_file, require_frame_id_match=require))
+    try:
+        h.send_temperature(T0, 25.0)
+        out = h.send_imu(T0 + 0.5, RATE, frame_id='other_gyro')
+        assert out is not None and out.header.frame_id == 'other_gyro'
+        if require:
+            assert_array_equal(rate_of(out), RATE)
+        else:
+            assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0))
+        status = h.diagnose()
+        assert 'frame_id differs' in status.message
+        assert status.level == (ERROR if require else WARN)
+    finally:
+        h.close()
+
+
+# ------------------------------------------------------------------ coefficients file
+def _broken(coefficients: Coefficients, edit: str) -> dict:
+    data = to_dict(coefficients)
+    if edit == 'wrong schema':
+        data['schema_version'] = 7
+    elif edit == 'missing axis':
+        del data['axes']['y']
+    elif edit == 'nan coefficient':
+        data['axes']['z']['dtdot_deg_h_per_degC_per_min'] = float('nan')
+    return data
+
+
+@pytest.mark.parametrize(
+    ('case', 'match'),
+    [
+        ('missing', 'cannot read'),
+        ('empty', 'mapping'),
+        ('malformed', 'not valid YAML'),
+        ('wrong schema', 'schema_version'),
+        ('missing axis', 'axes.y'),
+        ('nan coefficient', 'axes.z.dtdot_deg_h_per_degC_per_min'),
+        ('unset', 'coefficients_file'),
+    ],
+)
+def test_bad_coefficients_file_refuses_to_start(
+    ros_context: object, tmp_path: Path, coefficients: Coefficients, case: str, match: str
+) -> None:
+    path = tmp_path / 'bad.yaml'
+    if case == 'empty':
+        path.write_text('')
+    elif case == 'malformed':
+        path.write_text('axes: [x, y\n')
+    elif case not in ('missing', 'unset'):
+        path.write_text(yaml.safe_dump(_broken(coefficients, case)))
+    with pytest.raises(CoefficientsError, match=match):
+        if case == 'unset':
+            CompensatorNode(context=ros_context)
+        else:
+            start(ros_context, path)
+
+
+# ------------------------------------------------------------------ runtime parameters
+def test_runtime_change_of_denoise_method(harness: Harness) -> None:
+    node = harness.node
+    result = node.set_parameters([Parameter('denoise', value='wavelet')])[0]
+    assert result.successful
+    assert node.config.settings.method == 'wavelet' and node.reconfigurations == 1
+    refused = node.set_parameters([Parameter('denoise', value='kalman')])[0]
+    assert not refused.successful and 'method' in refused.reason
+    assert node.config.settings.method == 'wavelet'
+
+
+def test_runtime_reload_of_coefficients(
+    harness: Harness, tmp_path: Path, coefficients: Coefficients
+) -> None:
+    node = harness.node
+    harness.send_temperature(T0, 25.0)
+    harness.send_imu(T0 + 0.1, RATE)
+    other = tmp_path / 'other.yaml'
+    data = to_dict(coefficients)
+    data['axes']['x']['d0_deg_h'] = -20.0
+    other.write_text(yaml.safe_dump(data))
+    assert node.set_parameters([Parameter('coefficients_file', value=str(other))])[0].successful
+    harness.send_temperature(T0 + 1, 25.0)
+    out = harness.send_imu(T0 + 1.1, RATE)
+    expected = load(other).model.drift_deg_h(25.0, 0.0) * RAD_S_PER_DEG_H
+    assert_allclose(rate_of(out), RATE - expected, rtol=1e-12)
+    # a broken file is refused with the reason, and the running coefficients stay
+    missing = node.set_parameters([Parameter('coefficients_file', value='/nope.yaml')])[0]
+    assert not missing.successful and 'cannot read' in missing.reason
+    assert node.config.coefficients_file == str(other)
+    assert node.get_parameter('coefficients_file').value == str(other)
+
+
+def test_runtime_guard_change_applies_without_reset(harness: Harness) -> None:
+    node = harness.node
+    harness.send_temperature(T0, 25.0)
+    assert node.set_parameters([Parameter('stale_policy', value='none')])[0].successful
+    assert node.compensator.guard.stale_policy == 'none'
+    assert node.compensator.status.has_temperature  # not reset
+    bad = node.set_parameters([Parameter('stale_policy', value='guess')])[0]
+    assert not bad.successful and 'stale_policy' in bad.reason
+
+
+# ------------------------------------------------------------------ deployment
+def test_two_gyros_in_namespaces(
+    ros_context: object, coeffs_file: Path, tmp_path: Path, coefficients: Coefficients
+) -> None:
+    data = to_dict(coefficients)
+    data['axes']['x']['d0_deg_h'] = 50.0
+    data['frame_id'] = 'gyro_b'
+    second = tmp_path / 'b.yaml'
+    second.write_text(yaml.safe_dump(data))
+    node_a = CompensatorNode(
+        context=ros_context,
+        namespace='gyro_a',
+        parameter_overrides=[Parameter('coefficients_file', value=str(coeffs_file))],
+    )
+    node_b = CompensatorNode(
+        context=ros_context,
+        namespace='gyro_b',
+        parameter_overrides=[Parameter('coefficients_file', value=str(second))],
+    )
+    ha = Harness(ros_context, node_a, namespace='gyro_a')
+    hb = Harness(ros_context, node_b, namespace='gyro_b')
+    try:
+        for h in (ha, hb):
+            h.send_temperature(T0, 25.0)
+        out_a = ha.send_imu(T0 + 0.1, RATE)
+        out_b = hb.send_imu(T0 + 0.1, RATE, frame_id='gyro_b')
+        assert_allclose(rate_of(out_a), RATE - expected_correction(coefficients, 25.0))
+        assert_allclose(
+            rate_of(out_b), RATE - load(second).model.drift_deg_h(25.0, 0.0) * (RAD_S_PER_DEG_H)
+        )
+        assert len(ha.received) == 1 and len(hb.received) == 1
+    finally:
+        ha.close()
+        hb.peer.destroy_node()
+        node_b.destroy_node()
+
+
+def test_use_sim_time(ros_context: object, coeffs_file: Path, coefficients: Coefficients) -> None:
+    h = Harness(ros_context, start(ros_context, coeffs_file, use_sim_time=True))
+    try:
+        h.send_temperature(100.0, 25.0)  # sim-time stamps near zero are fine
+        out = h.send_imu(100.5, RATE)
+        assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0))
+    finally:
+        h.close()
