@@ -8,13 +8,15 @@ output depends only on the messages fed before it.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.model import DriftModel
+from fog_temp_comp.model import TERMS, DriftModel
 from fog_temp_comp.tdot import TdotEstimate, TdotEstimator, make_estimator
 from fog_temp_comp.units import RAD_S_PER_DEG_H, S_PER_MIN
 
@@ -136,7 +138,7 @@ class CompensatorStatus:
     estimator_ready: bool = False
     last_temperature_stamp_s: float = -math.inf
     last_imu_stamp_s: float = -math.inf
-    correction_deg_h: FloatArray = field(default_factory=lambda: np.zeros(3))
+    correction_deg_h: tuple[float, float, float] = (0.0, 0.0, 0.0)
     counters: CompensatorCounters = field(default_factory=CompensatorCounters)
 
 
@@ -165,18 +167,34 @@ class Compensator:
     ) -> None:
         self.model = model
         self.denoise = denoise
-        self.guard = guard or GuardSettings()
+        self._guard = guard or GuardSettings()
         self._estimator: TdotEstimator = make_estimator(denoise)
         self.status = CompensatorStatus()
-        self._correction_rad_s = np.zeros(3)
+        self._correction = (0.0, 0.0, 0.0)  # rad/s
         self._pending: list[tuple[float, float]] = []  # candidate samples of a temperature step
         self._last_temperature = math.nan
+        # scalar evaluation of the model (the per-message hot path; no small numpy arrays)
+        self._term_functions: list[Callable[[Any, Any], Any]] = [
+            TERMS[term][1] for term in model.terms
+        ]
+        self._coefficient_rows = model.coefficients.tolist()
+        self._horizon_s = 2 * denoise.tdot_period_s + self._guard.temperature_timeout_s
+
+    @property
+    def guard(self) -> GuardSettings:
+        """Input guards; may be replaced at run time (no reset)."""
+        return self._guard
+
+    @guard.setter
+    def guard(self, guard: GuardSettings) -> None:
+        self._guard = guard
+        self._horizon_s = 2 * self.denoise.tdot_period_s + guard.temperature_timeout_s
 
     def reset(self) -> None:
         """Forget the temperature history (keeps the counters)."""
         self._estimator.reset()
         self.status = CompensatorStatus(counters=self.status.counters)
-        self._correction_rad_s = np.zeros(3)
+        self._correction = (0.0, 0.0, 0.0)
         self._pending = []
         self._last_temperature = math.nan
 
@@ -257,7 +275,7 @@ class Compensator:
     @property
     def correction_rad_s(self) -> FloatArray:
         """Drift subtracted at the last gyro message, shape (3,), rad/s."""
-        return self._correction_rad_s
+        return np.array(self._correction)
 
     def correct(self, stamp_s: float, rate_rad_s: ArrayLike) -> FloatArray | None:
         """Corrected angular rate (rad/s, shape (3,)) for one gyro sample, or None to drop it.
@@ -266,71 +284,92 @@ class Compensator:
         ``stale_policy='none'``) the rate passes through unchanged; non-finite components are
         left as they are and the others corrected.
         """
-        rate = np.array(rate_rad_s, dtype=np.float64)
+        x, y, z = (float(v) for v in np.asarray(rate_rad_s, dtype=np.float64).reshape(3))
+        out = self.correct_xyz(stamp_s, x, y, z)
+        return None if out is None else np.array(out)
+
+    def correct_xyz(
+        self, stamp_s: float, x: float, y: float, z: float
+    ) -> tuple[float, float, float] | None:
+        """:meth:`correct` on plain floats (rad/s), the per-message hot path of the node."""
         status = self.status
         counters = status.counters
         guard = self.guard
         last = status.last_imu_stamp_s
-        stamp_ok = math.isfinite(stamp_s) and stamp_s > 0
+        stamp_ok = stamp_s > 0 and math.isfinite(stamp_s)
         if not stamp_ok:
             counters.imu_zero_stamp += 1
+        elif stamp_s > last:
+            status.last_imu_stamp_s = stamp_s
         elif stamp_s == last:
             counters.imu_duplicate += 1
             return None
-        elif stamp_s < last:
-            if last - stamp_s >= guard.time_jump_threshold_s:
-                counters.time_jumps += 1
-                self.reset()
-                status = self.status
-                status.last_imu_stamp_s = stamp_s
-            else:
-                counters.imu_out_of_order += 1
-        else:
+        elif last - stamp_s >= guard.time_jump_threshold_s:
+            counters.time_jumps += 1
+            self.reset()
+            status = self.status
             status.last_imu_stamp_s = stamp_s
-        if not np.all(np.isfinite(rate)):
+        else:
+            counters.imu_out_of_order += 1
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             counters.imu_nonfinite += 1
         if not status.has_temperature:
             counters.imu_uncorrected += 1
-            status.correction_deg_h = np.zeros(3)
-            self._correction_rad_s = np.zeros(3)
-            return rate
-        stale = stamp_ok and abs(stamp_s - status.last_temperature_stamp_s) > (
+            self._set_correction((0.0, 0.0, 0.0))
+            return (x, y, z)
+        if stamp_ok and abs(stamp_s - status.last_temperature_stamp_s) > (
             guard.temperature_timeout_s
-        )
-        status.temperature_stale = stale
-        if stale:
+        ):
+            status.temperature_stale = True
             if guard.stale_policy == 'none':
                 counters.imu_uncorrected += 1
-                return rate
+                return (x, y, z)
             counters.imu_held += 1
         else:
+            status.temperature_stale = False
             if stamp_ok:
                 self._update_correction(stamp_s)
             counters.imu_corrected += 1
-        return rate - self._correction_rad_s
+        cx, cy, cz = self._correction
+        return (x - cx, y - cy, z - cz)
+
+    def _set_correction(self, correction_deg_h: tuple[float, float, float]) -> None:
+        self.status.correction_deg_h = correction_deg_h
+        k = RAD_S_PER_DEG_H
+        self._correction = (
+            correction_deg_h[0] * k,
+            correction_deg_h[1] * k,
+            correction_deg_h[2] * k,
+        )
 
     def _update_correction(self, stamp_s: float) -> None:
         estimate: TdotEstimate | None = self._estimator.estimate
         if estimate is None:
             return
         status = self.status
-        model = self.model
         tdot = estimate.tdot_degC_per_min
         # the estimate refers to a past instant (grid bins lag); extrapolate at most this far
-        horizon_s = 2 * self.denoise.tdot_period_s + self.guard.temperature_timeout_s
-        elapsed_s = min(max(stamp_s - estimate.stamp_s, 0.0), horizon_s)
+        elapsed_s = min(max(stamp_s - estimate.stamp_s, 0.0), self._horizon_s)
         temperature = estimate.temperature_degC + tdot * elapsed_s / S_PER_MIN
-        t_range, r_range = model.temperature_range_degC, model.tdot_range_degC_per_min
-        status.temperature_out_of_range = not t_range.contains(temperature)
-        status.tdot_out_of_range = not r_range.contains(tdot)
-        t_used = t_range.clamp(temperature) if self.guard.clamp_temperature else temperature
-        r_used = r_range.clamp(tdot) if self.guard.clamp_tdot else tdot
+        t_range, r_range = self.model.temperature_range_degC, self.model.tdot_range_degC_per_min
+        t_low, t_high, r_low, r_high = t_range.low, t_range.high, r_range.low, r_range.high
+        status.temperature_out_of_range = not t_low <= temperature <= t_high
+        status.tdot_out_of_range = not r_low <= tdot <= r_high
+        t_used = (
+            min(max(temperature, t_low), t_high) if self.guard.clamp_temperature else (temperature)
+        )
+        r_used = min(max(tdot, r_low), r_high) if self.guard.clamp_tdot else tdot
         status.temperature_clamped = t_used != temperature
         status.tdot_clamped = r_used != tdot
         status.temperature_used_degC = t_used
         status.tdot_used_degC_per_min = r_used
-        status.correction_deg_h = model.drift_deg_h(t_used, r_used)
-        self._correction_rad_s = status.correction_deg_h * RAD_S_PER_DEG_H
+        cx = cy = cz = 0.0
+        for term, row in zip(self._term_functions, self._coefficient_rows, strict=True):
+            value = float(term(t_used, r_used))
+            cx += value * row[0]
+            cy += value * row[1]
+            cz += value * row[2]
+        self._set_correction((cx, cy, cz))
 
 
 def replay(

@@ -139,6 +139,8 @@ class CompensatorNode(Node):
         )
         self.reconfigurations = 0
         self.frame_mismatches = 0
+        self._require_frame_match = bool(self.get_parameter('require_frame_id_match').value)
+        self._inflate_covariance = bool(self.get_parameter('inflate_covariance').value)
         self._log_config('started')
 
         qos_options = QoSOverridingOptions.with_default_policies()
@@ -246,6 +248,10 @@ class CompensatorNode(Node):
 
     def _on_set_parameters(self, params: Sequence[Parameter]) -> SetParametersResult:
         changes = {p.name: p for p in params}
+        if 'require_frame_id_match' in changes:
+            self._require_frame_match = bool(changes['require_frame_id_match'].value)
+        if 'inflate_covariance' in changes:
+            self._inflate_covariance = bool(changes['inflate_covariance'].value)
         rebuild = set(changes) & ({'coefficients_file'} | set(FILTER_PARAMETERS))
         guard_change = set(changes) & set(GUARD_PARAMETERS)
         if not (rebuild or guard_change):
@@ -285,14 +291,14 @@ class CompensatorNode(Node):
         expected_frame = self.config.coefficients.frame_id
         if expected_frame and msg.header.frame_id != expected_frame:
             self.frame_mismatches += 1
-            if self.get_parameter('require_frame_id_match').value:
+            if self._require_frame_match:
                 self._publisher.publish(msg)
                 return
-        rate = self.compensator.correct(stamp.sec + stamp.nanosec * 1e-9, (w.x, w.y, w.z))
+        rate = self.compensator.correct_xyz(stamp.sec + stamp.nanosec * 1e-9, w.x, w.y, w.z)
         if rate is None:  # duplicate stamp: dropped and counted
             return
-        w.x, w.y, w.z = float(rate[0]), float(rate[1]), float(rate[2])
-        if self.get_parameter('inflate_covariance').value:
+        w.x, w.y, w.z = rate
+        if self._inflate_covariance:
             self._inflate(msg)
         self._publisher.publish(msg)
 
@@ -322,7 +328,7 @@ class CompensatorNode(Node):
             temperature_rate_hz=(counters.temperature_total - previous.temperature_total)
             / elapsed,
             frame_mismatches=self.frame_mismatches,
-            require_frame_match=self.get_parameter('require_frame_id_match').value,
+            require_frame_match=self._require_frame_match,
         )
         self._last_counters = dataclasses.replace(counters)
         self._last_report_time = now

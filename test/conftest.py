@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 
 import numpy as np
@@ -10,6 +11,11 @@ import pytest
 from fog_temp_comp.simulate import SimulatedRun, simulate_run
 
 from simdata import SHORT_CHAMBER
+
+
+# keep this test run's DDS traffic to itself: its own domain, discovery on this host only
+os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 
 @pytest.fixture(scope='session')

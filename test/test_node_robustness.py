@@ -494,3 +494,22 @@ def test_use_sim_time(ros_context: object, coeffs_file: Path, coefficients: Coef
         assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0))
     finally:
         h.close()
+
+
+@pytest.mark.parametrize('inflate', [False, True])
+def test_angular_velocity_covariance_passed_or_inflated(
+    ros_context: object, coeffs_file: Path, inflate: bool
+) -> None:
+    h = Harness(ros_context, start(ros_context, coeffs_file, inflate_covariance=inflate))
+    try:
+        h.send_temperature(T0, 25.0)
+        out = h.send_imu(T0 + 0.5, RATE)
+        cov = np.array(out.angular_velocity_covariance)
+        sent = np.zeros(9)
+        sent[[0, 4, 8]] = [1e-8, 2e-8, 3e-8]
+        if inflate:  # + (0.02 deg/h residual std in rad/s)^2 on the diagonal
+            sent[[0, 4, 8]] += (0.02 * RAD_S_PER_DEG_H) ** 2
+        assert_allclose(cov, sent, rtol=1e-12, atol=0)
+        assert out.orientation_covariance[0] == -1.0  # unknown orientation stays unknown
+    finally:
+        h.close()
