@@ -141,48 +141,53 @@ def temperature_first(
 
 
 def read_record(
-    path: str | Path, *, gyro_topic: str | None = None, temp_topic: str | None = None
+    path: str | Path,
+    *,
+    gyro_topic: str | None = None,
+    temp_topic: str | None = None,
+    temp_field: str | None = None,
+    time_source: str = 'header',
+    quiet: bool = True,
 ) -> ChamberRecord:
-    """Read the gyro and temperature streams of a bag into arrays."""
+    """Read the gyro and temperature streams of a bag into arrays (sorted by stamp).
+
+    See :class:`fog_temp_comp.stream.BagStream` for the options.
+    """
+    from fog_temp_comp.stream import BagStream, Progress  # stream builds on this module
+
     path = Path(path)
-    with open_bag(path) as reader:
-        imu_name = resolve_topic(reader, gyro_topic, IMU_TYPE, '--gyro-topic')
-        temp_name = resolve_topic(reader, temp_topic, TEMPERATURE_TYPE, '--temp-topic')
-        conns = [c for c in reader.connections if c.topic in (imu_name, temp_name)]
-        imu_t: list[float] = []
-        rates: list[tuple[float, float, float]] = []
-        temp_t: list[float] = []
-        temps: list[float] = []
-        frame_id = ''
-        try:
-            for conn, _, raw in reader.messages(connections=conns):
-                msg: Any = reader.deserialize(raw, conn.msgtype)
-                if conn.topic == imu_name:
-                    w = msg.angular_velocity
-                    imu_t.append(stamp_to_s(msg.header.stamp))
-                    rates.append((w.x, w.y, w.z))
-                    frame_id = frame_id or msg.header.frame_id
-                else:
-                    temp_t.append(stamp_to_s(msg.header.stamp))
-                    temps.append(msg.temperature)
-        except Exception as err:
-            raise BagError(f'{path}: cannot read messages (truncated bag?): {err}') from err
-    if not imu_t:
-        raise BagError(f'{path}: topic {imu_name} has no messages')
-    if not temp_t:
-        raise BagError(f'{path}: topic {temp_name} has no messages')
-    imu_order = np.argsort(np.asarray(imu_t), kind='stable')
-    temp_order = np.argsort(np.asarray(temp_t), kind='stable')
-    return ChamberRecord(
-        path=path,
-        imu_topic=imu_name,
-        temp_topic=temp_name,
-        frame_id=frame_id,
-        imu_stamps_s=np.asarray(imu_t)[imu_order],
-        rates_rad_s=np.asarray(rates, dtype=np.float64).reshape(-1, 3)[imu_order],
-        temp_stamps_s=np.asarray(temp_t)[temp_order],
-        temperature_degC=np.asarray(temps, dtype=np.float64)[temp_order],
-    )
+    progress = Progress(path.name, quiet=quiet)
+    parts: dict[str, list[Any]] = {'imu': [], 'temperature': []}
+    with BagStream(
+        path,
+        gyro_topic=gyro_topic,
+        temp_topic=temp_topic,
+        temp_field=temp_field,
+        time_source=time_source,
+        progress=progress,
+    ) as stream:
+        for chunk in stream.chunks():
+            parts[chunk.kind].append(chunk)
+        progress.close()
+        for kind, topic in (('imu', stream.imu_topic), ('temperature', stream.temp_topic)):
+            if not parts[kind]:
+                raise BagError(f'{path}: topic {topic} has no messages')
+        imu_t = np.concatenate([c.stamps_s for c in parts['imu']])
+        rates = np.concatenate([c.values for c in parts['imu']])
+        temp_t = np.concatenate([c.stamps_s for c in parts['temperature']])
+        temps = np.concatenate([c.values for c in parts['temperature']])
+        imu_order = np.argsort(imu_t, kind='stable')
+        temp_order = np.argsort(temp_t, kind='stable')
+        return ChamberRecord(
+            path=path,
+            imu_topic=stream.imu_topic,
+            temp_topic=stream.temp_topic,
+            frame_id=stream.frame_id,
+            imu_stamps_s=imu_t[imu_order],
+            rates_rad_s=rates[imu_order].reshape(-1, 3),
+            temp_stamps_s=temp_t[temp_order],
+            temperature_degC=temps[temp_order],
+        )
 
 
 class BagWriter:

@@ -150,3 +150,81 @@ def bin_means(
     mean = np.add.reduceat(x, starts, axis=0)
     mean = mean / (counts if x.ndim == 1 else counts[:, None])
     return idx[starts], stamp, mean
+
+
+class GridAccumulator:
+    """Bin means of a stream fed in chunks (any order), in memory bounded by the bin count.
+
+    ``result()`` equals :func:`bin_means` over all samples fed (up to summation order).
+
+    Parameters
+    ----------
+    period_s : float
+        Bin length (s).
+
+    """
+
+    def __init__(self, period_s: float) -> None:
+        if not period_s > 0:
+            raise ValueError(f'period_s must be > 0, got {period_s}')
+        self.period_s = float(period_s)
+        self._index = np.empty(0, dtype=np.int64)
+        self._count = np.empty(0, dtype=np.int64)
+        self._sum_offset = np.empty(0)
+        self._sum_value: FloatArray | None = None
+        self._shape: tuple[int, ...] = ()
+        self.samples = 0
+
+    def add(self, stamps_s: ArrayLike, values: ArrayLike) -> None:
+        """Add samples: stamps (n,) in s, values (n,) or (n, M) in any unit."""
+        t = np.asarray(stamps_s, dtype=np.float64)
+        x = np.asarray(values, dtype=np.float64)
+        if t.ndim != 1 or x.shape[:1] != t.shape:
+            raise ValueError(f'stamps (n,) and values (n, ...) expected, got {t.shape}, {x.shape}')
+        if not t.size:
+            return
+        idx = np.floor(t / self.period_s).astype(np.int64)
+        unique, inverse = np.unique(idx, return_inverse=True)
+        count = np.bincount(inverse, minlength=unique.size)
+        offset = np.bincount(inverse, weights=t - idx * self.period_s, minlength=unique.size)
+        x2 = x.reshape(t.size, -1)
+        value = np.stack(
+            [
+                np.bincount(inverse, weights=x2[:, j], minlength=unique.size)
+                for j in range(x2.shape[1])
+            ],
+            axis=1,
+        )
+        if self._sum_value is None:
+            self._sum_value = np.empty((0, x2.shape[1]))
+            self._shape = x.shape[1:]
+        elif value.shape[1] != self._sum_value.shape[1]:
+            raise ValueError('values changed shape between chunks')
+        merged = np.union1d(self._index, unique)
+        new_count = np.zeros(merged.size, dtype=np.int64)
+        new_offset = np.zeros(merged.size)
+        new_value = np.zeros((merged.size, value.shape[1]))
+        old_pos = np.searchsorted(merged, self._index)
+        pos = np.searchsorted(merged, unique)
+        for src_pos, c, o, v in (
+            (old_pos, self._count, self._sum_offset, self._sum_value),
+            (pos, count, offset, value),
+        ):
+            new_count[src_pos] += c  # positions are unique within each source
+            new_offset[src_pos] += o
+            new_value[src_pos] += v
+        self._index, self._count, self._sum_offset, self._sum_value = (
+            merged,
+            new_count,
+            new_offset,
+            new_value,
+        )
+        self.samples += t.size
+
+    def result(self) -> tuple[NDArray[np.int64], FloatArray, FloatArray]:
+        """Occupied bins (K,), mean stamps (K,) and mean values (K,) or (K, M)."""
+        if self._sum_value is None:
+            return self._index.copy(), np.empty(0), np.empty(0)
+        stamp = self._index * self.period_s + self._sum_offset / self._count
+        mean = self._sum_value / self._count[:, None]
+        return self._index.copy(), stamp, mean.reshape((-1, *self._shape))

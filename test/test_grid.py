@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from fog_temp_comp.grid import TemperatureGrid, bin_means, temperature_grid
+from fog_temp_comp.grid import GridAccumulator, TemperatureGrid, bin_means, temperature_grid
 
 
 def online(stamps: np.ndarray, temps: np.ndarray, period: float) -> list:
@@ -72,3 +72,24 @@ def test_reset_forgets_history() -> None:
 def test_period_must_be_positive() -> None:
     with pytest.raises(ValueError, match='period_s'):
         TemperatureGrid(0.0)
+
+
+def test_accumulator_in_chunks_equals_bin_means(rng: np.random.Generator) -> None:
+    stamps = 1.7e9 + np.sort(rng.uniform(0, 500, 3000))
+    values = rng.normal(size=(3000, 3))
+    index, stamp, mean = bin_means(stamps, values, 10.0)
+    acc = GridAccumulator(10.0)
+    # uneven chunks, shuffled order: bins split across chunks must merge
+    cuts = [0, 7, 700, 701, 2000, 3000]
+    parts = [(stamps[a:b], values[a:b]) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+    for k in (3, 0, 4, 1, 2):
+        acc.add(*parts[k])
+    got_index, got_stamp, got_mean = acc.result()
+    assert_array_equal(got_index, index)
+    assert_allclose(got_stamp, stamp, rtol=0, atol=1e-6)
+    assert_allclose(got_mean, mean, rtol=1e-12, atol=1e-15)
+    assert acc.samples == 3000
+    scalar = GridAccumulator(10.0)
+    scalar.add(stamps, values[:, 0])
+    assert_allclose(scalar.result()[2], mean[:, 0], rtol=1e-12, atol=1e-15)
+    assert scalar.result()[2].shape == (index.size,)
