@@ -1,0 +1,130 @@
+"""Chunked bag streaming: custom temperature fields, receive-time alignment, bounded reduction."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+from rosbags.rosbag2 import Writer
+from rosbags.rosbag2.enums import StoragePlugin
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from fog_temp_comp.bagio import BagError, make_header, make_imu, read_record, write_chamber_bag
+from fog_temp_comp.reduce import bin_record, reduce_bag
+from fog_temp_comp.simulate import SimulatedRun
+from fog_temp_comp.stream import BagStream, Progress
+
+STATUS_MSG = """
+std_msgs/Header header
+float64 coil_temp_c
+uint8 mode
+"""
+
+
+def write_custom_bag(path: Path, run: SimulatedRun, lag_ns: int = 0) -> None:
+    """Imu plus a custom status message whose field carries the temperature."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg(STATUS_MSG, 'fog_msgs/msg/GyroStatus'))
+    status_type = store.types['fog_msgs/msg/GyroStatus']
+    events = [(t, 0, k) for k, t in enumerate(run.temp_stamps_s)]
+    events += [(t, 1, k) for k, t in enumerate(run.imu_stamps_s)]
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        status = writer.add_connection('/gyro/status', 'fog_msgs/msg/GyroStatus', typestore=store)
+        imu = writer.add_connection('/imu/data_raw', 'sensor_msgs/msg/Imu', typestore=store)
+        for t, kind, k in sorted(events):
+            ns = round(t * 1e9)
+            if kind == 0:
+                msg = status_type(
+                    header=make_header(ns, 'imu_link'),
+                    coil_temp_c=float(run.temperature_degC[k]),
+                    mode=1,
+                )
+                writer.write(status, ns + lag_ns, store.serialize_cdr(msg, status.msgtype))
+            else:
+                msg = make_imu(ns, 'imu_link', run.rates_rad_s[k])
+                writer.write(imu, ns + lag_ns, store.serialize_cdr(msg, imu.msgtype))
+
+
+@pytest.fixture(scope='module')
+def short_run() -> SimulatedRun:
+    from fog_temp_comp.simulate import SimulationConfig, simulate_run
+
+    cfg = SimulationConfig(imu_hz=0.5, temp_hz=0.5, low_degC=15.0, high_degC=25.0,
+                           start_degC=20.0, cycle_soak_s=300.0)  # fmt: skip
+    return simulate_run('cycle', 1.0, cfg, seed=3)
+
+
+def test_temperature_from_a_custom_message_field(tmp_path: Path, short_run: SimulatedRun) -> None:
+    bag = tmp_path / 'custom'
+    write_custom_bag(bag, short_run)
+    record = read_record(bag, temp_topic='gyro/status', temp_field='coil_temp_c')
+    assert record.temp_topic == '/gyro/status'
+    assert_array_equal(record.temperature_degC, short_run.temperature_degC)
+    assert_allclose(record.temp_stamps_s, short_run.temp_stamps_s, rtol=0, atol=1e-6)
+    assert_array_equal(record.rates_rad_s, short_run.rates_rad_s)
+
+
+def test_custom_field_errors_name_the_field(tmp_path: Path, short_run: SimulatedRun) -> None:
+    bag = tmp_path / 'custom'
+    write_custom_bag(bag, short_run)
+    with pytest.raises(BagError, match=r"no field 'coil_temp'.*coil_temp_c"):
+        read_record(bag, temp_topic='/gyro/status', temp_field='coil_temp')
+    with pytest.raises(BagError, match='not a number'):
+        read_record(bag, temp_topic='/gyro/status', temp_field='header')
+    with pytest.raises(BagError, match='needs --temp-topic'):
+        read_record(bag, temp_field='coil_temp_c')
+    # without --temp-field the custom topic is not a Temperature
+    with pytest.raises(BagError, match='sensor_msgs/msg/Temperature'):
+        read_record(bag)
+
+
+def test_receive_time_alignment(tmp_path: Path, short_run: SimulatedRun) -> None:
+    bag = tmp_path / 'late'
+    write_custom_bag(bag, short_run, lag_ns=250_000_000)  # logged 0.25 s after the stamp
+    header = read_record(bag, temp_topic='/gyro/status', temp_field='coil_temp_c')
+    receive = read_record(
+        bag, temp_topic='/gyro/status', temp_field='coil_temp_c', time_source='receive'
+    )
+    assert_allclose(receive.imu_stamps_s - header.imu_stamps_s, 0.25, atol=1e-6)
+    assert_allclose(receive.temp_stamps_s - header.temp_stamps_s, 0.25, atol=1e-6)
+
+
+def test_reduce_bag_equals_binning_the_whole_record(
+    tmp_path: Path, short_run: SimulatedRun
+) -> None:
+    bag = tmp_path / 'run'
+    write_chamber_bag(
+        bag, 'mcap', imu_stamps_s=short_run.imu_stamps_s, rates_rad_s=short_run.rates_rad_s,
+        temp_stamps_s=short_run.temp_stamps_s, temperature_degC=short_run.temperature_degC,
+    )  # fmt: skip
+    whole = bin_record(read_record(bag), 10.0)
+    with BagStream(bag, chunk_size=97) as stream:  # many small chunks, bins split across them
+        assert sum(1 for _ in stream.chunks()) > 10
+    streamed = reduce_bag(bag, 10.0)
+    assert_array_equal(streamed.temp_index, whole.temp_index)
+    assert_array_equal(streamed.gyro_index, whole.gyro_index)
+    assert_allclose(streamed.temperature_degC, whole.temperature_degC, rtol=1e-12)
+    assert_allclose(streamed.rate_rad_s, whole.rate_rad_s, rtol=1e-12, atol=1e-20)
+    assert streamed.imu_messages == short_run.imu_stamps_s.size
+    assert streamed.frame_id == 'imu_link'
+
+
+def test_progress_line_counts_messages_and_seconds() -> None:
+    out = io.StringIO()
+    progress = Progress('run.mcap', stream=out)
+    progress.update(10, 1_000_000_000)
+    progress.update(5, 61_000_000_000)
+    progress.close()
+    assert out.getvalue().rstrip().endswith('reading run.mcap: 15 messages, 60 s of data')
+    quiet = io.StringIO()
+    silent = Progress('run.mcap', stream=quiet, quiet=True)
+    silent.update(1, 0)
+    silent.close()
+    assert quiet.getvalue() == ''
+
+
+def test_bad_time_source() -> None:
+    with pytest.raises(ValueError, match='time_source'):
+        BagStream('x', time_source='gps')
