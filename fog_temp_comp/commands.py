@@ -16,9 +16,9 @@ from fog_temp_comp import bagio
 from fog_temp_comp.bagio import BagError, BagWriter, read_record
 from fog_temp_comp.calibration import CalibrationError, calibrate
 from fog_temp_comp.coefficients import Coefficients, CoefficientsError, load, save
-from fog_temp_comp.compensator import Compensator, GuardSettings
+from fog_temp_comp.compensator import Compensator, CompensatorCounters, GuardSettings
 from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.evaluate import compensate_record, format_scores, score_record
+from fog_temp_comp.evaluate import format_scores, replay_record, score_record
 from fog_temp_comp.simulate import SimulationConfig, paper_plan, simulate_run
 from fog_temp_comp.units import AXES
 
@@ -242,11 +242,35 @@ def evaluate_command(
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
     scores = []
+    notes = []
     for bag in bags:
         record = read_record(bag, gyro_topic=gyro_topic, temp_topic=temp_topic)
-        corrected = compensate_record(
+        corrected, status = replay_record(
             record, coeffs, effective_settings(coeffs, denoise_method), guard
         )
         scores += score_record(bag.name, record.imu_stamps_s, record.rates_rad_s, corrected)
+        notes += clamp_notes(bag.name, status.counters, coeffs)
     print(format_scores(scores), file=stdout)
+    for note in notes:
+        print(note, file=stdout)
     return 0
+
+
+def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) -> list[str]:
+    """Say when the calibrated-range guard limited the correction of a run."""
+    notes = []
+    total = max(counters.imu_total, 1)
+    model = coeffs.model
+    for count, what, rng, unit, flag in (
+        (counters.imu_tdot_clamped, 'Tdot', model.tdot_range_degC_per_min, 'degC/min',
+         '--extrapolate-tdot'),
+        (counters.imu_temperature_clamped, 'temperature', model.temperature_range_degC, 'degC',
+         None),
+    ):  # fmt: skip
+        if count:
+            hint = f'; {flag} applies the linear term beyond it' if flag else ''
+            notes.append(
+                f'note: {name}: {what} left the calibrated range [{rng.low:.3g}, {rng.high:.3g}] '
+                f'{unit} for {100 * count / total:.0f} % of the gyro samples and was clamped{hint}'
+            )
+    return notes

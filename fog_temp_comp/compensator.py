@@ -90,6 +90,8 @@ class CompensatorCounters:
     imu_out_of_order: int = 0  # stamp earlier than the previous one (still corrected)
     imu_nonfinite: int = 0  # NaN/inf component(s) left as they were, others corrected
     imu_zero_stamp: int = 0  # no usable stamp: corrected with the current correction
+    imu_temperature_clamped: int = 0  # corrected with T clamped to the calibrated range
+    imu_tdot_clamped: int = 0  # corrected with Tdot clamped to the calibrated range
     temperature_accepted: int = 0
     temperature_rejected: int = 0  # NaN/inf value or stamp
     temperature_duplicate: int = 0
@@ -361,6 +363,10 @@ class Compensator:
         r_used = min(max(tdot, r_low), r_high) if self.guard.clamp_tdot else tdot
         status.temperature_clamped = t_used != temperature
         status.tdot_clamped = r_used != tdot
+        if status.temperature_clamped:
+            status.counters.imu_temperature_clamped += 1
+        if status.tdot_clamped:
+            status.counters.imu_tdot_clamped += 1
         status.temperature_used_degC = t_used
         status.tdot_used_degC_per_min = r_used
         cx = cy = cz = 0.0

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fog_temp_comp.coefficients import Coefficients
-from fog_temp_comp.compensator import Compensator, GuardSettings, replay
+from fog_temp_comp.compensator import Compensator, CompensatorStatus, GuardSettings, replay
 from fog_temp_comp.denoise import DenoiseSettings
 from fog_temp_comp.metrics import bias_range, bias_stability, window_means
 from fog_temp_comp.record import ChamberRecord
@@ -40,14 +40,25 @@ def compensate_record(
     guard: GuardSettings | None = None,
 ) -> FloatArray:
     """Corrected rates (N, 3) rad/s, from a fresh :class:`Compensator` replaying the record."""
+    return replay_record(record, coeffs, denoise, guard)[0]
+
+
+def replay_record(
+    record: ChamberRecord,
+    coeffs: Coefficients,
+    denoise: DenoiseSettings | None = None,
+    guard: GuardSettings | None = None,
+) -> tuple[FloatArray, CompensatorStatus]:
+    """:func:`compensate_record` plus the compensator's final status (counters)."""
     compensator = Compensator(coeffs.model, denoise or coeffs.denoise, guard)
-    return replay(
+    corrected = replay(
         compensator,
         record.imu_stamps_s,
         record.rates_rad_s,
         record.temp_stamps_s,
         record.temperature_degC,
     )
+    return corrected, compensator.status
 
 
 def score_record(
