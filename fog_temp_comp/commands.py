@@ -5,14 +5,14 @@ from __future__ import annotations
 import dataclasses
 import shutil
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
 import yaml
 
-from fog_temp_comp import bagio
+from fog_temp_comp import bagio, cdr
 from fog_temp_comp.bagio import BagError, BagWriter, read_record
 from fog_temp_comp.calibration import CalibrationError, calibrate
 from fog_temp_comp.coefficients import Coefficients, CoefficientsError, load, save
@@ -181,24 +181,11 @@ def compensate_command(
                         writer.add_topic(conn.topic, conn.msgtype, like=conn)
                 writer.add_topic(output_topic, bagio.IMU_TYPE)
                 messages = bagio.temperature_first(reader.messages(), temp_name)
-                for conn, log_ns, raw in messages:
-                    writer.write_raw(conn.topic, log_ns, raw)
-                    if conn.topic == temp_name:
-                        msg: Any = reader.deserialize(raw, conn.msgtype)
-                        compensator.add_temperature(
-                            bagio.stamp_to_s(msg.header.stamp), msg.temperature
-                        )
-                    elif conn.topic == imu_name:
-                        msg = reader.deserialize(raw, conn.msgtype)
-                        w = msg.angular_velocity
-                        rate = compensator.correct(
-                            bagio.stamp_to_s(msg.header.stamp), (w.x, w.y, w.z)
-                        )
-                        if rate is None:  # duplicate stamp: dropped, counted
-                            continue
-                        w.x, w.y, w.z = float(rate[0]), float(rate[1]), float(rate[2])
-                        writer.write(output_topic, log_ns, msg)
-                        n_out += 1
+                replayer = ChunkReplayer(compensator, reader, imu_name, temp_name)
+                for chunk in chunked(messages, 20_000):
+                    for topic, log_ns, raw in replayer.run(chunk):
+                        writer.write_raw(topic or output_topic, log_ns, raw)
+                        n_out += topic is None
         except Exception as err:
             remove_bag(out_bag)  # no half-written output
             if isinstance(err, BagError):
@@ -218,6 +205,95 @@ def effective_settings(coeffs: Coefficients, denoise_method: str | None) -> Deno
     if denoise_method is None:
         return coeffs.denoise
     return dataclasses.replace(coeffs.denoise, method=denoise_method)
+
+
+def chunked(items: Iterable[Any], size: int) -> Iterator[list[Any]]:
+    """Consecutive lists of at most ``size`` items."""
+    chunk: list[Any] = []
+    for item in items:
+        chunk.append(item)
+        if len(chunk) >= size:
+            yield chunk
+            chunk = []
+    if chunk:
+        yield chunk
+
+
+class ChunkReplayer:
+    """Feed bag messages through a compensator a chunk at a time, in their original order.
+
+    Imu and Temperature messages of a chunk are decoded in one batch (:mod:`fog_temp_comp.cdr`),
+    the compensator sees every message in bag order exactly as one at a time, and the corrected
+    Imu are written by patching the raw bytes, so every other field stays bit-identical.
+    """
+
+    def __init__(self, compensator: Compensator, reader: Any, imu_topic: str, temp_topic: str):
+        self.compensator = compensator
+        self.ros2 = bool(reader.is2)
+        self.imu_topic = imu_topic
+        self.temp_topic = temp_topic
+        self._seq = {
+            c.id: (cdr.ros1_header_has_seq(c.msgdef.data) if not self.ros2 else False)
+            for c in reader.connections
+        }
+
+    def run(self, chunk: list[tuple[Any, int, bytes]]) -> list[tuple[str | None, int, bytes]]:
+        """Messages to write for ``chunk``, in order.
+
+        Every input as (topic, log_ns, raw), each corrected Imu followed by its output with
+        topic None.
+        """
+        imu = [k for k, (c, _, _) in enumerate(chunk) if c.topic == self.imu_topic]
+        temp = [k for k, (c, _, _) in enumerate(chunk) if c.topic == self.temp_topic]
+        imu_batch = self._decode([chunk[k] for k in imu], imu=True)
+        temp_batch = self._decode([chunk[k] for k in temp], imu=False)
+        rates = imu_batch.angular_velocity_rad_s.tolist() if imu else []
+        imu_stamps = imu_batch.stamps_s.tolist() if imu else []
+        temp_stamps = temp_batch.stamps_s.tolist() if temp else []
+        temps = temp_batch.temperature_degC.tolist() if temp else []
+        kind = {k: ('imu', j) for j, k in enumerate(imu)}
+        kind.update({k: ('temp', j) for j, k in enumerate(temp)})
+        corrected: list[tuple[float, float, float] | None] = []
+        compensator = self.compensator
+        for k in range(len(chunk)):
+            what = kind.get(k)
+            if what is None:
+                continue
+            j = what[1]
+            if what[0] == 'temp':
+                compensator.add_temperature(temp_stamps[j], temps[j])
+            else:
+                x, y, z = rates[j]
+                corrected.append(compensator.correct_xyz(imu_stamps[j], x, y, z))
+        keep = [j for j, c in enumerate(corrected) if c is not None]
+        patched = self._patch([chunk[imu[j]] for j in keep], [corrected[j] for j in keep])
+        out_of = dict(zip((imu[j] for j in keep), patched, strict=True))
+        out: list[tuple[str | None, int, bytes]] = []
+        for k, (conn, log_ns, raw) in enumerate(chunk):
+            out.append((conn.topic, log_ns, raw))
+            if k in out_of:
+                out.append((None, log_ns, out_of[k]))
+        return out
+
+    def _decode(self, items: list[tuple[Any, int, bytes]], *, imu: bool) -> Any:
+        if not items:
+            return None
+        raws = [raw for _, _, raw in items]
+        if self.ros2:
+            return (cdr.decode_imu_cdr if imu else cdr.decode_temperature_cdr)(raws)
+        seq = self._seq[items[0][0].id]
+        if imu:
+            return cdr.decode_imu_ros1(raws, header_seq=seq)
+        return cdr.decode_temperature_ros1(raws, header_seq=seq)
+
+    def _patch(self, items: list[tuple[Any, int, bytes]], rates: list[Any]) -> list[bytes]:
+        if not items:
+            return []
+        raws = [raw for _, _, raw in items]
+        if self.ros2:
+            return cdr.patch_imu_angular_velocity_cdr(raws, rates)
+        seq = self._seq[items[0][0].id]
+        return cdr.patch_imu_angular_velocity_ros1(raws, rates, header_seq=seq)
 
 
 def remove_bag(path: Path) -> None:

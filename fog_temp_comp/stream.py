@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 from rosbags.highlevel import AnyReader
 
+from fog_temp_comp import cdr
 from fog_temp_comp.bagio import (
     IMU_TYPE,
     TEMPERATURE_TYPE,
@@ -173,50 +174,85 @@ class BagStream:
         self.reader = None
 
     def chunks(self) -> Iterator[Chunk]:
-        """Chunks of each stream in bag order; every message appears exactly once."""
+        """Chunks of each stream in bag order; every message appears exactly once.
+
+        Standard ``sensor_msgs`` messages are decoded in batches with :mod:`fog_temp_comp.cdr`
+        (no Python object per message); a ``temp_field`` of another type is deserialized per
+        message with rosbags.
+        """
         reader = self.reader
         if reader is None:
             raise RuntimeError('BagStream is not open')
         conns = [c for c in reader.connections if c.topic in (self.imu_topic, self.temp_topic)]
-        receive = self.time_source == 'receive'
-        imu_t: list[float] = []
-        rates: list[tuple[float, float, float]] = []
-        temp_t: list[float] = []
-        temps: list[float] = []
-        field = self.temp_field
+        decoders = {c.id: _decoder(c, reader.is2) for c in conns}
+        pending: dict[str, tuple[list[Any], list[int], list[Any]]] = {
+            'imu': ([], [], []),
+            'temperature': ([], [], []),
+        }
         try:
             for conn, log_ns, raw in reader.messages(connections=conns):
-                msg: Any = reader.deserialize(raw, conn.msgtype)
-                if conn.topic == self.imu_topic:
-                    w = msg.angular_velocity
-                    imu_t.append(log_ns / NS_PER_S if receive else stamp_to_s(msg.header.stamp))
-                    rates.append((w.x, w.y, w.z))
-                    if not self.frame_id:
-                        self.frame_id = msg.header.frame_id
-                    if len(imu_t) >= self.chunk_size:
-                        yield Chunk('imu', np.array(imu_t), np.array(rates))
-                        imu_t, rates = [], []
+                kind = 'imu' if conn.topic == self.imu_topic else 'temperature'
+                raws, logs, owners = pending[kind]
+                if kind == 'temperature' and self.temp_field is not None:
+                    raws.append(reader.deserialize(raw, conn.msgtype))
                 else:
-                    has_header = hasattr(msg, 'header')
-                    temp_t.append(
-                        stamp_to_s(msg.header.stamp)
-                        if has_header and not receive
-                        else log_ns / NS_PER_S
-                    )
-                    temps.append(msg.temperature if field is None else get_field(msg, field))
-                    if len(temp_t) >= self.chunk_size:
-                        yield Chunk('temperature', np.array(temp_t), np.array(temps))
-                        temp_t, temps = [], []
+                    raws.append(raw)
+                logs.append(log_ns)
+                owners.append(conn.id)
                 if self.progress is not None:
                     self.progress.update(1, log_ns)
+                if len(raws) >= self.chunk_size:
+                    yield self._flush(kind, pending[kind], decoders)
+                    pending[kind] = ([], [], [])
+            for kind in ('imu', 'temperature'):
+                if pending[kind][0]:
+                    yield self._flush(kind, pending[kind], decoders)
         except BagError:
             raise
         except Exception as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
-        if imu_t:
-            yield Chunk('imu', np.array(imu_t), np.array(rates))
-        if temp_t:
-            yield Chunk('temperature', np.array(temp_t), np.array(temps))
+
+    def _flush(
+        self,
+        kind: str,
+        batch: tuple[list[Any], list[int], list[Any]],
+        decoders: dict[int, Any],
+    ) -> Chunk:
+        raws, logs, owners = batch
+        receive = np.asarray(logs, dtype=np.int64) / NS_PER_S
+        if kind == 'temperature' and self.temp_field is not None:
+            field = self.temp_field
+            values = np.array([get_field(msg, field) for msg in raws])
+            stamps = np.array(
+                [stamp_to_s(m.header.stamp) if hasattr(m, 'header') else np.nan for m in raws]
+            )
+            stamps = np.where(np.isnan(stamps), receive, stamps)
+        else:
+            decode = decoders[owners[0]]
+            if any(o != owners[0] for o in owners):  # several connections on one topic
+                parts = [decoders[o]([r]) for o, r in zip(owners, raws, strict=True)]
+                batch_out = type(parts[0]).concatenate(parts)
+            else:
+                batch_out = decode(raws)
+            stamps = batch_out.stamps_s
+            if kind == 'imu':
+                values = batch_out.angular_velocity_rad_s
+                if not self.frame_id:
+                    self.frame_id = batch_out.frame_id
+            else:
+                values = batch_out.temperature_degC
+        return Chunk(kind, receive if self.time_source == 'receive' else stamps, values)
+
+
+def _decoder(conn: Any, is_ros2: bool) -> Any:
+    """Batch decoder of a connection's messages."""
+    imu = conn.msgtype == IMU_TYPE
+    if is_ros2:
+        return cdr.decode_imu_cdr if imu else cdr.decode_temperature_cdr
+    seq = cdr.ros1_header_has_seq(conn.msgdef.data)
+    if imu:
+        return lambda raws: cdr.decode_imu_ros1(raws, header_seq=seq)
+    return lambda raws: cdr.decode_temperature_ros1(raws, header_seq=seq)
 
 
 def resolve_any_topic(reader: AnyReader, topic: str, flag: str) -> str:

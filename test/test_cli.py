@@ -691,13 +691,15 @@ def parse_table(text: str) -> dict[tuple[str, str, float], list[float]]:
     lines = text.strip().splitlines()
     assert lines[0].split()[:3] == ['run', 'axis', 'tau_s']
     assert set(lines[1]) == {'-'}
-    assert lines[-1].startswith('(deg/h')
+    # the table ends with its unit line; only notes on the range guard may follow
+    end = next(k for k, line in enumerate(lines) if line.startswith('(deg/h'))
+    assert all(line.startswith('note: ') for line in lines[end + 1 :])
     rows = {}
-    for line in lines[2:-1]:
+    for line in lines[2:end]:
         run, axis, tau, *values = line.split()
         assert len(values) == 6
         rows[run, axis, float(tau)] = [float(v) for v in values]
-    assert len(rows) == len(lines) - 3
+    assert len(rows) == end - 2
     return rows
 
 
