@@ -13,6 +13,11 @@ Offline, whole-record denoising follows MATLAB ``wden`` / ``thselect`` exactly
 * :class:`SlidingWaveletDenoiser` -- ``wden`` applied to a sliding window of the most recent
   samples, one decomposition per new sample (method ``'wavelet'``).
 
+The methods ``'llr'`` (causal local linear regression) and ``'kalman'`` (Kalman filter on
+temperature and its rate) work on the temperature samples rather than on grid Tdot; they live
+in :mod:`fog_temp_comp.tdot`, and :class:`DenoiseSettings` carries their settings too, so one
+settings object (the YAML's ``denoise`` block) describes any Tdot estimator.
+
 All values are in degC/min, all periods in seconds and all frequencies in Hz.
 """
 
@@ -32,8 +37,10 @@ from scipy import signal
 
 __all__ = [
     'BOUNDARY_MODES',
+    'GRID_METHODS',
     'METHODS',
     'NOISE_SCALINGS',
+    'RECOMMENDED_SETTINGS',
     'THRESHOLD_MODES',
     'THRESHOLD_RULES',
     'ButterworthDenoiser',
@@ -49,7 +56,9 @@ __all__ = [
     'wavelet_denoise',
 ]
 
-METHODS: tuple[str, ...] = ('wavelet', 'iir', 'none')
+METHODS: tuple[str, ...] = ('wavelet', 'iir', 'none', 'llr', 'kalman')
+#: methods that denoise the raw Tdot of the grid (the others work on temperature samples)
+GRID_METHODS: tuple[str, ...] = ('wavelet', 'iir', 'none')
 THRESHOLD_RULES: tuple[str, ...] = ('heursure', 'rigrsure', 'sqtwolog', 'minimaxi')
 THRESHOLD_MODES: tuple[str, ...] = ('soft', 'hard')
 NOISE_SCALINGS: tuple[str, ...] = ('sln', 'mln', 'one')
@@ -174,8 +183,10 @@ class DenoiseSettings:
     Attributes
     ----------
     method : str
-        ``'wavelet'`` (sliding-window ``wden``), ``'iir'`` (Butterworth low-pass) or
-        ``'none'``.
+        Tdot estimator (:func:`fog_temp_comp.tdot.make_estimator`): ``'wavelet'``
+        (sliding-window ``wden`` of grid Tdot), ``'iir'`` (Butterworth low-pass of grid Tdot),
+        ``'none'`` (raw grid Tdot), ``'llr'`` (causal local linear regression on the
+        temperature samples) or ``'kalman'`` (Kalman filter on temperature and Tdot).
     tdot_period_s : float
         Sample period of the Tdot sequence, s (> 0).
     wavelet : str
@@ -201,6 +212,21 @@ class DenoiseSettings:
         Butterworth filter order (>= 1).
     iir_cutoff_hz : float
         Butterworth -3 dB cut-off frequency, Hz (``0 < iir_cutoff_hz < 0.5 / tdot_period_s``).
+    llr_window_s : float
+        Method ``'llr'``: length of the causal regression window, s (>= 2 ``tdot_period_s``).
+        Tdot lags by about half of it.
+    kalman_rate_walk_degC_per_min_per_sqrt_s : float
+        Method ``'kalman'``: intensity of the random walk of Tdot in the process model,
+        degC/min per sqrt(s) (> 0). Larger follows Tdot changes faster and passes more noise.
+    temperature_noise_degC : float
+        Method ``'kalman'``: white-noise standard deviation of the temperature sensor, degC.
+    temperature_quantum_degC : float
+        Method ``'kalman'``: quantization step of the temperature sensor, degC (0: none). The
+        measurement variance is ``temperature_noise_degC**2 + temperature_quantum_degC**2 / 12``.
+    coil_lag_s : float
+        Time constant of the first-order lag from the temperature sensor to the fibre coil, s
+        (0: the sensor reads the coil). Any method: its temperature and Tdot output pass
+        through the lag (:mod:`fog_temp_comp.coil`); ``calibrate`` can fit it.
 
     """
 
@@ -216,6 +242,11 @@ class DenoiseSettings:
     delay_samples: int = 0
     iir_order: int = 3
     iir_cutoff_hz: float = 0.01
+    llr_window_s: float = 300.0
+    kalman_rate_walk_degC_per_min_per_sqrt_s: float = 0.01
+    temperature_noise_degC: float = 0.02
+    temperature_quantum_degC: float = 0.0625
+    coil_lag_s: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field; raise ValueError naming the offending field."""
@@ -250,6 +281,34 @@ class DenoiseSettings:
         order, cutoff, _ = _check_butter(self.iir_order, self.iir_cutoff_hz, period)
         object.__setattr__(self, 'iir_order', order)
         object.__setattr__(self, 'iir_cutoff_hz', cutoff)
+        llr = _check_float('llr_window_s', self.llr_window_s)
+        if llr < 2.0 * period:
+            raise ValueError(
+                f'llr_window_s must be >= 2 * tdot_period_s = {2.0 * period:g} s, got '
+                f'{self.llr_window_s!r}'
+            )
+        object.__setattr__(self, 'llr_window_s', llr)
+        walk = _check_float(
+            'kalman_rate_walk_degC_per_min_per_sqrt_s',
+            self.kalman_rate_walk_degC_per_min_per_sqrt_s,
+        )
+        if walk <= 0.0:
+            raise ValueError(f'kalman_rate_walk_degC_per_min_per_sqrt_s must be > 0, got {walk!r}')
+        object.__setattr__(self, 'kalman_rate_walk_degC_per_min_per_sqrt_s', walk)
+        for name in ('temperature_noise_degC', 'temperature_quantum_degC', 'coil_lag_s'):
+            value = _check_float(name, getattr(self, name))
+            if value < 0.0:
+                raise ValueError(f'{name} must be >= 0, got {getattr(self, name)!r}')
+            object.__setattr__(self, name, value)
+        if self.method == 'kalman' and self.measurement_variance_degC2 <= 0.0:
+            raise ValueError(
+                "method 'kalman' needs temperature_noise_degC > 0 or temperature_quantum_degC > 0"
+            )
+
+    @property
+    def measurement_variance_degC2(self) -> float:
+        """Variance of one temperature reading, degC^2: noise plus uniform quantization."""
+        return self.temperature_noise_degC**2 + self.temperature_quantum_degC**2 / 12.0
 
     def to_dict(self) -> dict[str, object]:
         """Return the settings as a plain ``dict`` (YAML-serialisable builtin types)."""
@@ -284,6 +343,12 @@ class DenoiseSettings:
                 f'unknown DenoiseSettings keys: {unknown}; allowed keys: {sorted(known)}'
             )
         return cls(**{str(k): v for k, v in d.items()})  # type: ignore[arg-type]
+
+
+#: the online pipeline chosen by the accuracy study (``benchmarks/accuracy.py``): a Kalman
+#: filter on temperature and Tdot that knows the sensor's noise (0.02 degC) and quantization
+#: (1/16 degC); calibrate it with ``fit_coil_lag=True`` and the terms chosen on held-out runs
+RECOMMENDED_SETTINGS = DenoiseSettings(method='kalman')
 
 
 # --------------------------------------------------------------------------------------------
@@ -747,7 +812,10 @@ def make_denoiser(settings: DenoiseSettings) -> TdotDenoiser:
         )
     if settings.method == 'none':
         return PassThroughDenoiser()
-    raise ValueError(f'method must be one of {METHODS}, got {settings.method!r}')
+    raise ValueError(
+        f'method {settings.method!r} has no grid-Tdot denoiser (it estimates Tdot from the '
+        f'temperature samples: fog_temp_comp.tdot.make_estimator); grid methods: {GRID_METHODS}'
+    )
 
 
 def denoise_offline(x: ArrayLike, settings: DenoiseSettings) -> NDArray[np.float64]:
@@ -787,4 +855,8 @@ def denoise_offline(x: ArrayLike, settings: DenoiseSettings) -> NDArray[np.float
         )
     if settings.method == 'none':
         return _as_finite_1d(x)
-    raise ValueError(f'method must be one of {METHODS}, got {settings.method!r}')
+    raise ValueError(
+        f'method {settings.method!r} does not denoise grid Tdot (it estimates Tdot from the '
+        f'temperature samples: fog_temp_comp.tdot.offline_estimates); grid methods: '
+        f'{GRID_METHODS}'
+    )

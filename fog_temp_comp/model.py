@@ -2,6 +2,9 @@
 
 The paper's model is ``D [deg/h] = D0 + DT * T [degC] + DTdot * Tdot [degC/min]``; every term has a
 named coefficient whose key carries its unit, so the YAML file and the code say the same thing.
+Beyond the paper, ``T2`` (``T^2``, a curvature of the static drift) and ``T_Tdot`` (``T * Tdot``,
+a temperature-dependent rate sensitivity) are available; the YAML's ``terms`` list says which
+terms a model has.
 """
 
 from __future__ import annotations
@@ -21,9 +24,18 @@ TERMS: dict[str, tuple[str, Callable[[FloatArray, FloatArray], FloatArray]]] = {
     'const': ('d0_deg_h', lambda t, r: np.ones_like(t)),
     'T': ('dt_deg_h_per_degC', lambda t, r: t),
     'Tdot': ('dtdot_deg_h_per_degC_per_min', lambda t, r: r),
+    'T2': ('dt2_deg_h_per_degC2', lambda t, r: t * t),
+    'T_Tdot': ('dttdot_deg_h_per_degC2_per_min', lambda t, r: t * r),
 }
 #: the paper's model, in order
 PAPER_TERMS = ('const', 'T', 'Tdot')
+#: candidate models beyond the paper's, simplest first (see :mod:`fog_temp_comp.selection`)
+CANDIDATE_TERMS: tuple[tuple[str, ...], ...] = (
+    PAPER_TERMS,
+    (*PAPER_TERMS, 'T2'),
+    (*PAPER_TERMS, 'T_Tdot'),
+    (*PAPER_TERMS, 'T2', 'T_Tdot'),
+)
 
 
 def coefficient_key(term: str) -> str:

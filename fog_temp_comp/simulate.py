@@ -3,14 +3,24 @@
 Pure numpy: :func:`simulate_run` returns arrays; :mod:`fog_temp_comp.bagio` writes them as bags.
 
 Physics (all documented units):
-- chamber air temperature: piecewise-linear profile (cycles at a given degC/min between
-  ``low_degC`` and ``high_degC`` with soaks at the ends, or a constant soak with a small
-  controller oscillation);
-- gyro (coil) temperature: first-order lag of the chamber, time constant ``lag_s``; its exact
-  rate ``Tdot = (T_chamber - T_gyro) / lag_s`` drives the drift;
-- drift per axis: ``D = d0 + dt*T + dtdot*Tdot`` (deg/h), x near the paper's Table 1;
-- gyro noise: angle random walk (white rate) and a Gauss-Markov bias instability;
+
+- chamber setpoint: piecewise-linear profile (cycles at a given degC/min between ``low_degC``
+  and ``high_degC`` with soaks at the ends, or a constant soak);
+- chamber air: the setpoint, or (``chamber_period_s > 0``) the response of a second-order
+  controller to it, which lags the ramps and overshoots at their ends; plus a controller
+  oscillation (``soak_oscillation_degC`` on soaks, ``cycle_oscillation_degC`` on cycles);
+- gyro housing, where the temperature sensor sits: first-order lag of the chamber air, time
+  constant ``lag_s``;
+- fibre coil: first-order lag of the housing, time constant ``coil_lag_s`` (0: the sensor reads
+  the coil, as in the paper); the coil temperature and its exact rate drive the drift;
+- drift per axis: ``D = d0 + dt*T + dtdot*Tdot + t2*T^2 + t_tdot*T*Tdot`` (deg/h), x near the
+  paper's Table 1 (the last two terms are zero by default);
+- gyro noise: angle random walk (white rate), a Gauss-Markov bias instability and a slowly
+  wandering bias (rate random walk);
 - temperature sensor: white noise, then quantization (1/16 degC).
+
+:data:`SimulationConfig` defaults reproduce the shipped sample bags (the paper's model exactly);
+:data:`REALISTIC` switches on every effect above and is what the accuracy study uses.
 """
 
 from __future__ import annotations
@@ -24,7 +34,7 @@ from scipy import signal
 
 from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range
 from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.units import RAD_S_PER_DEG_H, S_PER_MIN
+from fog_temp_comp.units import RAD_S_PER_DEG_H, S_PER_H, S_PER_MIN
 
 FloatArray = NDArray[np.float64]
 
@@ -42,16 +52,44 @@ TRUE_COEFFICIENTS = np.array(
         [0.9287, -0.62, 0.45],  # dtdot_deg_h_per_degC_per_min
     ]
 )
-
-
-def true_model() -> DriftModel:
-    """The simulator's drift model as a :class:`DriftModel`."""
-    return DriftModel(PAPER_TERMS, TRUE_COEFFICIENTS, Range(-60.0, 80.0), Range(-2.0, 2.0))
+#: the small nonlinearity of :data:`REALISTIC`, deg/h/degC^2 per axis (about 0.02 deg/h away
+#: from the best straight line over -40..60 degC)
+REALISTIC_T2_COEFFICIENTS = (2.0e-5, -1.5e-5, 1.0e-5)
 
 
 @dataclass(frozen=True)
 class SimulationConfig:
-    """Sensor and chamber settings (units in the names)."""
+    """Sensor and chamber settings (units in the names).
+
+    The fields up to ``coefficients`` are the original model (the shipped bags); the fields
+    after it add realism and default to "off", so the defaults reproduce the original runs
+    bit for bit.
+
+    Attributes
+    ----------
+    lag_s : float
+        Time constant of the first-order lag from chamber air to the gyro housing (where the
+        temperature sensor is), s.
+    coefficients : ndarray, shape (3, 3)
+        Rows const/T/Tdot (deg/h, deg/h/degC, deg/h/(degC/min)), columns x/y/z.
+    coil_lag_s : float
+        Time constant of the first-order lag from the housing sensor to the fibre coil, s; 0
+        means the sensor reads the coil.
+    chamber_period_s : float
+        Natural period of the chamber controller, modelled as a second-order low-pass from
+        setpoint to air temperature, s; 0 means the air follows the setpoint exactly.
+    chamber_damping : float
+        Damping ratio of that controller (below 1: overshoot at the end of each ramp).
+    cycle_oscillation_degC : float
+        Amplitude of the controller oscillation during cycle runs, degC (period
+        ``soak_oscillation_period_s``); ``soak_oscillation_degC`` is the one on soak runs.
+    t2_coefficients, t_tdot_coefficients : tuple of 3 float
+        Nonlinear drift terms per axis: deg/h/degC^2 times T^2 and deg/h/(degC degC/min) times
+        T * Tdot.
+    bias_random_walk_deg_h_per_sqrt_h : float
+        Rate random walk of the gyro bias (a slowly wandering bias), deg/h/sqrt(h).
+
+    """
 
     imu_hz: float = 10.0
     temp_hz: float = 1.0
@@ -71,11 +109,79 @@ class SimulationConfig:
     temp_noise_degC: float = 0.02
     temp_quantum_degC: float = 1.0 / 16.0
     coefficients: FloatArray = field(default_factory=lambda: TRUE_COEFFICIENTS.copy())
+    coil_lag_s: float = 0.0
+    chamber_period_s: float = 0.0
+    chamber_damping: float = 0.5
+    cycle_oscillation_degC: float = 0.0
+    t2_coefficients: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    t_tdot_coefficients: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    bias_random_walk_deg_h_per_sqrt_h: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ('imu_hz', 'temp_hz', 'lag_s', 'soak_duration_s'):
             if not getattr(self, name) > 0:
                 raise ValueError(f'{name} must be > 0, got {getattr(self, name)}')
+        for name in (
+            'coil_lag_s',
+            'chamber_period_s',
+            'cycle_oscillation_degC',
+            'bias_random_walk_deg_h_per_sqrt_h',
+        ):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
+        if not self.chamber_damping > 0:
+            raise ValueError(f'chamber_damping must be > 0, got {self.chamber_damping}')
+        for name in ('t2_coefficients', 't_tdot_coefficients'):
+            value = tuple(float(v) for v in getattr(self, name))
+            if len(value) != 3 or not all(np.isfinite(value)):
+                raise ValueError(f'{name} must be 3 finite numbers (x, y, z), got {value}')
+            object.__setattr__(self, name, value)
+
+    @property
+    def terms(self) -> tuple[str, ...]:
+        """Model terms of the true drift: the paper's, plus the nonlinear ones in use."""
+        extra = [
+            term
+            for term, values in (
+                ('T2', self.t2_coefficients),
+                ('T_Tdot', self.t_tdot_coefficients),
+            )
+            if any(values)
+        ]
+        return (*PAPER_TERMS, *extra)
+
+    @property
+    def true_coefficients(self) -> FloatArray:
+        """Coefficients of :attr:`terms`, shape (len(terms), 3)."""
+        rows = [np.asarray(self.coefficients, dtype=np.float64)]
+        if any(self.t2_coefficients):
+            rows.append(np.array([self.t2_coefficients]))
+        if any(self.t_tdot_coefficients):
+            rows.append(np.array([self.t_tdot_coefficients]))
+        return np.concatenate(rows, axis=0)
+
+
+#: the accuracy study's chamber: a housing sensor 3 min ahead of the coil, a controller that
+#: overshoots and oscillates, a small T^2 nonlinearity and a wandering bias; 1 Hz streams
+REALISTIC = SimulationConfig(
+    imu_hz=1.0,
+    temp_hz=1.0,
+    soak_oscillation_degC=0.3,
+    soak_oscillation_period_s=1200.0,
+    coil_lag_s=180.0,
+    chamber_period_s=900.0,
+    chamber_damping=0.5,
+    cycle_oscillation_degC=0.1,
+    t2_coefficients=REALISTIC_T2_COEFFICIENTS,
+    bias_random_walk_deg_h_per_sqrt_h=0.003,
+)
+
+
+def true_model(cfg: SimulationConfig | None = None) -> DriftModel:
+    """The simulator's drift model as a :class:`DriftModel` (default: the paper's terms)."""
+    if cfg is None:
+        return DriftModel(PAPER_TERMS, TRUE_COEFFICIENTS, Range(-60.0, 80.0), Range(-2.0, 2.0))
+    return DriftModel(cfg.terms, cfg.true_coefficients, Range(-60.0, 80.0), Range(-2.0, 2.0))
 
 
 @dataclass(frozen=True)
@@ -86,7 +192,7 @@ class SimulatedRun:
     ----------
     imu_stamps_s : (N,) ; rates_rad_s : (N, 3) measured gyro output
     temp_stamps_s : (M,) ; temperature_degC : (M,) measured (noisy, quantized) temperature
-    true_temperature_degC, true_tdot_degC_per_min : (N,) gyro temperature and rate at imu stamps
+    true_temperature_degC, true_tdot_degC_per_min : (N,) coil temperature and rate at imu stamps
     true_drift_deg_h : (N, 3) temperature drift in the gyro output (the part to remove)
 
     """
@@ -132,7 +238,7 @@ def paper_plan() -> list[tuple[str, float]]:
 def chamber_profile(
     kind: str, setpoint: float, cfg: SimulationConfig
 ) -> tuple[FloatArray, FloatArray]:
-    """Breakpoints (s from start, degC) of the chamber temperature; linear in between."""
+    """Breakpoints (s from start, degC) of the chamber setpoint; linear in between."""
     if kind == 'cycle':
         rate = setpoint / S_PER_MIN  # degC/s
         if not rate > 0:
@@ -162,44 +268,101 @@ def chamber_profile(
     raise ValueError(f"kind must be 'cycle' or 'soak', got {kind!r}")
 
 
+def first_order_lag(x: FloatArray, dt_s: float, tau_s: float) -> tuple[FloatArray, FloatArray]:
+    """Exact first-order lag of a piecewise-constant input, starting in steady state.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        Input on a uniform grid of ``dt_s`` seconds (degC).
+    dt_s, tau_s : float
+        Grid step and time constant (s, > 0).
+
+    Returns
+    -------
+    y : ndarray, shape (n,)
+        Lagged signal (degC).
+    ydot : ndarray, shape (n,)
+        Its exact rate ``(x - y) / tau_s`` in degC/min.
+
+    """
+    a = np.exp(-dt_s / tau_s)
+    y, _ = signal.lfilter([1 - a], [1, -a], x, zi=[a * x[0]])
+    y = np.asarray(y, dtype=np.float64)
+    return y, (x - y) / tau_s * S_PER_MIN
+
+
+def chamber_air(setpoint_degC: FloatArray, dt_s: float, cfg: SimulationConfig) -> FloatArray:
+    """Chamber air temperature (degC) for a setpoint on a uniform grid of ``dt_s`` seconds.
+
+    A second-order controller ``wn^2 / (s^2 + 2 zeta wn s + wn^2)`` with ``wn = 2 pi /
+    chamber_period_s`` and ``zeta = chamber_damping``, at rest on the first setpoint; the
+    setpoint itself when ``chamber_period_s`` is 0.
+    """
+    if cfg.chamber_period_s <= 0:
+        return setpoint_degC
+    wn = 2 * np.pi / cfg.chamber_period_s
+    zeta = cfg.chamber_damping
+    num, den, _ = signal.cont2discrete(([wn**2], [1.0, 2 * zeta * wn, wn**2]), dt_s, method='zoh')
+    start = setpoint_degC[0]
+    air = signal.lfilter(np.ravel(num), den, setpoint_degC - start)
+    return np.asarray(air, dtype=np.float64) + start
+
+
 def simulate_run(
     kind: str, setpoint: float, cfg: SimulationConfig | None = None, *, seed: int = 0
 ) -> SimulatedRun:
-    """Simulate one run (``kind`` 'cycle' with setpoint in degC/min, or 'soak' in degC)."""
+    """Simulate one run (``kind`` 'cycle' with setpoint in degC/min, or 'soak' in degC).
+
+    Random draws of the original model come from ``default_rng(seed)`` in the original order,
+    so the default configuration reproduces the shipped runs; the realism fields draw from a
+    second generator ``default_rng((seed, 1))``.
+    """
     cfg = cfg or SimulationConfig()
     rng = np.random.default_rng(seed)
+    extra_rng = np.random.default_rng((seed, 1))
     bp_t, bp_x = chamber_profile(kind, setpoint, cfg)
     duration = float(bp_t[-1])
-    # 1 s simulation grid for the thermal lag (exact first-order discretisation)
+    # 1 s simulation grid for the thermal lags (exact first-order discretisation)
     dt = 1.0
     t_grid = np.arange(0.0, duration + dt, dt)
-    chamber = np.interp(t_grid, bp_t, bp_x)
+    chamber = chamber_air(np.interp(t_grid, bp_t, bp_x), dt, cfg)
     if kind == 'soak' and cfg.soak_oscillation_degC > 0:
         phase = rng.uniform(0, 2 * np.pi)
         chamber = chamber + cfg.soak_oscillation_degC * np.sin(
             2 * np.pi * t_grid / cfg.soak_oscillation_period_s + phase
         )
-    a = np.exp(-dt / cfg.lag_s)
-    gyro_t, _ = signal.lfilter([1 - a], [1, -a], chamber, zi=[a * chamber[0]])
-    gyro_tdot = (chamber - gyro_t) / cfg.lag_s * S_PER_MIN  # degC/min
+    if kind == 'cycle' and cfg.cycle_oscillation_degC > 0:
+        phase = extra_rng.uniform(0, 2 * np.pi)
+        chamber = chamber + cfg.cycle_oscillation_degC * np.sin(
+            2 * np.pi * t_grid / cfg.soak_oscillation_period_s + phase
+        )
+    housing_t, housing_tdot = first_order_lag(chamber, dt, cfg.lag_s)
+    if cfg.coil_lag_s > 0:
+        coil_t, coil_tdot = first_order_lag(housing_t, dt, cfg.coil_lag_s)
+    else:
+        coil_t, coil_tdot = housing_t, housing_tdot
 
     n_imu = int(np.floor(duration * cfg.imu_hz))
     t_imu = np.arange(n_imu) / cfg.imu_hz
-    true_t = np.interp(t_imu, t_grid, gyro_t)
-    true_tdot = np.interp(t_imu, t_grid, gyro_tdot)
-    coeffs = np.asarray(cfg.coefficients, dtype=np.float64)
-    drift = np.stack([np.ones_like(true_t), true_t, true_tdot], axis=1) @ coeffs  # (N, 3) deg/h
+    true_t = np.interp(t_imu, t_grid, coil_t)
+    true_tdot = np.interp(t_imu, t_grid, coil_tdot)
+    drift = true_model(cfg).drift_deg_h(true_t, true_tdot)  # (N, 3) deg/h
 
     sigma_white = cfg.arw_10s_deg_h * np.sqrt(10.0 * cfg.imu_hz)  # per-sample std, deg/h
     white = rng.normal(0.0, sigma_white, size=(n_imu, 3))
     bias = _gauss_markov(
         rng, n_imu, 1.0 / cfg.imu_hz, cfg.bias_instability_deg_h, cfg.bias_correlation_s
     )
-    rates = (drift + white + bias) * RAD_S_PER_DEG_H
+    rates = drift + white + bias
+    if cfg.bias_random_walk_deg_h_per_sqrt_h > 0 and n_imu:
+        step = cfg.bias_random_walk_deg_h_per_sqrt_h * np.sqrt(1.0 / cfg.imu_hz / S_PER_H)
+        rates = rates + np.cumsum(extra_rng.normal(0.0, step, size=(n_imu, 3)), axis=0)
+    rates = rates * RAD_S_PER_DEG_H
 
     n_temp = int(np.floor(duration * cfg.temp_hz))
     t_temp = np.arange(n_temp) / cfg.temp_hz
-    temp = np.interp(t_temp, t_grid, gyro_t) + rng.normal(0.0, cfg.temp_noise_degC, n_temp)
+    temp = np.interp(t_temp, t_grid, housing_t) + rng.normal(0.0, cfg.temp_noise_degC, n_temp)
     if cfg.temp_quantum_degC > 0:
         temp = np.round(temp / cfg.temp_quantum_degC) * cfg.temp_quantum_degC
     return SimulatedRun(
@@ -214,6 +377,31 @@ def simulate_run(
         true_tdot_degC_per_min=true_tdot,
         true_drift_deg_h=drift,
     )
+
+
+def simulate_plan(
+    cfg: SimulationConfig | None = None,
+    *,
+    seed: int = 0,
+    runs: list[tuple[str, float]] | None = None,
+) -> dict[str, SimulatedRun]:
+    """Simulate the paper's plan (or ``runs``), run ``k`` with seed ``seed * 1000 + k``.
+
+    The seeds are those of ``fog-temp-comp simulate --seed``, so the runs equal the bags it
+    writes with the same configuration.
+
+    Returns
+    -------
+    dict
+        Run name -> :class:`SimulatedRun`, in plan order (training run first).
+
+    """
+    plan = runs if runs is not None else paper_plan()
+    out = {}
+    for k, (kind, setpoint) in enumerate(plan):
+        run = simulate_run(kind, setpoint, cfg, seed=seed * 1000 + k)
+        out[run.name] = run
+    return out
 
 
 def _gauss_markov(

@@ -1,17 +1,61 @@
 """Online temperature-rate (Tdot) estimators: temperature samples in, Tdot (degC/min) out.
 
 Every estimator is a small stateful object with the :class:`TdotEstimator` interface, so the
-compensator (and with it the node and the offline commands) can run any of them.
+compensator (and with it the node and the offline commands) can run any of them. They are
+selected by :attr:`DenoiseSettings.method <fog_temp_comp.denoise.DenoiseSettings.method>`:
+
+========== =============================================================================
+method     estimator
+========== =============================================================================
+wavelet    :class:`GridTdotEstimator`: the paper's 10 s grid, slope between bin means, then
+           ``wden`` on a sliding window, once per new bin (read at the newest sample or
+           ``delay_samples`` earlier)
+iir        :class:`GridTdotEstimator` with a Butterworth low-pass (``sosfilt`` with carried
+           state)
+none       :class:`GridTdotEstimator`, raw slope between bin means
+llr        :class:`LocalLinearTdotEstimator`: least-squares line through the raw samples of
+           the last ``llr_window_s`` seconds, once per new bin
+kalman     :class:`KalmanTdotEstimator`: Kalman filter on (T, Tdot) with a random-walk Tdot,
+           whose measurement noise includes the sensor's quantization, once per sample
+========== =============================================================================
+
+With ``coil_lag_s > 0`` the estimate (temperature and Tdot) passes through the sensor-to-coil
+lag (:class:`CoilLagEstimator`, :mod:`fog_temp_comp.coil`).
+
+Every estimator gives the same result fed one sample at a time (:meth:`add`) or in blocks
+(:meth:`add_block`). :func:`offline_estimates` is what calibration uses over a whole record.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import Protocol
 
-from fog_temp_comp.denoise import DenoiseSettings, make_denoiser
-from fog_temp_comp.grid import TemperatureGrid
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fog_temp_comp.coil import CoilLag, coil_lag
+from fog_temp_comp.denoise import GRID_METHODS, DenoiseSettings, denoise_offline, make_denoiser
+from fog_temp_comp.grid import TemperatureGrid, bin_index, temperature_grid
+from fog_temp_comp.units import S_PER_MIN
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    'CoilLagEstimator',
+    'EstimateSeries',
+    'GridTdotEstimator',
+    'KalmanTdotEstimator',
+    'LocalLinearTdotEstimator',
+    'TdotEstimate',
+    'TdotEstimator',
+    'make_estimator',
+    'offline_estimates',
+    'run_estimator',
+]
 
 
 @dataclass(frozen=True)
@@ -31,6 +75,10 @@ class TdotEstimator(Protocol):
         """Feed one finite sample (stamps increasing); return True if the estimate changed."""
         ...
 
+    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
+        """Feed samples shape (n,) in order; return the new estimates, oldest first."""
+        ...
+
     @property
     def estimate(self) -> TdotEstimate | None:
         """The latest estimate, None before the first sample."""
@@ -46,10 +94,26 @@ class TdotEstimator(Protocol):
         ...
 
 
+def _pairs(stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[tuple[float, float]]:
+    t = np.asarray(stamps_s, dtype=np.float64).ravel()
+    x = np.asarray(temperature_degC, dtype=np.float64).ravel()
+    if t.shape != x.shape:
+        raise ValueError(f'stamps and temperatures must have equal length, got {t.size}, {x.size}')
+    return list(zip(t.tolist(), x.tolist(), strict=True))
+
+
 class GridTdotEstimator:
     """The paper's estimator: 10 s grid means, slope between bins, then a denoiser.
 
-    Before the first bin completes the estimate is the latest sample with Tdot = 0.
+    Methods ``'wavelet'``, ``'iir'`` and ``'none'``. The denoiser runs once per completed bin
+    (one DWT per new Tdot sample for the wavelet), never per gyro message. Before the first bin
+    completes the estimate is the latest sample with Tdot = 0.
+
+    Parameters
+    ----------
+    settings : DenoiseSettings
+        ``tdot_period_s`` and the denoiser's settings.
+
     """
 
     def __init__(self, settings: DenoiseSettings) -> None:
@@ -74,6 +138,37 @@ class GridTdotEstimator:
         self._estimate = TdotEstimate(point.stamp_s, point.temperature_degC, tdot, raw)
         return True
 
+    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
+        """Feed samples shape (n,) in order; the denoiser filters the new bins as one block.
+
+        Same estimates as :meth:`add` on each sample (the Butterworth block runs ``sosfilt``
+        with carried state, equal to sample-by-sample filtering to rounding).
+        """
+        points = []
+        first: TdotEstimate | None = None
+        for stamp, value in _pairs(stamps_s, temperature_degC):
+            point = self._grid.add(stamp, value)
+            if point is not None:
+                points.append(point)
+            elif self._estimate is None and first is None and not points:
+                first = TdotEstimate(stamp, value, 0.0)
+        out: list[TdotEstimate] = []
+        if first is not None:
+            out.append(first)
+            self._estimate = first
+        raws = [p.tdot_degC_per_min for p in points]
+        filtered = iter(
+            self._denoiser.update_block([r for r in raws if not math.isnan(r)]).tolist()
+        )
+        tdot = self._estimate.tdot_degC_per_min if self._estimate is not None else 0.0
+        for point, raw in zip(points, raws, strict=True):
+            if not math.isnan(raw):
+                tdot = next(filtered)
+            out.append(TdotEstimate(point.stamp_s, point.temperature_degC, tdot, raw))
+        if out:
+            self._estimate = out[-1]
+        return out
+
     @property
     def estimate(self) -> TdotEstimate | None:
         """Latest completed bin (mean stamp, mean temperature) and denoised Tdot."""
@@ -91,6 +186,373 @@ class GridTdotEstimator:
         self._estimate = None
 
 
+class LocalLinearTdotEstimator:
+    """Causal local linear regression (method ``'llr'``), a Savitzky-Golay slope.
+
+    Once per completed grid bin, a least-squares line is fitted through every raw temperature
+    sample of the last ``K = round(llr_window_s / tdot_period_s)`` complete bins; Tdot is its
+    slope and the temperature its value at the newest bin's mean stamp. Each bin keeps only
+    its sufficient statistics (count and sums), so the cost per update is ``O(K)`` whatever
+    the sample rate, and memory is bounded.
+
+    For white noise of standard deviation ``sigma`` (degC) at ``n`` samples spread evenly over
+    ``W`` seconds, the slope's standard deviation is ``sigma * sqrt(12 / n) / W * 60`` degC/min,
+    and it lags a changing Tdot by ``W / 2`` (it is the exact slope at the window's middle for
+    a quadratic temperature).
+
+    Parameters
+    ----------
+    settings : DenoiseSettings
+        ``tdot_period_s`` and ``llr_window_s``.
+
+    """
+
+    def __init__(self, settings: DenoiseSettings) -> None:
+        self.settings = settings
+        self.period_s = settings.tdot_period_s
+        self.bins = max(2, round(settings.llr_window_s / settings.tdot_period_s))
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all samples."""
+        # per completed bin: (base stamp s, n, sum dt, sum dt^2, sum y, sum dt*y, mean stamp)
+        self._stats: deque[tuple[float, int, float, float, float, float, float]] = deque(
+            maxlen=self.bins
+        )
+        self._index: int | None = None
+        self._acc = [0, 0.0, 0.0, 0.0, 0.0]
+        self._estimate: TdotEstimate | None = None
+        self._last_mean: tuple[float, float] | None = None
+
+    def add(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Accumulate the sample; refit when it completes a bin (or on the very first sample)."""
+        index = bin_index(stamp_s, self.period_s)
+        changed = False
+        if self._index is not None and index != self._index:
+            self._close()
+            changed = True
+        if self._index != index:
+            self._index = index
+            self._acc = [0, 0.0, 0.0, 0.0, 0.0]
+        base = index * self.period_s
+        dt = stamp_s - base
+        acc = self._acc
+        acc[0] += 1
+        acc[1] += dt
+        acc[2] += dt * dt
+        acc[3] += temperature_degC
+        acc[4] += dt * temperature_degC
+        if self._estimate is None:
+            self._estimate = TdotEstimate(stamp_s, temperature_degC, 0.0)
+            return True
+        return changed
+
+    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
+        """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
+        out = []
+        for stamp, value in _pairs(stamps_s, temperature_degC):
+            if self.add(stamp, value):
+                assert self._estimate is not None
+                out.append(self._estimate)
+        return out
+
+    def _close(self) -> None:
+        assert self._index is not None
+        n, s1, s2, sy, sty = self._acc
+        base = self._index * self.period_s
+        mean_stamp = base + s1 / n
+        mean_temp = sy / n
+        raw = math.nan
+        if self._last_mean is not None:
+            raw = (mean_temp - self._last_mean[1]) / (
+                (mean_stamp - self._last_mean[0]) / S_PER_MIN
+            )
+        self._last_mean = (mean_stamp, mean_temp)
+        self._stats.append((base, int(n), s1, s2, sy, sty, mean_stamp))
+        # pooled regression about the newest bin's base (keeps full precision for epoch stamps)
+        n_tot = 0
+        t1 = t2 = y1 = ty = 0.0
+        for b, nj, s1j, s2j, syj, styj, _ in self._stats:
+            d = b - base
+            n_tot += nj
+            t1 += s1j + nj * d
+            t2 += s2j + 2.0 * d * s1j + nj * d * d
+            y1 += syj
+            ty += styj + d * syj
+        sxx = t2 - t1 * t1 / n_tot
+        slope = 0.0 if len(self._stats) < 2 or sxx <= 0.0 else (ty - t1 * y1 / n_tot) / sxx
+        at = mean_stamp - base
+        temperature = (y1 + slope * (n_tot * at - t1)) / n_tot
+        self._estimate = TdotEstimate(mean_stamp, temperature, slope * S_PER_MIN, raw)
+
+    @property
+    def estimate(self) -> TdotEstimate | None:
+        """Latest fit: newest bin's mean stamp, fitted temperature there, slope (degC/min)."""
+        return self._estimate
+
+    @property
+    def ready(self) -> bool:
+        """True once the window holds ``K`` complete bins."""
+        return len(self._stats) >= self.bins
+
+    @property
+    def latency_s(self) -> float:
+        """Nominal delay of the Tdot estimate behind a changing Tdot, s (half the window)."""
+        return 0.5 * self.bins * self.period_s
+
+
+class KalmanTdotEstimator:
+    """Kalman filter on temperature and its rate (method ``'kalman'``), once per sample.
+
+    State ``[T (degC), Tdot (degC/s)]``; process: ``T`` integrates ``Tdot``, and ``Tdot`` is a
+    random walk of intensity ``q = (kalman_rate_walk_degC_per_min_per_sqrt_s / 60)^2``
+    (degC^2/s^3), i.e. ``Q = q [[dt^3/3, dt^2/2], [dt^2/2, dt]]``; measurement: one reading of
+    variance ``temperature_noise_degC^2 + temperature_quantum_degC^2 / 12`` (white noise plus
+    uniform quantization error, so the filter knows the quantization step). Irregular sample
+    intervals are handled exactly; a sample not after the previous one is ignored.
+
+    Parameters
+    ----------
+    settings : DenoiseSettings
+        ``kalman_rate_walk_degC_per_min_per_sqrt_s``, ``temperature_noise_degC`` and
+        ``temperature_quantum_degC``.
+
+    Notes
+    -----
+    The first sample sets ``T``, with ``Tdot = 0`` and a prior standard deviation of 1 degC/min.
+    In steady state the filter is an alpha-beta filter; its Tdot bandwidth is about
+    ``(q / R)^(1/4)`` rad/s, i.e. it averages over roughly ``(R / q)^(1/4)`` seconds.
+
+    """
+
+    #: prior standard deviation of Tdot at start-up, degC/min
+    PRIOR_TDOT_DEGC_PER_MIN = 1.0
+
+    def __init__(self, settings: DenoiseSettings) -> None:
+        self.settings = settings
+        self.q = (settings.kalman_rate_walk_degC_per_min_per_sqrt_s / S_PER_MIN) ** 2
+        self.r = settings.measurement_variance_degC2
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all samples."""
+        self._stamp = math.nan
+        self._t = 0.0
+        self._v = 0.0  # degC/s
+        self._p00 = self._p01 = self._p11 = 0.0
+        self._ready = False
+        self._estimate: TdotEstimate | None = None
+
+    def add(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Predict to ``stamp_s`` and update with the reading; return True (estimate changed)."""
+        z = temperature_degC
+        if self._estimate is None:
+            self._stamp = stamp_s
+            self._t, self._v = z, 0.0
+            self._p00, self._p01 = self.r, 0.0
+            self._p11 = (self.PRIOR_TDOT_DEGC_PER_MIN / S_PER_MIN) ** 2
+            self._estimate = TdotEstimate(stamp_s, z, 0.0)
+            return True
+        dt = stamp_s - self._stamp
+        if not dt > 0.0:
+            return False
+        q = self.q
+        # predict: x = F x, P = F P F' + Q
+        t = self._t + dt * self._v
+        p00 = self._p00 + 2.0 * dt * self._p01 + dt * dt * self._p11 + q * dt**3 / 3.0
+        p01 = self._p01 + dt * self._p11 + q * dt * dt / 2.0
+        p11 = self._p11 + q * dt
+        # update with z = T + noise
+        s = p00 + self.r
+        k0, k1 = p00 / s, p01 / s
+        innovation = z - t
+        self._t = t + k0 * innovation
+        self._v += k1 * innovation
+        previous = self._p11
+        self._p00, self._p01, self._p11 = p00 - k0 * p00, p01 - k0 * p01, p11 - k1 * p01
+        self._stamp = stamp_s
+        if not self._ready and abs(self._p11 - previous) <= 1e-3 * self._p11:
+            self._ready = True
+        self._estimate = TdotEstimate(stamp_s, self._t, self._v * S_PER_MIN)
+        return True
+
+    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
+        """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
+        out = []
+        for stamp, value in _pairs(stamps_s, temperature_degC):
+            if self.add(stamp, value):
+                assert self._estimate is not None
+                out.append(self._estimate)
+        return out
+
+    @property
+    def estimate(self) -> TdotEstimate | None:
+        """Filtered temperature and Tdot at the latest sample."""
+        return self._estimate
+
+    @property
+    def ready(self) -> bool:
+        """True once the Tdot variance has converged (changes < 0.1 % per sample)."""
+        return self._ready
+
+    @property
+    def tdot_std_degC_per_min(self) -> float:
+        """Current posterior standard deviation of Tdot, degC/min."""
+        return math.sqrt(max(self._p11, 0.0)) * S_PER_MIN
+
+
+class CoilLagEstimator:
+    """Any estimator followed by the sensor-to-coil lag on its temperature and Tdot output.
+
+    Parameters
+    ----------
+    inner : TdotEstimator
+        The estimator on the sensor's temperature.
+    coil_lag_s : float
+        Time constant of the lag, s (> 0).
+
+    """
+
+    def __init__(self, inner: TdotEstimator, coil_lag_s: float) -> None:
+        self.inner = inner
+        self._lag_t = CoilLag(coil_lag_s)
+        self._lag_r = CoilLag(coil_lag_s)
+        self._estimate: TdotEstimate | None = None
+
+    def _apply(self, e: TdotEstimate) -> TdotEstimate:
+        self._estimate = TdotEstimate(
+            e.stamp_s,
+            self._lag_t.update(e.stamp_s, e.temperature_degC),
+            self._lag_r.update(e.stamp_s, e.tdot_degC_per_min),
+            e.raw_tdot_degC_per_min,
+        )
+        return self._estimate
+
+    def add(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Feed the inner estimator; lag its new estimate."""
+        if not self.inner.add(stamp_s, temperature_degC):
+            return False
+        estimate = self.inner.estimate
+        assert estimate is not None
+        self._apply(estimate)
+        return True
+
+    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
+        """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
+        return [self._apply(e) for e in self.inner.add_block(stamps_s, temperature_degC)]
+
+    @property
+    def estimate(self) -> TdotEstimate | None:
+        """Coil temperature (degC) and coil Tdot (degC/min) at the inner estimate's stamp."""
+        return self._estimate
+
+    @property
+    def ready(self) -> bool:
+        """Whether the inner estimator is warmed up."""
+        return self.inner.ready
+
+    def reset(self) -> None:
+        """Forget all samples."""
+        self.inner.reset()
+        self._lag_t.reset()
+        self._lag_r.reset()
+        self._estimate = None
+
+
 def make_estimator(settings: DenoiseSettings) -> TdotEstimator:
-    """The online Tdot estimator selected by ``settings.method``."""
-    return GridTdotEstimator(settings)
+    """The online Tdot estimator selected by ``settings.method`` (lagged if ``coil_lag_s``)."""
+    base: TdotEstimator
+    if settings.method in GRID_METHODS:
+        base = GridTdotEstimator(settings)
+    elif settings.method == 'llr':
+        base = LocalLinearTdotEstimator(settings)
+    elif settings.method == 'kalman':
+        base = KalmanTdotEstimator(settings)
+    else:  # DenoiseSettings validates method
+        raise ValueError(f'unknown method {settings.method!r}')
+    if settings.coil_lag_s > 0:
+        return CoilLagEstimator(base, settings.coil_lag_s)
+    return base
+
+
+@dataclass(frozen=True)
+class EstimateSeries:
+    """A stream of estimates as arrays, each shape (n,): stamp s, degC, degC/min."""
+
+    stamp_s: FloatArray
+    temperature_degC: FloatArray
+    tdot_degC_per_min: FloatArray
+
+    @staticmethod
+    def from_estimates(estimates: list[TdotEstimate]) -> EstimateSeries:
+        """Arrays of a list of :class:`TdotEstimate`."""
+        return EstimateSeries(
+            np.array([e.stamp_s for e in estimates], dtype=np.float64),
+            np.array([e.temperature_degC for e in estimates], dtype=np.float64),
+            np.array([e.tdot_degC_per_min for e in estimates], dtype=np.float64),
+        )
+
+    def lagged(self, coil_lag_s: float) -> EstimateSeries:
+        """Temperature and Tdot through the coil lag (:func:`fog_temp_comp.coil.coil_lag`)."""
+        if coil_lag_s == 0:
+            return self
+        return EstimateSeries(
+            self.stamp_s,
+            coil_lag(self.stamp_s, self.temperature_degC, coil_lag_s),
+            coil_lag(self.stamp_s, self.tdot_degC_per_min, coil_lag_s),
+        )
+
+
+def run_estimator(
+    settings: DenoiseSettings, stamps_s: ArrayLike, temperature_degC: ArrayLike
+) -> EstimateSeries:
+    """Every estimate of a fresh :func:`make_estimator` fed a whole record (causal)."""
+    return EstimateSeries.from_estimates(
+        make_estimator(settings).add_block(stamps_s, temperature_degC)
+    )
+
+
+def offline_estimates(
+    settings: DenoiseSettings,
+    stamps_s: ArrayLike,
+    temperature_degC: ArrayLike,
+    *,
+    coil_lag: bool = True,
+    online: bool = False,
+) -> EstimateSeries:
+    """Temperature and Tdot over a whole record, as calibration uses them.
+
+    Grid methods return one row per grid bin after the first (bin mean stamp and temperature,
+    Tdot denoised by :func:`~fog_temp_comp.denoise.denoise_offline`: the whole-record,
+    non-causal ``wden`` for ``'wavelet'``, as in the paper; the causal Butterworth for
+    ``'iir'``). ``'llr'`` and ``'kalman'`` have no offline version that would match what runs
+    online, so the online estimator runs causally over the record and every estimate is
+    returned (one per bin for ``'llr'``, one per sample for ``'kalman'``). With ``coil_lag``
+    (default) the coil lag of ``settings.coil_lag_s`` is applied, as online.
+
+    Parameters
+    ----------
+    settings : DenoiseSettings
+        Estimator settings.
+    stamps_s, temperature_degC : array_like, shape (n,)
+        Temperature samples (s, degC), stamps non-decreasing.
+    coil_lag : bool
+        Apply ``settings.coil_lag_s``.
+    online : bool
+        Run the online estimator causally for the grid methods too (what the node computes;
+        for ``'wavelet'`` this includes the sliding window's edge effects and delay).
+
+    Returns
+    -------
+    EstimateSeries
+
+    """
+    if settings.method in GRID_METHODS and not online:
+        _, stamp, temp, tdot_raw = temperature_grid(
+            stamps_s, temperature_degC, settings.tdot_period_s
+        )
+        series = EstimateSeries(stamp[1:], temp[1:], denoise_offline(tdot_raw[1:], settings))
+    else:
+        no_lag = dataclasses.replace(settings, coil_lag_s=0.0)
+        series = run_estimator(no_lag, stamps_s, temperature_degC)
+    return series.lagged(settings.coil_lag_s) if coil_lag else series

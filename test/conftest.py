@@ -12,7 +12,6 @@ from fog_temp_comp.simulate import SimulatedRun, simulate_run
 
 from simdata import SHORT_CHAMBER
 
-
 # keep this test run's DDS traffic to itself: its own domain, discovery on this host only
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')

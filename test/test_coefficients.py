@@ -99,7 +99,7 @@ def del_key(path: str) -> Callable[[dict], None]:
         (del_key('calibrated_range'), 'calibrated_range'),
         (set_key('calibrated_range.temperature_degC', [60.0, -40.0]), 'temperature_degC'),
         (set_key('calibrated_range.tdot_degC_per_min', [0.1]), 'tdot_degC_per_min'),
-        (set_key('denoise.method', 'kalman'), 'denoise'),
+        (set_key('denoise.method', 'median'), 'denoise'),
         (set_key('denoise.bogus', 1), 'denoise'),
         (set_key('frame_id', 5), 'frame_id'),
     ],

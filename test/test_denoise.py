@@ -13,6 +13,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scipy import signal
 
 from fog_temp_comp.denoise import (
+    GRID_METHODS,
+    METHODS,
     ButterworthDenoiser,
     DenoiseSettings,
     PassThroughDenoiser,
@@ -465,6 +467,13 @@ def test_sliding_rejects_nonfinite_without_state_change():
         ('iir_order', 0),
         ('iir_cutoff_hz', 0.0),
         ('iir_cutoff_hz', 0.05),
+        ('llr_window_s', 19.0),
+        ('llr_window_s', float('inf')),
+        ('kalman_rate_walk_degC_per_min_per_sqrt_s', 0.0),
+        ('temperature_noise_degC', -0.01),
+        ('temperature_quantum_degC', float('nan')),
+        ('coil_lag_s', -5.0),
+        ('coil_lag_s', 'slow'),
     ],
 )
 def test_settings_bad_field_named(field, value):
@@ -502,8 +511,14 @@ def test_settings_round_trip_and_keys():
         delay_samples=7,
         iir_order=2,
         iir_cutoff_hz=0.02,
+        llr_window_s=120,
+        kalman_rate_walk_degC_per_min_per_sqrt_s=0.03,
+        temperature_noise_degC=0.01,
+        temperature_quantum_degC=0.1,
+        coil_lag_s=150,
     )
     assert isinstance(s.tdot_period_s, float)
+    assert isinstance(s.llr_window_s, float) and isinstance(s.coil_lag_s, float)
     d = s.to_dict()
     assert all(isinstance(v, (str, int, float)) for v in d.values())
     assert DenoiseSettings.from_dict(d) == s
@@ -565,3 +580,26 @@ def test_denoise_offline_each_method():
     none = denoise_offline(x, dataclasses.replace(s, method='none'))
     assert_array_equal(none, x)
     assert none is not x
+
+
+def test_new_methods_are_selectable_but_not_grid_denoisers():
+    """'llr' and 'kalman' are valid methods; they estimate from temperature, not grid Tdot."""
+    assert set(GRID_METHODS) == {'wavelet', 'iir', 'none'}
+    assert {'llr', 'kalman'} <= set(METHODS)
+    for method in ('llr', 'kalman'):
+        settings = DenoiseSettings(method=method)
+        assert DenoiseSettings.from_dict(settings.to_dict()) == settings
+        with pytest.raises(ValueError, match='temperature samples'):
+            make_denoiser(settings)
+        with pytest.raises(ValueError, match='temperature samples'):
+            denoise_offline(np.zeros(10), settings)
+
+
+def test_measurement_variance_adds_uniform_quantization():
+    """R = noise^2 + quantum^2 / 12 (variance of a uniform rounding error)."""
+    s = DenoiseSettings(temperature_noise_degC=0.02, temperature_quantum_degC=1 / 16)
+    assert s.measurement_variance_degC2 == pytest.approx(0.02**2 + (1 / 16) ** 2 / 12)
+    # the new fields default to the behaviour of the original settings
+    assert DenoiseSettings().coil_lag_s == 0.0
+    d = DenoiseSettings().to_dict()
+    assert d['method'] == 'wavelet' and d['window_samples'] == 512

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -81,7 +82,7 @@ def test_accumulator_in_chunks_equals_bin_means(rng: np.random.Generator) -> Non
     acc = GridAccumulator(10.0)
     # uneven chunks, shuffled order: bins split across chunks must merge
     cuts = [0, 7, 700, 701, 2000, 3000]
-    parts = [(stamps[a:b], values[a:b]) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+    parts = [(stamps[a:b], values[a:b]) for a, b in itertools.pairwise(cuts)]
     for k in (3, 0, 4, 1, 2):
         acc.add(*parts[k])
     got_index, got_stamp, got_mean = acc.result()

@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range, coefficient_key, design_matrix
+from fog_temp_comp.model import (
+    CANDIDATE_TERMS,
+    PAPER_TERMS,
+    TERMS,
+    DriftModel,
+    Range,
+    coefficient_key,
+    design_matrix,
+)
 from fog_temp_comp.units import DEG_H_PER_RAD_S, RAD_S_PER_DEG_H
 
 
@@ -50,3 +58,33 @@ def test_range_clamp_and_contains() -> None:
     assert r.clamp(70.0) == 60.0
     assert r.clamp(12.5) == 12.5
     assert r.contains(60.0) and not r.contains(60.1)
+
+
+def test_nonlinear_terms_have_unit_keys_and_values() -> None:
+    assert coefficient_key('T2') == 'dt2_deg_h_per_degC2'
+    assert coefficient_key('T_Tdot') == 'dttdot_deg_h_per_degC2_per_min'
+    terms = (*PAPER_TERMS, 'T2', 'T_Tdot')
+    a = design_matrix([10.0, -20.0], [0.5, -0.1], terms)
+    assert_allclose(a, [[1.0, 10.0, 0.5, 100.0, 5.0], [1.0, -20.0, -0.1, 400.0, 2.0]])
+    assert all(t in TERMS for terms_ in CANDIDATE_TERMS for t in terms_)
+    assert CANDIDATE_TERMS[0] == PAPER_TERMS
+
+
+def test_compensator_evaluates_any_model_like_drift_deg_h() -> None:
+    """The compensator's scalar hot path gives the model's drift for the nonlinear terms too."""
+    from fog_temp_comp.compensator import Compensator, GuardSettings
+    from fog_temp_comp.denoise import DenoiseSettings
+
+    terms = (*PAPER_TERMS, 'T2', 'T_Tdot')
+    rng = np.random.default_rng(3)
+    coeffs = rng.normal(size=(5, 3)) * [[1.0], [1e-3], [1.0], [1e-5], [1e-3]]
+    model = DriftModel(terms, coeffs, Range(-50, 80), Range(-2, 2))
+    comp = Compensator(model, DenoiseSettings(method='kalman'), GuardSettings(clamp_tdot=False))
+    t0 = 1.7e9
+    for k in range(600):
+        comp.add_temperature(t0 + k, 30.0 + 0.8 / 60.0 * k)
+    comp.correct(t0 + 599.5, np.zeros(3))
+    status = comp.status
+    expected = model.drift_deg_h(status.temperature_used_degC, status.tdot_used_degC_per_min)
+    assert_allclose(status.correction_deg_h, expected, rtol=1e-12)
+    assert_allclose(status.tdot_used_degC_per_min, 0.8, rtol=1e-3)

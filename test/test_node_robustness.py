@@ -412,7 +412,7 @@ def test_runtime_change_of_denoise_method(harness: Harness) -> None:
     result = node.set_parameters([Parameter('denoise', value='wavelet')])[0]
     assert result.successful
     assert node.config.settings.method == 'wavelet' and node.reconfigurations == 1
-    refused = node.set_parameters([Parameter('denoise', value='kalman')])[0]
+    refused = node.set_parameters([Parameter('denoise', value='median')])[0]
     assert not refused.successful and 'method' in refused.reason
     assert node.config.settings.method == 'wavelet'
 
