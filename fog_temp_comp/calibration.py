@@ -11,6 +11,7 @@ from __future__ import annotations
 import datetime as dt
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,10 +19,17 @@ from numpy.typing import NDArray
 from fog_temp_comp import __version__
 from fog_temp_comp.coefficients import Coefficients
 from fog_temp_comp.denoise import DenoiseSettings, denoise_offline
+from fog_temp_comp.fitstats import (
+    AxisFitStats,
+    IdentifiabilityError,
+    check_identifiability,
+    fit_drift,
+    fit_summary,
+)
 from fog_temp_comp.grid import bin_means, temperature_grid
-from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range, coefficient_key, design_matrix
+from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range, design_matrix
 from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.units import AXES, DEG_H_PER_RAD_S
+from fog_temp_comp.units import DEG_H_PER_RAD_S
 
 FloatArray = NDArray[np.float64]
 
@@ -123,65 +131,52 @@ def grid_table(
     return GridTable(means[ti, 0], means[ti, 1], rate[gi] * DEG_H_PER_RAD_S)
 
 
-@dataclass(frozen=True)
-class AxisFit:
-    """Least-squares result of one axis (units of each term's coefficient)."""
+def fit_table(
+    table: GridTable, terms: Sequence[str] = PAPER_TERMS, *, lag: int | None = None
+) -> list[AxisFitStats]:
+    """Least squares per axis with classical and Newey-West standard errors, R^2, condition.
 
-    coefficients: FloatArray
-    standard_errors: FloatArray
-    residual_std_deg_h: float
-    r_squared: float
-    n_samples: int
-
-
-def fit_table(table: GridTable, terms: Sequence[str] = PAPER_TERMS) -> list[AxisFit]:
-    """Ordinary least squares per axis, with standard errors and R^2."""
+    Raises :class:`CalibrationError` for a fit the data cannot identify (too small a swing).
+    """
     check_identifiable(table, terms)
-    a = design_matrix(table.temperature_degC, table.tdot_degC_per_min, terms)
-    n, p = a.shape
+    n, p = table.rate_deg_h.shape[0], len(terms)
     if n <= p:
         raise CalibrationError(f'{n} grid rows cannot fit {p} coefficients')
-    coeffs, _, rank, _ = np.linalg.lstsq(a, table.rate_deg_h, rcond=None)
-    if rank < p:
+    a = design_matrix(table.temperature_degC, table.tdot_degC_per_min, terms)
+    if np.linalg.matrix_rank(a) < p:
         raise CalibrationError('design matrix is rank deficient; the terms are not identifiable')
-    cov_unscaled = np.linalg.inv(a.T @ a)
-    fits = []
-    for j in range(len(AXES)):
-        y = table.rate_deg_h[:, j]
-        resid = y - a @ coeffs[:, j]
-        sigma2 = float(resid @ resid) / (n - p)
-        total = float(np.sum((y - y.mean()) ** 2))
-        fits.append(
-            AxisFit(
-                coefficients=np.asarray(coeffs[:, j], dtype=np.float64),
-                standard_errors=np.sqrt(np.diag(cov_unscaled) * sigma2),
-                residual_std_deg_h=float(np.sqrt(sigma2)),
-                r_squared=1.0 - float(resid @ resid) / total if total > 0 else float('nan'),
-                n_samples=n,
-            )
-        )
-    return fits
+    return fit_drift(table.temperature_degC, table.tdot_degC_per_min, table.rate_deg_h, terms,
+                     lag=lag)  # fmt: skip
 
 
-def check_identifiable(table: GridTable, terms: Sequence[str]) -> None:
-    """Refuse a fit whose data cannot identify a coefficient (too small a swing)."""
-    if 'T' in terms:
-        swing = float(np.ptp(table.temperature_degC)) if table.temperature_degC.size else 0.0
-        if swing < MIN_TEMPERATURE_SWING_DEGC:
-            raise CalibrationError(
-                f'temperature swing {swing:.2f} degC is below {MIN_TEMPERATURE_SWING_DEGC} degC: '
-                'the temperature coefficient cannot be identified; use a chamber cycle'
-            )
-    if 'Tdot' in terms:
-        spread = float(np.ptp(table.tdot_degC_per_min)) if table.tdot_degC_per_min.size else 0.0
-        if spread < MIN_TDOT_SPREAD_DEGC_PER_MIN:
-            raise CalibrationError(
-                f'Tdot spread {spread:.3f} degC/min is below {MIN_TDOT_SPREAD_DEGC_PER_MIN} '
-                'degC/min: the Tdot coefficient cannot be identified; use a ramp'
-            )
+def check_identifiable(table: GridTable, terms: Sequence[str]) -> list[str]:
+    """Refuse a fit the data cannot identify; return the warnings (ill-conditioning)."""
+    try:
+        return check_identifiability(table.temperature_degC, table.tdot_degC_per_min, terms)
+    except IdentifiabilityError as err:
+        raise CalibrationError(str(err)) from None
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """Coefficients plus what a report needs: the grid rows, per-axis fit statistics, warnings."""
+
+    coefficients: Coefficients
+    table: GridTable
+    fits: list[AxisFitStats]
+    warnings: list[str]
 
 
 def calibrate(
+    records: Sequence[ChamberRecord],
+    settings: DenoiseSettings,
+    **options: Any,
+) -> Coefficients:
+    """Fit the drift model; see :func:`calibrate_detailed` for the options."""
+    return calibrate_detailed(records, settings, **options).coefficients
+
+
+def calibrate_detailed(
     records: Sequence[ChamberRecord],
     settings: DenoiseSettings,
     *,
@@ -190,7 +185,9 @@ def calibrate(
     coil_lag_bounds_s: tuple[float, float] = (0.0, 1800.0),
     coil_lag_highpass_s: float = 1800.0,
     online_tdot: bool = False,
-) -> Coefficients:
+    hac_lag: int | None = None,
+    provenance: dict[str, Any] | None = None,
+) -> CalibrationResult:
     """Fit the drift model on one or more chamber records (each keeps its own time span).
 
     Parameters
@@ -220,10 +217,14 @@ def calibrate(
         Fit with the Tdot the node computes (the online estimator run causally over each
         record) also for the grid methods; by default ``'wavelet'`` uses the paper's
         whole-record denoising. ``'llr'`` and ``'kalman'`` always run online.
+    hac_lag : int, optional
+        Newey-West lag of the standard errors (default: data-driven).
+    provenance : dict, optional
+        Entries added to the coefficients' provenance (e.g. the Earth-rate removal).
 
     Returns
     -------
-    Coefficients
+    CalibrationResult
 
     """
     # local imports: this function may only grow inside its body (shared file)
@@ -286,7 +287,8 @@ def calibrate(
         table = GridTable.concatenate(
             [grid_table(r, settings, online_tdot=online_tdot) for r in records]
         )
-    fits = fit_table(table, terms)
+    warnings = check_identifiable(table, terms)
+    fits = fit_table(table, terms, lag=hac_lag)
     model = DriftModel(
         tuple(terms),
         np.stack([f.coefficients for f in fits], axis=1),
@@ -294,22 +296,11 @@ def calibrate(
         Range(float(table.tdot_degC_per_min.min()), float(table.tdot_degC_per_min.max())),
     )
     frame_ids = sorted({r.frame_id for r in records})
-    return Coefficients(
+    coefficients = Coefficients(
         model=model,
         denoise=settings,
         frame_id=frame_ids[0] if len(frame_ids) == 1 else '',
-        fit={
-            axis: {
-                'residual_std_deg_h': f.residual_std_deg_h,
-                'r_squared': f.r_squared,
-                'n_samples': f.n_samples,
-                'standard_errors': {
-                    coefficient_key(term): float(se)
-                    for term, se in zip(terms, f.standard_errors, strict=True)
-                },
-            }
-            for axis, f in zip(AXES, fits, strict=True)
-        },
+        fit={**fit_summary(fits), **({'warnings': warnings} if warnings else {})},
         provenance={
             'bags': [str(r.path) for r in records],
             'gyro_topics': sorted({r.imu_topic for r in records}),
@@ -317,5 +308,7 @@ def calibrate(
             'created_utc': dt.datetime.now(dt.UTC).strftime('%Y-%m-%dT%H:%M:%SZ'),
             'package_version': __version__,
             **({'coil_lag_fit': lag_fit} if lag_fit is not None else {}),
+            **(provenance or {}),
         },
     )
+    return CalibrationResult(coefficients, table, fits, warnings)

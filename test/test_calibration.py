@@ -28,7 +28,7 @@ def test_exact_fit_on_noise_free_table() -> None:
     for j, fit in enumerate(fits):
         assert_allclose(fit.coefficients, TRUE_COEFFICIENTS[:, j], rtol=1e-9, atol=1e-12)
         assert fit.r_squared == pytest.approx(1.0)
-        assert fit.residual_std_deg_h < 1e-9
+        assert fit.residual_std < 1e-9
 
 
 @pytest.mark.parametrize('method', ['wavelet', 'iir'])
