@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -10,7 +11,9 @@ from pathlib import Path
 from fog_temp_comp import __version__, commands
 from fog_temp_comp.bagio import FORMATS
 from fog_temp_comp.compensator import GuardSettings
-from fog_temp_comp.denoise import METHODS, DenoiseSettings
+from fog_temp_comp.denoise import METHODS, RECOMMENDED_SETTINGS
+from fog_temp_comp.model import TERMS
+from fog_temp_comp.stream import TIME_SOURCES
 
 
 def _add_topics(parser: argparse.ArgumentParser) -> None:
@@ -26,7 +29,7 @@ def _add_topics(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_guard(parser: argparse.ArgumentParser) -> None:
+def _add_guard(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     parser.add_argument(
         '--extrapolate-tdot',
         action='store_true',
@@ -73,7 +76,98 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
     p.add_argument('-o', '--output', type=Path, required=True, metavar='COEFFS.yaml')
     _add_topics(p)
-    _add_denoise(p, 'wavelet')
+    _add_denoise(p, 'kalman')
+    g = p.add_argument_group('input')
+    g.add_argument(
+        '--temp-field',
+        metavar='FIELD',
+        help='read temperature (degC) from this field (a.b.c) of --temp-topic, '
+        'a message of any type',
+    )
+    g.add_argument(
+        '--time-source',
+        choices=TIME_SOURCES,
+        default='header',
+        help='align gyro and temperature by header stamp (default) or receive time',
+    )
+    g.add_argument('--quiet', action='store_true', help='no progress line on stderr')
+    g.add_argument(
+        '--latitude-deg',
+        type=float,
+        metavar='DEG',
+        help='subtract the Earth-rate projection at this latitude before the fit',
+    )
+    g.add_argument(
+        '--axes-orientation',
+        metavar='SPEC',
+        help='sensor axes in ENU for --latitude-deg: enu, ned, nwu, ..., a '
+        'quaternion x,y,z,w or a row-major 3x3 matrix',
+    )
+    g = p.add_argument_group('model')
+    g.add_argument(
+        '--terms',
+        default='const,T,Tdot',
+        metavar='LIST',
+        help=f'model terms, comma separated, from {sorted(TERMS)} '
+        '(default const,T,Tdot, the paper)',
+    )
+    g.add_argument(
+        '--no-constant',
+        action='store_true',
+        help='write the model without D0 (ArduPilot style: the offset, Earth '
+        'rate included, comes from a start-up calibration)',
+    )
+    g.add_argument(
+        '--fit-coil-lag',
+        action='store_true',
+        help='fit a first-order lag (s) between the temperature sensor and the coil',
+    )
+    g.add_argument(
+        '--online-tdot',
+        action='store_true',
+        help='fit with the Tdot the node computes, also for wavelet/iir/none',
+    )
+    g.add_argument(
+        '--hac-lag',
+        type=int,
+        metavar='N',
+        help='Newey-West lag of the standard errors (default: data-driven)',
+    )
+    g = p.add_argument_group('selection and validation (held-out runs)')
+    g.add_argument(
+        '--heldout',
+        type=Path,
+        nargs='+',
+        default=[],
+        metavar='BAG',
+        help='choose model terms and coil lag by these held-out runs',
+    )
+    g.add_argument(
+        '--leave-one-run-out',
+        action='store_true',
+        help='choose by leave-one-run-out over the training bags',
+    )
+    g.add_argument(
+        '--tolerance',
+        type=float,
+        default=0.02,
+        help='keep the simplest candidate within this fraction of the best (0.02)',
+    )
+    g.add_argument(
+        '--validate',
+        type=Path,
+        nargs='+',
+        default=[],
+        metavar='BAG',
+        help='print the stability/range table for these held-out bags',
+    )
+    g.add_argument(
+        '--report',
+        type=Path,
+        metavar='DIR',
+        help='write PNG plots and an HTML page (index.html) to DIR',
+    )
+    _add_guard(g)
 
     p = sub.add_parser('compensate', help='replay a bag through the compensator')
     p.add_argument('in_bag', type=Path, metavar='IN_BAG')
@@ -115,13 +209,28 @@ def run(args: argparse.Namespace) -> int:
             args.out_dir, fmt=args.fmt, imu_hz=args.imu_hz, temp_hz=args.temp_hz, seed=args.seed
         )
     if args.command == 'calibrate':
-        return commands.calibrate_command(
-            args.bags,
-            args.output,
+        options = commands.CalibrateOptions(
             gyro_topic=args.gyro_topic,
             temp_topic=args.temp_topic,
-            settings=DenoiseSettings(method=args.denoise),
+            temp_field=args.temp_field,
+            time_source=args.time_source,
+            settings=dataclasses.replace(RECOMMENDED_SETTINGS, method=args.denoise),
+            terms=tuple(t.strip() for t in args.terms.split(',') if t.strip()),
+            fit_coil_lag=args.fit_coil_lag,
+            online_tdot=args.online_tdot,
+            hac_lag=args.hac_lag,
+            latitude_deg=args.latitude_deg,
+            axes_orientation=args.axes_orientation,
+            no_constant=args.no_constant,
+            heldout=tuple(args.heldout),
+            leave_one_run_out=args.leave_one_run_out,
+            tolerance=args.tolerance,
+            validate=tuple(args.validate),
+            report_dir=args.report,
+            extrapolate_tdot=args.extrapolate_tdot,
+            quiet=args.quiet,
         )
+        return commands.calibrate_command(args.bags, args.output, options=options)
     if args.command == 'compensate':
         return commands.compensate_command(
             args.in_bag,

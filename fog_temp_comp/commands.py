@@ -5,7 +5,8 @@ from __future__ import annotations
 import dataclasses
 import shutil
 import sys
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -14,11 +15,17 @@ import yaml
 
 from fog_temp_comp import bagio, cdr
 from fog_temp_comp.bagio import BagError, BagWriter, read_record
-from fog_temp_comp.calibration import CalibrationError, calibrate
+from fog_temp_comp.calibration import CalibrationError, calibrate_detailed
 from fog_temp_comp.coefficients import Coefficients, CoefficientsError, load, save
 from fog_temp_comp.compensator import Compensator, CompensatorCounters, GuardSettings
-from fog_temp_comp.denoise import DenoiseSettings
+from fog_temp_comp.denoise import RECOMMENDED_SETTINGS, DenoiseSettings
+from fog_temp_comp.earth import earth_rate_body_deg_h, parse_orientation, remove_earth_rate
 from fog_temp_comp.evaluate import format_scores, replay_record, score_record
+from fog_temp_comp.fitstats import format_fits
+from fog_temp_comp.model import PAPER_TERMS, DriftModel
+from fog_temp_comp.record import ChamberRecord
+from fog_temp_comp.reduce import reduce_record
+from fog_temp_comp.selection import default_candidates, format_results, select_and_calibrate
 from fog_temp_comp.simulate import SimulationConfig, paper_plan, simulate_run
 from fog_temp_comp.units import AXES
 
@@ -104,44 +111,200 @@ def simulate_command(
     return 0
 
 
+@dataclass(frozen=True)
+class CalibrateOptions:
+    """Everything ``fog-temp-comp calibrate`` can be told (units in the names)."""
+
+    gyro_topic: str | None = None
+    temp_topic: str | None = None
+    temp_field: str | None = None
+    time_source: str = 'header'
+    settings: DenoiseSettings = RECOMMENDED_SETTINGS
+    terms: tuple[str, ...] = PAPER_TERMS
+    fit_coil_lag: bool = False
+    online_tdot: bool = False
+    hac_lag: int | None = None
+    latitude_deg: float | None = None
+    axes_orientation: str | None = None
+    no_constant: bool = False
+    heldout: tuple[Path, ...] = ()
+    leave_one_run_out: bool = False
+    tolerance: float = 0.02
+    validate: tuple[Path, ...] = ()
+    report_dir: Path | None = None
+    extrapolate_tdot: bool = False
+    quiet: bool = True
+
+
 def calibrate_command(
     bags: Sequence[Path],
     output: Path,
     *,
+    options: CalibrateOptions | None = None,
+    settings: DenoiseSettings | None = None,
     gyro_topic: str | None = None,
     temp_topic: str | None = None,
-    settings: DenoiseSettings | None = None,
     stdout: TextIO | None = None,
 ) -> int:
-    """Fit coefficients on ``bags`` and write them to ``output`` (YAML)."""
+    """Fit coefficients on ``bags`` and write them to ``output`` (YAML).
+
+    Training bags are streamed and reduced to the Tdot grid (bounded memory); held-out and
+    validation bags are replayed through the compensator at full rate.
+    """
     stdout = stdout or sys.stdout
-    settings = settings or DenoiseSettings()
-    records = [read_record(b, gyro_topic=gyro_topic, temp_topic=temp_topic) for b in bags]
-    coeffs = calibrate(records, settings)
+    opt = options or CalibrateOptions()
+    opt = dataclasses.replace(
+        opt,
+        settings=settings or opt.settings,
+        gyro_topic=gyro_topic or opt.gyro_topic,
+        temp_topic=temp_topic or opt.temp_topic,
+    )
+    guard = GuardSettings(clamp_tdot=not opt.extrapolate_tdot)
+    read = dict(
+        gyro_topic=opt.gyro_topic,
+        temp_topic=opt.temp_topic,
+        temp_field=opt.temp_field,
+        time_source=opt.time_source,
+        quiet=opt.quiet,
+    )
+    earth, provenance = _earth_correction(opt)
+    period = opt.settings.tdot_period_s
+    records = [earth(reduce_record(b, period, **read)) for b in bags]  # type: ignore[arg-type]
+    if opt.heldout or opt.leave_one_run_out:
+        heldout = [earth(read_record(b, **read)) for b in opt.heldout] or None  # type: ignore[arg-type]
+        candidates = default_candidates(opt.settings)
+        coeffs, chosen, results = select_and_calibrate(
+            candidates, records, heldout, guard=guard, tolerance=opt.tolerance
+        )
+        print(format_results(results, chosen), file=stdout)
+        candidate = chosen.candidate
+        result = calibrate_detailed(
+            records,
+            coeffs.denoise,
+            terms=candidate.terms,
+            online_tdot=candidate.online_tdot,
+            hac_lag=opt.hac_lag,
+            provenance={**provenance, 'selection': coeffs.provenance.get('selection')},
+        )
+    else:
+        result = calibrate_detailed(
+            records,
+            opt.settings,
+            terms=opt.terms,
+            fit_coil_lag=opt.fit_coil_lag,
+            online_tdot=opt.online_tdot,
+            hac_lag=opt.hac_lag,
+            provenance=provenance,
+        )
+    coeffs = result.coefficients
+    if opt.no_constant:
+        coeffs = _without_constant(coeffs)
     save(coeffs, output)
     model = coeffs.model
+    lag = coeffs.denoise.coil_lag_s
     print(
-        f'fitted {", ".join(model.terms)} on {len(records)} bag(s), Tdot denoise '
-        f'{settings.method}; wrote {output}',
+        f'fitted {", ".join(model.terms)} on {len(records)} bag(s), Tdot estimator '
+        f'{coeffs.denoise.method}'
+        + (f', coil lag {lag:.0f} s' if lag else '')
+        + f'; wrote {output}',
         file=stdout,
     )
-    for j, axis in enumerate(AXES):
-        fit = coeffs.fit[axis]
-        values = '  '.join(
-            f'{t}={model.coefficients[i, j]:+.6g}' for i, t in enumerate(model.terms)
-        )
-        print(
-            f'  {axis}: {values}  residual_std={fit["residual_std_deg_h"]:.4f} deg/h  '
-            f'R2={fit["r_squared"]:.4f}',
-            file=stdout,
-        )
+    for line in format_fits(result.fits):
+        print('  ' + line, file=stdout)
     t_range, r_range = model.temperature_range_degC, model.tdot_range_degC_per_min
     print(
         f'  calibrated range: T [{t_range.low:.2f}, {t_range.high:.2f}] degC, '
         f'Tdot [{r_range.low:.3f}, {r_range.high:.3f}] degC/min',
         file=stdout,
     )
+    for warning in result.warnings:
+        print(f'WARNING: {warning}', file=stdout)
+    runs = []
+    if opt.validate:
+        scores = []
+        notes = []
+        for bag in opt.validate:
+            record = earth(read_record(bag, **read))  # type: ignore[arg-type]
+            corrected, status = replay_record(record, coeffs, guard=guard)
+            scores += score_record(bag.name, record.imu_stamps_s, record.rates_rad_s, corrected)
+            notes += clamp_notes(bag.name, status.counters, coeffs)
+            runs.append((bag.name, record, corrected))
+        print('\nheld-out validation:', file=stdout)
+        print(format_scores(scores), file=stdout)
+        for note in notes:
+            print(note, file=stdout)
+    if opt.report_dir is not None:
+        from fog_temp_comp.report import ReportRun, write_report  # matplotlib only when asked
+
+        if not runs:  # no validation bags: show the training runs
+            for record in records:
+                corrected, _ = replay_record(record, coeffs, guard=guard)
+                runs.append((f'{record.path.name} (training)', record, corrected))
+        scores = []
+        report_runs = []
+        for name, record, corrected in runs:
+            scores += score_record(name, record.imu_stamps_s, record.rates_rad_s, corrected)
+            report_runs.append(
+                ReportRun(name, record.imu_stamps_s, record.rates_rad_s, corrected,
+                          record.temp_stamps_s, record.temperature_degC)
+            )  # fmt: skip
+        index = write_report(
+            opt.report_dir,
+            table=result.table,
+            model=coeffs.model,
+            fits=result.fits,
+            runs=report_runs,
+            scores=scores,
+            warnings=result.warnings,
+            context={
+                'bags': ', '.join(str(b) for b in bags),
+                'Tdot estimator': coeffs.denoise.method,
+                'Earth rate': str(provenance.get('earth_rate', 'not removed')),
+            },
+        )
+        print(f'report: {index}', file=stdout)
     return 0
+
+
+def _earth_correction(
+    opt: CalibrateOptions,
+) -> tuple[Callable[[ChamberRecord], ChamberRecord], dict[str, Any]]:
+    """Function removing the Earth-rate projection from a record, and its provenance."""
+    if opt.latitude_deg is None:
+        if opt.axes_orientation is not None:
+            raise ValueError('--axes-orientation needs --latitude-deg')
+        return (lambda record: record), {}
+    if opt.axes_orientation is None:
+        raise ValueError(
+            '--latitude-deg needs --axes-orientation (the sensor axes in ENU, e.g. enu, ned, '
+            'a quaternion x,y,z,w or a 3x3 matrix): a wrong default would shift D0 silently'
+        )
+    rotation = parse_orientation(opt.axes_orientation)
+    lat = opt.latitude_deg
+    body = earth_rate_body_deg_h(lat, rotation)
+    provenance = {
+        'earth_rate': {
+            'latitude_deg': lat,
+            'axes_orientation': opt.axes_orientation,
+            'removed_deg_h': [float(v) for v in body],
+        }
+    }
+    return (lambda record: remove_earth_rate(record, lat, rotation)), provenance
+
+
+def _without_constant(coeffs: Coefficients) -> Coefficients:
+    """The model without its constant term (ArduPilot style: the offset comes from elsewhere)."""
+    model = coeffs.model
+    if 'const' not in model.terms:
+        return coeffs
+    keep = [i for i, t in enumerate(model.terms) if t != 'const']
+    reduced = DriftModel(
+        tuple(model.terms[i] for i in keep),
+        model.coefficients[keep],
+        model.temperature_range_degC,
+        model.tdot_range_degC_per_min,
+    )
+    return dataclasses.replace(coeffs, model=reduced)
 
 
 def compensate_command(

@@ -37,6 +37,8 @@ class BinnedRecord:
     rate_rad_s: FloatArray
     imu_messages: int
     temperature_messages: int
+    #: (stamps_s (M,), temperature_degC (M,)) sorted by stamp, when asked to keep them
+    temperature_samples: tuple[FloatArray, FloatArray] | None = None
 
 
 def bin_record(record: ChamberRecord, period_s: float) -> BinnedRecord:
@@ -59,8 +61,12 @@ def reduce_bag(
     temp_field: str | None = None,
     time_source: str = 'header',
     quiet: bool = True,
+    keep_temperature: bool = False,
 ) -> BinnedRecord:
-    """Stream a bag and keep only its grid bins (memory grows with hours, not messages)."""
+    """Stream a bag and keep only its grid bins (memory grows with hours, not messages).
+
+    With ``keep_temperature`` the temperature samples are kept too (sorted by stamp).
+    """
     path = Path(path)
     gyro = GridAccumulator(period_s)
     temperature = GridAccumulator(period_s)
@@ -73,8 +79,11 @@ def reduce_bag(
         time_source=time_source,
         progress=progress,
     ) as stream:
+        kept: list[tuple[FloatArray, FloatArray]] = []
         for chunk in stream.chunks():
             (gyro if chunk.kind == 'imu' else temperature).add(chunk.stamps_s, chunk.values)
+            if keep_temperature and chunk.kind == 'temperature':
+                kept.append((chunk.stamps_s, chunk.values))
         progress.close()
         for acc, topic in ((gyro, stream.imu_topic), (temperature, stream.temp_topic)):
             if not acc.samples:
@@ -84,5 +93,52 @@ def reduce_bag(
         return BinnedRecord(
             path, stream.imu_topic, stream.temp_topic, stream.frame_id, period_s,
             t_idx, t_stamp, temp, g_idx, g_stamp, rate.reshape(-1, 3),
-            gyro.samples, temperature.samples,
+            gyro.samples, temperature.samples, _sorted_samples(kept) if keep_temperature else None,
         )  # fmt: skip
+
+
+def _sorted_samples(parts: list[tuple[FloatArray, FloatArray]]) -> tuple[FloatArray, FloatArray]:
+    stamps = np.concatenate([p[0] for p in parts])
+    values = np.concatenate([p[1] for p in parts])
+    order = np.argsort(stamps, kind='stable')
+    return stamps[order], values[order]
+
+
+def reduce_record(
+    path: str | Path,
+    period_s: float,
+    *,
+    gyro_topic: str | None = None,
+    temp_topic: str | None = None,
+    temp_field: str | None = None,
+    time_source: str = 'header',
+    quiet: bool = True,
+) -> ChamberRecord:
+    """A bag as a :class:`ChamberRecord` whose gyro stream is reduced to grid-bin means.
+
+    Temperature is kept sample by sample (the Tdot estimators need it; it is slow), the gyro
+    rate becomes one sample per ``period_s`` bin at the bin's mean stamp. Calibration on the
+    result equals calibration on the full record; memory grows with hours, not messages.
+    """
+    binned = reduce_bag(
+        path,
+        period_s,
+        gyro_topic=gyro_topic,
+        temp_topic=temp_topic,
+        temp_field=temp_field,
+        time_source=time_source,
+        quiet=quiet,
+        keep_temperature=True,
+    )
+    assert binned.temperature_samples is not None
+    temp_t, temps = binned.temperature_samples
+    return ChamberRecord(
+        path=binned.path,
+        imu_topic=binned.imu_topic,
+        temp_topic=binned.temp_topic,
+        frame_id=binned.frame_id,
+        imu_stamps_s=binned.gyro_stamp_s,
+        rates_rad_s=binned.rate_rad_s,
+        temp_stamps_s=temp_t,
+        temperature_degC=temps,
+    )

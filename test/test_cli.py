@@ -329,8 +329,9 @@ def test_calibrate_each_denoise_method(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], cal_bag: Path, method: str
 ) -> None:
     out = tmp_path / 'coeffs.yaml'
-    assert cli.main(['calibrate', str(cal_bag), '-o', str(out), '--denoise', method]) == 0
-    assert capsys.readouterr().err == ''
+    argv = ['calibrate', str(cal_bag), '-o', str(out), '--denoise', method, '--quiet']
+    assert cli.main(argv) == 0
+    assert capsys.readouterr().err == ''  # --quiet: no progress line
     coeffs = load(out)
     assert coeffs.denoise.method == method
     assert coeffs.model.terms == PAPER_TERMS
@@ -389,7 +390,7 @@ def test_calibrate_refuses_a_soak(tmp_path: Path, capsys: pytest.CaptureFixture[
     run = simulate_run('soak', 20.0, SMALL, seed=3)
     bag = write_run(tmp_path / 'soak', 'mcap', run)
     out = tmp_path / 'coeffs.yaml'
-    assert cli.main(['calibrate', str(bag), '-o', str(out)]) == 1
+    assert cli.main(['calibrate', str(bag), '-o', str(out), '--quiet']) == 1
     line = error_line(capsys)
     assert 'swing' in line
     assert not out.exists()
@@ -438,7 +439,7 @@ def test_command_output_follows_sys_stdout(
     # the summary must go to the sys.stdout of the call (capsys, contextlib.redirect_stdout)
     if command == 'calibrate':
         target = tmp_path / 'c.yaml'
-        argv = ['calibrate', str(cal_bag), '-o', str(target)]
+        argv = ['calibrate', str(cal_bag), '-o', str(target), '--quiet']
     elif command == 'compensate':
         target = tmp_path / 'out'
         bag = write_run(tmp_path / 'in', 'mcap', small_run)
@@ -766,3 +767,12 @@ def test_python_dash_m_help() -> None:
     assert 'calibrate' in proc.stdout
     assert 'compensate' in proc.stdout
     assert proc.stdout.startswith('usage: fog-temp-comp')
+
+
+def test_calibrate_shows_progress_on_stderr(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], cal_bag: Path
+) -> None:
+    assert cli.main(['calibrate', str(cal_bag), '-o', str(tmp_path / 'c.yaml')]) == 0
+    last = capsys.readouterr().err.strip().split('\r')[-1]
+    assert last.startswith(f'reading {cal_bag.name}: ')
+    assert last.endswith(' s of data')
