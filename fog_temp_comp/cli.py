@@ -71,6 +71,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--imu-hz', type=float, default=10.0, help='gyro rate (Hz, default 10)')
     p.add_argument('--temp-hz', type=float, default=1.0, help='temperature rate (Hz, default 1)')
     p.add_argument('--seed', type=int, default=0)
+    p.add_argument(
+        '--realistic',
+        action='store_true',
+        help="the accuracy study's chamber: sensor-to-coil lag, controller "
+        'overshoot, T^2 nonlinearity, wandering bias',
+    )
 
     p = sub.add_parser('calibrate', help='fit drift coefficients from chamber bags')
     p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
@@ -206,7 +212,12 @@ def run(args: argparse.Namespace) -> int:
     """Dispatch parsed arguments to a command."""
     if args.command == 'simulate':
         return commands.simulate_command(
-            args.out_dir, fmt=args.fmt, imu_hz=args.imu_hz, temp_hz=args.temp_hz, seed=args.seed
+            args.out_dir,
+            fmt=args.fmt,
+            imu_hz=args.imu_hz,
+            temp_hz=args.temp_hz,
+            seed=args.seed,
+            realistic=args.realistic,
         )
     if args.command == 'calibrate':
         options = commands.CalibrateOptions(

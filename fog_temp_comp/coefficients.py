@@ -52,7 +52,13 @@ class Coefficients:
 
 def model_equation(terms: tuple[str, ...]) -> str:
     """Human-readable model equation for the YAML header."""
-    names = {'const': '{k}', 'T': '{k} * T [degC]', 'Tdot': '{k} * Tdot [degC/min]'}
+    names = {
+        'const': '{k}',
+        'T': '{k} * T [degC]',
+        'Tdot': '{k} * Tdot [degC/min]',
+        'T2': '{k} * T^2 [degC^2]',
+        'T_Tdot': '{k} * T [degC] * Tdot [degC/min]',
+    }
     parts = [names.get(t, '{k} * ' + t).format(k=coefficient_key(t)) for t in terms]
     return 'D [deg/h] = ' + ' + '.join(parts)
 

@@ -22,11 +22,11 @@ from fog_temp_comp.denoise import RECOMMENDED_SETTINGS, DenoiseSettings
 from fog_temp_comp.earth import earth_rate_body_deg_h, parse_orientation, remove_earth_rate
 from fog_temp_comp.evaluate import format_scores, replay_record, score_record
 from fog_temp_comp.fitstats import format_fits
-from fog_temp_comp.model import PAPER_TERMS, DriftModel
+from fog_temp_comp.model import PAPER_TERMS, DriftModel, coefficient_key
 from fog_temp_comp.record import ChamberRecord
 from fog_temp_comp.reduce import reduce_record
 from fog_temp_comp.selection import default_candidates, format_results, select_and_calibrate
-from fog_temp_comp.simulate import SimulationConfig, paper_plan, simulate_run
+from fog_temp_comp.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
 from fog_temp_comp.units import AXES
 
 #: errors that end a command with one ``ERROR:`` line and exit code 1
@@ -44,6 +44,7 @@ def simulate_command(
     fmt: str = 'mcap',
     imu_hz: float = 10.0,
     temp_hz: float = 1.0,
+    realistic: bool = False,
     seed: int = 0,
     compress: bool = True,
     runs: Sequence[tuple[str, float]] | None = None,
@@ -52,7 +53,8 @@ def simulate_command(
 ) -> int:
     """Write the paper's chamber runs as bags plus ``<run>.truth.npz`` and ``manifest.yaml``."""
     stdout = stdout or sys.stdout
-    cfg = config or SimulationConfig(imu_hz=imu_hz, temp_hz=temp_hz)
+    base = REALISTIC if realistic else SimulationConfig()
+    cfg = config or dataclasses.replace(base, imu_hz=imu_hz, temp_hz=temp_hz)
     out_dir.mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
         'description': 'synthetic thermal-chamber runs (fog_temp_comp simulate)',
@@ -61,15 +63,13 @@ def simulate_command(
         'temp_hz': cfg.temp_hz,
         'seed': seed,
         'true_coefficients': {
-            axis: dict(
-                zip(
-                    ('d0_deg_h', 'dt_deg_h_per_degC', 'dtdot_deg_h_per_degC_per_min'),
-                    map(float, cfg.coefficients[:, j]),
-                    strict=True,
-                )
-            )
+            axis: {
+                coefficient_key(term): float(cfg.true_coefficients[i, j])
+                for i, term in enumerate(cfg.terms)
+            }
             for j, axis in enumerate(AXES)
         },
+        'coil_lag_s': float(cfg.coil_lag_s),
         'runs': [],
     }
     for k, (kind, setpoint) in enumerate(runs or paper_plan()):

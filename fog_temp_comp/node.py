@@ -62,6 +62,27 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
     'delay_samples': ('delay_samples', _T.INTEGER, 'wavelet read-out delay (Tdot samples)'),
     'iir_order': ('iir_order', _T.INTEGER, 'Butterworth order'),
     'iir_cutoff_hz': ('iir_cutoff_hz', _T.DOUBLE, 'Butterworth cut-off (Hz)'),
+    'llr_window_s': ('llr_window_s', _T.DOUBLE, 'local linear regression window (s), llr'),
+    'kalman_rate_walk_degC_per_min_per_sqrt_s': (
+        'kalman_rate_walk_degC_per_min_per_sqrt_s',
+        _T.DOUBLE,
+        'how fast Tdot may change in the Kalman model (degC/min per sqrt(s)), kalman',
+    ),
+    'temperature_noise_degC': (
+        'temperature_noise_degC',
+        _T.DOUBLE,
+        'temperature sensor white noise (degC), kalman',
+    ),
+    'temperature_quantum_degC': (
+        'temperature_quantum_degC',
+        _T.DOUBLE,
+        'temperature sensor resolution (degC), kalman',
+    ),
+    'coil_lag_s': (
+        'coil_lag_s',
+        _T.DOUBLE,
+        'first-order lag from the temperature sensor to the fibre coil (s), 0 = none',
+    ),
 }
 _GUARD_DEFAULTS = GuardSettings()
 #: input guards: name -> (default, text)

@@ -139,5 +139,7 @@ def test_missing_file(tmp_path: Path) -> None:
 def test_example_coefficients_shipped_in_config_load() -> None:
     path = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
     coeffs = load(path)
-    assert coeffs.model.terms == PAPER_TERMS
-    assert coeffs.denoise.method == 'wavelet'
+    # the default pipeline: Kalman Tdot, fitted coil lag, the paper's terms plus T^2
+    assert coeffs.model.terms == (*PAPER_TERMS, 'T2')
+    assert coeffs.denoise.method == 'kalman'
+    assert coeffs.denoise.coil_lag_s > 0
