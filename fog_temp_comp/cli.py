@@ -275,6 +275,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except commands.USER_ERRORS as err:
         print(f'ERROR: {err}', file=sys.stderr)
         return 1
+    except OSError as err:  # unwritable output, disk full, permissions
+        print(f'ERROR: {err.filename or ""}: {err.strerror or err}', file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         return 130
 

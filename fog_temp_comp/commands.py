@@ -152,7 +152,11 @@ def calibrate_command(
     validation bags are replayed through the compensator at full rate.
     """
     stdout = stdout or sys.stdout
+    if not output.parent.is_dir():
+        raise ValueError(f'-o {output}: directory {output.parent} does not exist')
     opt = options or CalibrateOptions()
+    if not opt.terms:
+        raise ValueError('--terms: give at least one model term')
     opt = dataclasses.replace(
         opt,
         settings=settings or opt.settings,
@@ -298,13 +302,25 @@ def _without_constant(coeffs: Coefficients) -> Coefficients:
     if 'const' not in model.terms:
         return coeffs
     keep = [i for i, t in enumerate(model.terms) if t != 'const']
+    d0 = coefficient_key('const')
+    fit = {
+        axis: {
+            key: (
+                {k: v for k, v in value.items() if k != d0} if isinstance(value, dict) else value
+            )
+            for key, value in entry.items()
+        }
+        if isinstance(entry, dict)
+        else entry
+        for axis, entry in coeffs.fit.items()
+    }
     reduced = DriftModel(
         tuple(model.terms[i] for i in keep),
         model.coefficients[keep],
         model.temperature_range_degC,
         model.tdot_range_degC_per_min,
     )
-    return dataclasses.replace(coeffs, model=reduced)
+    return dataclasses.replace(coeffs, model=reduced, fit=fit)
 
 
 def compensate_command(

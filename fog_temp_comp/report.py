@@ -500,13 +500,14 @@ def _fit_table(model: DriftModel, fits: Sequence[AxisFitStats]) -> str:
     ]
     for j, f in enumerate(fits):
         cells = []
-        for i, _ in enumerate(model.terms):
+        for i, term in enumerate(model.terms):
             value = float(model.coefficients[i, j])
+            k = f.names.index(term)  # the fit may have more terms (e.g. const, not written)
             cells.append(
                 f'<td class="c">{format_coefficient(value)} &plusmn; '
-                f'{format_se(float(f.se_hac[i]))}'
+                f'{format_se(float(f.se_hac[k]))}'
                 f'<br><span class="se">classical &plusmn; '
-                f'{format_se(float(f.se_classical[i]))}</span></td>'
+                f'{format_se(float(f.se_classical[k]))}</span></td>'
             )
         rows.append(
             f'<tr><td class="l">{_e(f.axis)}</td>{"".join(cells)}'
