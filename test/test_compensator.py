@@ -159,3 +159,32 @@ def test_temperature_is_clamped_to_calibrated_range(model: DriftModel) -> None:
     comp.correct(1.5, np.zeros(3))
     assert comp.status.temperature_clamped
     assert_allclose(comp.status.correction_deg_h, model.drift_deg_h(60.0, 0.0))
+
+
+@pytest.mark.parametrize('method', ['kalman', 'wavelet', 'iir', 'llr'])
+def test_correction_does_not_jump_when_the_filter_fills(model: DriftModel, method: str) -> None:
+    # a steady 0.5 degC/min ramp, quantized and noisy as a real sensor: the correction moves
+    # smoothly through warm-up; the step at the moment `estimator_ready` flips is no larger
+    # than the typical step between gyro samples around it
+    rng = np.random.default_rng(5)
+    comp = Compensator(model, DenoiseSettings(method=method))
+    t0 = 1.7e9
+    steps, ready_at, previous = [], None, None
+    for k in range(6 * 3600):
+        temp = 0.5 / 60 * k + rng.normal(0, 0.02)
+        comp.add_temperature(t0 + k, round(temp * 16) / 16)
+        comp.correct(t0 + k + 0.5, np.zeros(3))
+        now = comp.status.correction_deg_h[0]
+        if previous is not None:
+            steps.append(abs(now - previous))
+        previous = now
+        if ready_at is None and comp.status.estimator_ready:
+            ready_at = len(steps) - 1
+    assert ready_at is not None, 'filter never reported ready'
+    if ready_at < 60:  # ready with its first Tdot estimate (IIR): no warm-up switch to jump at
+        assert method == 'iir'
+    else:
+        around = np.array(steps[ready_at - 600 : ready_at + 600])
+        assert steps[ready_at] <= np.percentile(around, 99.9) + 1e-12
+    # before ready it already corrects with its best estimate (not zero Tdot)
+    assert comp.status.tdot_degC_per_min == pytest.approx(0.5, abs=0.1)
