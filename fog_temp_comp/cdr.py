@@ -121,9 +121,19 @@ class HeaderBatch:
         return self.frame_id_table[0] if self.frame_id_table else ''
 
     def take(self: _Batch, indices: ArrayLike) -> _Batch:
-        """The messages at ``indices`` (int array or boolean mask, shape (N,)), in that order.
+        """The messages at ``indices``, in that order.
 
-        The frame_id table keeps only the frame_ids used, in order of first appearance.
+        Parameters
+        ----------
+        indices : array_like of int, shape (M,), or of bool, shape (N,)
+            Message indices, or a mask.
+
+        Returns
+        -------
+        same type as self
+            M messages; the frame_id table keeps only the frame_ids used, in order of first
+            appearance.
+
         """
         selector = np.asarray(indices)
         if selector.dtype != np.bool_:
@@ -348,6 +358,11 @@ linear_acceleration_covariance : array_like, optional
         Shape (N, k) or broadcastable (k,). Defaults: orientation (0, 0, 0, 1) with covariance
         ``[-1, 0, ...]`` (unknown, REP 145), all else zero.
 
+    Returns
+    -------
+    ImuBatch
+        N messages, e.g. for :func:`encode_imu_cdr`.
+
     """
     header = _header_arrays(stamps_ns)
     n = header['stamps_ns'].size
@@ -384,6 +399,11 @@ def make_temperature_batch(
         One frame_id for all messages, or one per message.
     variance : array_like, shape (N,), optional
         Variance (degC^2).
+
+    Returns
+    -------
+    TemperatureBatch
+        N messages, e.g. for :func:`encode_temperature_cdr`.
 
     """
     header = _header_arrays(stamps_ns)
