@@ -227,7 +227,8 @@ class BagWriter:
         """Register a topic; ``like`` copies definition and QoS of a connection being copied."""
         ts = typestore()
         kwargs: dict[str, Any] = {}
-        if like is not None and like.msgtype not in ts.types:
+        if like is not None and (self._ros1 or like.msgtype not in ts.types):
+            # ROS 1: keep the source's definition (a real ROS 1 Header has seq)
             kwargs['msgdef'] = like.msgdef.data
             kwargs['md5sum' if self._ros1 else 'rihs01'] = like.digest
         else:

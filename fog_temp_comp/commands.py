@@ -358,7 +358,11 @@ def compensate_command(
                 for conn in reader.connections:
                     if conn.topic not in writer.topics:
                         writer.add_topic(conn.topic, conn.msgtype, like=conn)
-                writer.add_topic(output_topic, bagio.IMU_TYPE)
+                imu_conn = next(c for c in reader.connections if c.topic == imu_name)
+                # ROS 1: the corrected messages keep the input's layout (Header with seq)
+                writer.add_topic(
+                    output_topic, bagio.IMU_TYPE, like=imu_conn if fmt == 'ros1' else None
+                )
                 messages = bagio.temperature_first(reader.messages(), temp_name)
                 replayer = ChunkReplayer(compensator, reader, imu_name, temp_name)
                 for chunk in chunked(messages, 20_000):

@@ -126,7 +126,7 @@ class BagStream:
         temp_topic: str | None = None,
         temp_field: str | None = None,
         time_source: str = 'header',
-        chunk_size: int = 50_000,
+        chunk_size: int = 10_000,
         progress: Progress | None = None,
     ) -> None:
         if time_source not in TIME_SOURCES:
