@@ -2,17 +2,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import Imu, Temperature
+from rosharness import Harness, stamp_of
+from sensor_msgs.msg import Imu
 
 from fog_temp_comp.calibration import calibrate
 from fog_temp_comp.coefficients import CoefficientsError, save
@@ -24,81 +21,6 @@ from fog_temp_comp.simulate import SimulatedRun
 from fog_temp_comp.units import DEG_H_PER_RAD_S
 
 from simdata import SHORT_CHAMBER
-
-
-class Harness:
-    """Test publisher/subscriber node plus the node under test in one executor."""
-
-    def __init__(self, context: object, node: CompensatorNode) -> None:
-        self.node = node
-        self.peer = Node('test_peer', context=context)
-        self.imu_pub = self.peer.create_publisher(Imu, 'imu/data_raw', qos_profile_sensor_data)
-        self.temp_pub = self.peer.create_publisher(
-            Temperature, 'imu/temperature', qos_profile_sensor_data
-        )
-        self.received: list[Imu] = []
-        self.peer.create_subscription(
-            Imu, 'imu/data', self.received.append, qos_profile_sensor_data
-        )
-        self.executor = SingleThreadedExecutor(context=context)
-        self.executor.add_node(node)
-        self.executor.add_node(self.peer)
-        self.spin_until(
-            lambda: (
-                self.imu_pub.get_subscription_count() > 0
-                and self.peer.count_publishers('imu/data') > 0
-            )
-        )
-
-    def spin_until(self, done: Callable[[], bool], max_spins: int = 2000) -> None:
-        """Spin (bounded) until ``done()``; fail if it never happens."""
-        for _ in range(max_spins):
-            if done():
-                return
-            self.executor.spin_once(timeout_sec=0.01)
-        raise AssertionError('condition not reached within the spin budget')
-
-    def send_temperature(self, stamp_s: float, value: float) -> None:
-        msg = Temperature()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = split_stamp(stamp_s)
-        msg.header.frame_id = 'imu_link'
-        msg.temperature = value
-        counters = self.node.compensator.status.counters
-        before = counters.temperature_accepted + counters.temperature_duplicate
-        self.temp_pub.publish(msg)
-        self.spin_until(
-            lambda: counters.temperature_accepted + counters.temperature_duplicate > before
-        )
-
-    def send_imu(self, stamp_s: float, rate_rad_s: np.ndarray) -> Imu:
-        msg = Imu()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = split_stamp(stamp_s)
-        msg.header.frame_id = 'imu_link'
-        msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = map(
-            float, rate_rad_s
-        )
-        msg.linear_acceleration.z = 9.81
-        msg.orientation_covariance[0] = -1.0
-        msg.angular_velocity_covariance[0] = 1e-8
-        count = len(self.received)
-        self.imu_pub.publish(msg)
-        self.spin_until(lambda: len(self.received) > count)
-        return self.received[-1]
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.peer.destroy_node()
-        self.node.destroy_node()
-
-
-def split_stamp(stamp_s: float) -> tuple[int, int]:
-    """Float seconds as (sec, nanosec), rounded to the nanosecond."""
-    ns = round(stamp_s * 1e9)
-    return ns // 1_000_000_000, ns % 1_000_000_000
-
-
-def stamp_s(msg: Imu) -> float:
-    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
 
 @pytest.fixture()
@@ -155,7 +77,7 @@ def test_node_output_matches_core_and_removes_drift(
     )
     assert_array_equal(corrected, offline)
     # header and other fields pass through untouched
-    assert_allclose([stamp_s(m) for m in out], run.imu_stamps_s, rtol=0, atol=1e-9)
+    assert_allclose([stamp_of(m) for m in out], run.imu_stamps_s, rtol=0, atol=1e-9)
     assert all(m.header.frame_id == 'imu_link' for m in out)
     assert all(m.linear_acceleration.z == 9.81 for m in out)
     assert all(m.orientation_covariance[0] == -1.0 for m in out)
