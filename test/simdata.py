@@ -1,6 +1,12 @@
-"""Simulation settings shared by the tests."""
+"""Simulation settings and bag helpers shared by the tests."""
 
-from fog_temp_comp.simulate import SimulationConfig
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from fog_temp_comp.bagio import write_chamber_bag
+from fog_temp_comp.simulate import SimulatedRun, SimulationConfig
 
 #: a short chamber: 10..30 degC cycles with 10 min soaks, 1 Hz gyro and temperature
 SHORT_CHAMBER = SimulationConfig(
@@ -12,3 +18,22 @@ SHORT_CHAMBER = SimulationConfig(
     cycle_soak_s=600.0,
     soak_duration_s=1800.0,
 )
+
+
+def bag_path(directory: Path, name: str, fmt: str) -> Path:
+    """Where a bag called ``name`` goes: ROS 1 bags are ``.bag`` files, ROS 2 bags directories."""
+    return directory / (name + '.bag' if fmt == 'ros1' else name)
+
+
+def write_run(path: Path, fmt: str, run: SimulatedRun, **kwargs: Any) -> Path:
+    """Write ``run`` as a bag with :func:`write_chamber_bag`."""
+    write_chamber_bag(
+        path,
+        fmt,
+        imu_stamps_s=run.imu_stamps_s,
+        rates_rad_s=run.rates_rad_s,
+        temp_stamps_s=run.temp_stamps_s,
+        temperature_degC=run.temperature_degC,
+        **kwargs,
+    )
+    return path

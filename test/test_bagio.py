@@ -32,6 +32,8 @@ from fog_temp_comp.bagio import (
 from fog_temp_comp.record import ChamberRecord
 from fog_temp_comp.simulate import SimulatedRun, SimulationConfig, simulate_run
 
+from simdata import bag_path, write_run
+
 # a small chamber: 15..25 degC at 1 degC/min with 2 min soaks (~26 min at 1 Hz gyro, 0.5 Hz temp)
 TINY = SimulationConfig(
     imu_hz=1.0,
@@ -44,25 +46,6 @@ TINY = SimulationConfig(
 )
 FRAME = 'fog_link'
 STRING_TYPE = 'std_msgs/msg/String'
-
-
-def bag_path(directory: Path, name: str, fmt: str) -> Path:
-    """Where a bag called ``name`` goes: ROS 1 bags are ``.bag`` files, ROS 2 bags directories."""
-    return directory / (name + '.bag' if fmt == 'ros1' else name)
-
-
-def write_run(path: Path, fmt: str, run: SimulatedRun, **kwargs: Any) -> Path:
-    """Write ``run`` with :func:`write_chamber_bag`."""
-    write_chamber_bag(
-        path,
-        fmt,
-        imu_stamps_s=run.imu_stamps_s,
-        rates_rad_s=run.rates_rad_s,
-        temp_stamps_s=run.temp_stamps_s,
-        temperature_degC=run.temperature_degC,
-        **kwargs,
-    )
-    return path
 
 
 def storage_file(path: Path, fmt: str) -> Path:

@@ -30,7 +30,6 @@ from fog_temp_comp.bagio import (
     make_imu,
     make_temperature,
     read_record,
-    write_chamber_bag,
 )
 from fog_temp_comp.coefficients import load
 from fog_temp_comp.denoise import METHODS
@@ -46,7 +45,7 @@ from fog_temp_comp.simulate import (
 )
 from fog_temp_comp.units import AXES, DEG_H_PER_RAD_S
 
-from simdata import SHORT_CHAMBER
+from simdata import SHORT_CHAMBER, bag_path, write_run
 
 REPO = Path(__file__).resolve().parents[1]
 TDOT_KEY = coefficient_key('Tdot')
@@ -61,25 +60,6 @@ SMALL = SimulationConfig(
     soak_duration_s=600.0,
 )
 STRING_TYPE = 'std_msgs/msg/String'
-
-
-def bag_path(directory: Path, name: str, fmt: str) -> Path:
-    """ROS 1 bags are ``.bag`` files, ROS 2 bags directories."""
-    return directory / (name + '.bag' if fmt == 'ros1' else name)
-
-
-def write_run(path: Path, fmt: str, run: SimulatedRun, **kwargs: Any) -> Path:
-    """Write ``run`` as a bag with :func:`write_chamber_bag`."""
-    write_chamber_bag(
-        path,
-        fmt,
-        imu_stamps_s=run.imu_stamps_s,
-        rates_rad_s=run.rates_rad_s,
-        temp_stamps_s=run.temp_stamps_s,
-        temperature_degC=run.temperature_degC,
-        **kwargs,
-    )
-    return path
 
 
 def plain_read(path: Path) -> dict[str, list[tuple[int, bytes, Any]]]:
