@@ -47,7 +47,8 @@ def _add_denoise(parser: argparse.ArgumentParser, default: str | None) -> None:
         '--denoise',
         choices=METHODS,
         default=default,
-        help='Tdot denoising: wavelet (paper), iir (Butterworth) or none'
+        help='Tdot estimator: kalman (Kalman filter on T, Tdot), wavelet (the paper), iir '
+        '(Butterworth), llr (local linear regression) or none'
         + (
             f' (default: {default})'
             if default
