@@ -27,6 +27,7 @@ from fog_temp_comp.bagio import (
     resolve_topic,
     stamp_to_s,
 )
+from fog_temp_comp.mcapscan import scan_mcap
 from fog_temp_comp.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
@@ -58,11 +59,12 @@ class Progress:
         self.last_ns = 0
         self._shown = 0.0
 
-    def update(self, messages: int, log_ns: int) -> None:
-        """Count ``messages`` more, the newest with log time ``log_ns``."""
+    def update(self, messages: int, log_ns: int, first_ns: int | None = None) -> None:
+        """Count ``messages`` more, the newest with log time ``log_ns`` (oldest ``first_ns``)."""
         self.messages += messages
-        if self.first_ns is None:
-            self.first_ns = log_ns
+        oldest = log_ns if first_ns is None else first_ns
+        if self.first_ns is None or oldest < self.first_ns:
+            self.first_ns = oldest
         self.last_ns = max(self.last_ns, log_ns)
         now = time.monotonic()
         if not self.quiet and now - self._shown > 0.5:
@@ -185,6 +187,10 @@ class BagStream:
             raise RuntimeError('BagStream is not open')
         conns = [c for c in reader.connections if c.topic in (self.imu_topic, self.temp_topic)]
         decoders = {c.id: _decoder(c, reader.is2) for c in conns}
+        mcap_files = self._mcap_files()
+        if mcap_files and self.temp_field is None and len(conns) == 2:
+            yield from self._scan_mcap(mcap_files, decoders, conns)
+            return
         pending: dict[str, tuple[list[Any], list[int], list[Any]]] = {
             'imu': ([], [], []),
             'temperature': ([], [], []),
@@ -210,6 +216,38 @@ class BagStream:
         except BagError:
             raise
         except Exception as err:
+            raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
+
+    def _mcap_files(self) -> list[Path]:
+        """The MCAP files of this bag (in order), or [] when it is not MCAP."""
+        if self.path.suffix == '.mcap':
+            return [self.path]
+        if self.path.is_dir():
+            return sorted(self.path.glob('*.mcap'))
+        return []
+
+    def _scan_mcap(
+        self, files: list[Path], decoders: dict[int, Any], conns: list[Any]
+    ) -> Iterator[Chunk]:
+        """Read MCAP chunks with :func:`fog_temp_comp.mcapscan.scan_mcap` (3x rosbags' reader)."""
+        owner = {c.topic: c.id for c in conns}
+        kind_of = {self.imu_topic: 'imu', self.temp_topic: 'temperature'}
+        try:
+            for file in files:
+                for topic, log_ns, raws in scan_mcap(file, set(owner)):
+                    if not raws:
+                        continue
+                    if self.progress is not None:
+                        self.progress.update(len(raws), int(log_ns.max()), int(log_ns.min()))
+                    for start in range(0, len(raws), self.chunk_size):
+                        part = slice(start, start + self.chunk_size)
+                        batch = (
+                            raws[part],
+                            log_ns[part].tolist(),
+                            [owner[topic]] * len(raws[part]),
+                        )
+                        yield self._flush(kind_of[topic], batch, decoders)
+        except ValueError as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def _flush(

@@ -1,0 +1,261 @@
+"""Fast raw scanner for MCAP files (rosbag2's default storage), without per-message objects.
+
+``rosbags``' ``AnyReader.messages()`` parses every MCAP record in Python and builds a tuple per
+message; for the vectorised CDR decoders in :mod:`fog_temp_comp.cdr` that is the bottleneck.
+:func:`scan_mcap` walks the records with :func:`struct.unpack_from` on one buffer and yields,
+per chunk and topic, a log-time array and the raw CDR payloads (zero-copy memoryview slices).
+
+Ordering: within one batch (a chunk, or the unchunked messages between chunks) messages are
+stable-sorted by log time when ``sort_by_time`` is true (the default), else given in file order.
+Batches are yielded in file order; they are not merged across chunks. For files whose chunks do
+not overlap in time (what rosbags' and rosbag2's writers produce for time-ordered input) this is
+the same sequence per topic as ``AnyReader.messages()``.
+"""
+
+from __future__ import annotations
+
+import struct
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+if sys.version_info >= (3, 14):
+    from compression import zstd
+else:  # pragma: no cover
+    from backports import zstd
+
+try:
+    from lz4.frame import decompress as _lz4_decompress
+except ImportError:  # pragma: no cover
+    _lz4_decompress = None
+
+__all__ = ['MAGIC', 'scan_mcap']
+
+MAGIC = b'\x89MCAP0\r\n'
+
+_OP_CHANNEL = 0x04
+_OP_MESSAGE = 0x05
+_OP_CHUNK = 0x06
+_OP_FOOTER = 0x02
+
+_HEADER = struct.Struct('<BQ')  # opcode, record length
+_HEADER_MESSAGE = struct.Struct('<BQH4xQ')  # opcode, length, channel id, (sequence), log time
+_MESSAGE_HEAD = 22  # channel id u16, sequence u32, log time u64, publish time u64
+_CHANNEL = struct.Struct('<HHI')  # id, schema id, topic length
+_CHUNK = struct.Struct('<16xQII')  # (start, end), uncompressed size, crc, compression length
+_U32 = struct.Struct('<I')
+_U64 = struct.Struct('<Q')
+
+Batch = tuple[str, NDArray[np.int64], list[memoryview]]
+
+
+def _decompress(name: str, data: memoryview, size: int) -> bytes:
+    """Decompress a chunk's records with the named MCAP compression."""
+    if name == 'zstd':
+        out: bytes = zstd.decompress(data)
+    elif name == 'lz4':
+        if _lz4_decompress is None:  # pragma: no cover
+            raise ValueError('MCAP chunk is lz4-compressed but the lz4 package is not installed')
+        out = _lz4_decompress(bytes(data))
+    else:
+        raise ValueError(f'unsupported MCAP chunk compression {name!r}')
+    if len(out) != size:
+        raise ValueError(f'MCAP chunk decompressed to {len(out)} bytes, expected {size}')
+    return out
+
+
+class _Scanner:
+    """State of one scan: channel map, per-topic collections of the current batch."""
+
+    def __init__(self, path: Path, topics: set[str], sort_by_time: bool) -> None:
+        self.path = path
+        self.topics = topics
+        self.sort_by_time = sort_by_time
+        self.channel_topic: dict[int, str] = {}
+        # channel id -> (log times, payloads) lists of the current batch, wanted channels only
+        self.wanted: dict[int, tuple[list[int], list[memoryview]]] = {}
+        self.collect: dict[str, tuple[list[int], list[memoryview]]] = {}
+
+    def _error(self, what: str) -> ValueError:
+        return ValueError(f'{self.path}: {what}')
+
+    def _channel(self, buf: memoryview, body: int, end: int) -> None:
+        """Register a Channel record; route wanted topics to their collection."""
+        if body + 8 > end:
+            raise self._error('truncated MCAP channel record')
+        cid, _schema, tlen = _CHANNEL.unpack_from(buf, body)
+        if body + 8 + tlen > end:
+            raise self._error('truncated MCAP channel record')
+        topic = bytes(buf[body + 8 : body + 8 + tlen]).decode()
+        if self.channel_topic.get(cid, topic) != topic:
+            raise self._error(f'MCAP channel {cid} redefined as {topic!r}')
+        self.channel_topic[cid] = topic
+        if topic in self.topics and cid not in self.wanted:
+            self.wanted[cid] = self.collect.setdefault(topic, ([], []))
+
+    def records(self, buf: memoryview, pos: int, end: int, top: bool) -> int:
+        """Walk the records of ``buf[pos:end]``; return where a footer was found, or ``end``."""
+        unpack_header = _HEADER.unpack_from
+        unpack_full = _HEADER_MESSAGE.unpack_from
+        wanted = self.wanted
+        head = _MESSAGE_HEAD
+        op_message = _OP_MESSAGE
+        fast_end = end - 9 - head  # a message's header and fixed fields fit before ``end``
+        while pos < end:
+            if pos <= fast_end:  # one unpack for header and message fields (garbage if no message)
+                op, length, cid, log_time = unpack_full(buf, pos)
+            elif pos + 9 <= end:
+                op, length = unpack_header(buf, pos)
+                cid = log_time = 0
+                if op == op_message:
+                    raise self._error(f'MCAP message record too short at byte {pos}')
+            else:
+                raise self._error(f'truncated MCAP record header at byte {pos}')
+            body = pos + 9
+            nxt = body + length
+            if nxt > end:
+                raise self._error(f'truncated MCAP record (opcode {op:#04x}) at byte {pos}')
+            if op == op_message:
+                if length < head:
+                    raise self._error(f'MCAP message record too short at byte {pos}')
+                dest = wanted.get(cid)
+                if dest is not None:
+                    dest[0].append(log_time)
+                    dest[1].append(buf[body + head : nxt])
+            elif op == _OP_CHANNEL:
+                self._channel(buf, body, nxt)
+                wanted = self.wanted
+            elif top and op in (_OP_CHUNK, _OP_FOOTER):
+                return pos
+            pos = nxt
+        return end
+
+    def chunk(self, buf: memoryview, pos: int) -> tuple[memoryview, int]:
+        """Decode the Chunk record at ``pos``: its (decompressed) records and the next offset."""
+        length = _U64.unpack_from(buf, pos + 1)[0]
+        body = pos + 9
+        nxt = body + length
+        if body + 32 > nxt:
+            raise self._error(f'MCAP chunk record too short at byte {pos}')
+        usize, _crc, clen = _CHUNK.unpack_from(buf, body)
+        cstart = body + 32
+        rpos = cstart + clen
+        if rpos + 8 > nxt:
+            raise self._error(f'MCAP chunk record too short at byte {pos}')
+        compression = bytes(buf[cstart:rpos]).decode()
+        rlen = _U64.unpack_from(buf, rpos)[0]
+        if rpos + 8 + rlen > nxt:
+            raise self._error(f'truncated MCAP chunk records at byte {pos}')
+        data = buf[rpos + 8 : rpos + 8 + rlen]
+        if compression:
+            data = memoryview(_decompress(compression, data, usize))
+        return data, nxt
+
+    def flush(self) -> Iterator[Batch]:
+        """Yield the current batch per topic (sorted by log time if asked) and reset it."""
+        for topic, (times, payloads) in self.collect.items():
+            if not times:
+                continue
+            t = np.array(times, dtype=np.int64)
+            out = payloads.copy()
+            if self.sort_by_time and t.size > 1 and bool(np.any(t[1:] < t[:-1])):
+                order = np.argsort(t, kind='stable')
+                t = t[order]
+                out = [out[k] for k in order.tolist()]
+            times.clear()
+            payloads.clear()
+            yield topic, t, out
+
+
+def scan_mcap(
+    path: str | Path, topics: set[str], *, sort_by_time: bool = True
+) -> Iterator[tuple[str, NDArray[np.int64], list[memoryview]]]:
+    """Scan an MCAP file for the raw messages of some topics.
+
+    Parameters
+    ----------
+    path : str or Path
+        An ``.mcap`` file (for a rosbag2 bag directory, pass the ``.mcap`` file inside it).
+    topics : set of str
+        Topics to return; messages of other channels are skipped without copying.
+    sort_by_time : bool, optional
+        Stable-sort each batch's messages by log time (default). If false, file order.
+
+    Yields
+    ------
+    topic : str
+        A wanted topic with messages in this batch.
+    log_times_ns : ndarray of int64
+        Log times of these messages in ns.
+    payloads : list of memoryview
+        The messages' raw data (CDR for ROS 2), as ``AnyReader.messages()`` yields them; the
+        views reference the file's (or the chunk's decompressed) buffer.
+
+    Raises
+    ------
+    ValueError
+        If the file is not MCAP, is truncated, or uses an unsupported compression (raised on
+        the first ``next()``, as this is a generator).
+
+    Notes
+    -----
+    A batch is one chunk, or the unchunked messages between chunks; batches come in file order
+    and are not merged in time across chunks (see the module docstring).
+
+    """
+    path = Path(path)
+    data = path.read_bytes()
+    if not data.startswith(MAGIC):
+        raise ValueError(f'{path}: not an MCAP file (bad magic)')
+    if len(data) < 2 * len(MAGIC) or not data.endswith(MAGIC):
+        raise ValueError(f'{path}: truncated MCAP file (no trailing magic)')
+    buf = memoryview(data)
+    end = len(data) - len(MAGIC)
+    scanner = _Scanner(path, set(topics), sort_by_time)
+    pos = len(MAGIC)
+    while True:
+        pos = scanner.records(buf, pos, end, top=True)
+        yield from scanner.flush()
+        if pos >= end:
+            raise ValueError(f'{path}: truncated MCAP file (no footer record)')
+        if buf[pos] == _OP_FOOTER:
+            return
+        records, pos = scanner.chunk(buf, pos)
+        scanner.records(records, 0, len(records), top=False)
+        yield from scanner.flush()
+
+
+def _benchmark(path: str, topics: set[str]) -> None:  # pragma: no cover
+    """Time :func:`scan_mcap` against ``AnyReader.messages()`` on one file and print msgs/s."""
+    import time
+
+    from rosbags.highlevel import AnyReader
+
+    def timed(fn: Callable[[], int]) -> tuple[int, float]:
+        t0 = time.perf_counter()
+        n = fn()
+        return n, time.perf_counter() - t0
+
+    def scan() -> int:
+        return sum(t.size for _, t, _ in scan_mcap(path, topics))
+
+    def rosbags() -> int:
+        n = 0
+        with AnyReader([Path(path)]) as reader:
+            conns = [c for c in reader.connections if c.topic in topics]
+            for _ in reader.messages(connections=conns):
+                n += 1
+        return n
+
+    for name, fn in (('scan_mcap', scan), ('AnyReader', rosbags)):
+        n, dt = timed(fn)
+        print(f'{name:10s} {n:9d} msgs  {dt:7.3f} s  {n / dt:12.0f} msgs/s')
+
+
+if __name__ == '__main__':  # pragma: no cover
+    if len(sys.argv) < 3:
+        sys.exit('usage: python -m fog_temp_comp.mcapscan FILE.mcap TOPIC [TOPIC ...]')
+    _benchmark(sys.argv[1], set(sys.argv[2:]))

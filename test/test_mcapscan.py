@@ -1,0 +1,137 @@
+"""Raw MCAP scanner (fog_temp_comp.mcapscan) against rosbags' own reader, on real bags."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+
+from fog_temp_comp.bagio import IMU_TYPE, BagWriter, make_imu, write_chamber_bag
+from fog_temp_comp.mcapscan import MAGIC, scan_mcap
+
+IMU = '/imu/data_raw'
+TEMP = '/imu/temperature'
+
+
+def write_bag(path: Path, compress: bool, n_imu: int = 6000) -> Path:
+    """A chamber bag of several chunks; returns the ``.mcap`` file inside the bag directory."""
+    rng = np.random.default_rng(1)
+    imu_t = 1.7e9 + np.arange(n_imu, dtype=np.float64) * 0.01
+    temp_t = imu_t[::10]  # equal stamps: exercises temperature-first ties
+    write_chamber_bag(
+        path,
+        'mcap',
+        imu_stamps_s=imu_t,
+        rates_rad_s=rng.normal(size=(n_imu, 3)),
+        temp_stamps_s=temp_t,
+        temperature_degC=20 + rng.normal(size=temp_t.size),
+        compress=compress,
+    )
+    (mcap,) = path.glob('*.mcap')
+    return mcap
+
+
+def rosbags_messages(bag: Path, topics: set[str]) -> list[tuple[str, int, bytes]]:
+    with AnyReader([bag]) as reader:
+        conns = [c for c in reader.connections if c.topic in topics]
+        return [(c.topic, t, bytes(d)) for c, t, d in reader.messages(connections=conns)]
+
+
+def scanned(mcap: Path, topics: set[str]) -> list[tuple[str, int, bytes]]:
+    """Scanner output flattened in the order yielded (batch by batch)."""
+    rows = []
+    for topic, times, payloads in scan_mcap(mcap, topics):
+        assert times.dtype == np.int64
+        assert len(payloads) == times.size
+        rows += [(topic, t, bytes(d)) for t, d in zip(times.tolist(), payloads, strict=True)]
+    return rows
+
+
+def by_topic(msgs: list[tuple[str, int, bytes]], topic: str) -> list[tuple[int, bytes]]:
+    return [(t, d) for tp, t, d in msgs if tp == topic]
+
+
+@pytest.mark.parametrize('compress', [False, True])
+def test_equals_rosbags(tmp_path: Path, compress: bool) -> None:
+    mcap = write_bag(tmp_path / 'bag', compress)
+    topics = {IMU, TEMP}
+    ref = rosbags_messages(tmp_path / 'bag', topics)
+    got = scanned(mcap, topics)
+    assert len(got) == len(ref) == 6600
+    # per topic: identical (log time, bytes) sequences
+    for topic in topics:
+        assert by_topic(got, topic) == by_topic(ref, topic)
+    # whole sequence: merging the per-topic batches by log time (temperature first on ties,
+    # as rosbags orders equal stamps by file position) reproduces rosbags exactly
+    batches = list(scan_mcap(mcap, topics))
+    assert sum(topic == IMU for topic, _, _ in batches) > 1  # several chunks
+    rows = [
+        (t, 0 if topic == TEMP else 1, topic, bytes(d))
+        for topic, times, payloads in batches
+        for t, d in zip(times.tolist(), payloads, strict=True)
+    ]
+    rows.sort(key=lambda r: (r[0], r[1]))
+    assert [(tp, t, d) for t, _, tp, d in rows] == ref
+
+
+@pytest.mark.parametrize('compress', [False, True])
+def test_topic_filter(tmp_path: Path, compress: bool) -> None:
+    mcap = write_bag(tmp_path / 'bag', compress, n_imu=500)
+    ref = rosbags_messages(tmp_path / 'bag', {TEMP})
+    batches = list(scan_mcap(mcap, {TEMP}))
+    assert {topic for topic, _, _ in batches} == {TEMP}
+    assert scanned(mcap, {TEMP}) == ref
+    assert list(scan_mcap(mcap, {'/nope'})) == []
+    assert list(scan_mcap(mcap, set())) == []
+
+
+def test_unsorted_chunk(tmp_path: Path) -> None:
+    """Messages written out of log-time order: sorted per chunk as rosbags does, or file order."""
+    path = tmp_path / 'bag'
+    stamps = [5, 3, 3, 9, 1, 7, 3]
+    with BagWriter(path, 'mcap') as writer:
+        writer.add_topic(IMU, IMU_TYPE)
+        for k, ns in enumerate(stamps):
+            writer.write(IMU, ns, make_imu(ns, f'f{k}', [k, 0, 0]))
+    (mcap,) = path.glob('*.mcap')
+    ref = rosbags_messages(path, {IMU})
+    assert [t for _, t, _ in ref] == sorted(stamps)
+    assert scanned(mcap, {IMU}) == ref
+    ((_, times, payloads),) = scan_mcap(mcap, {IMU}, sort_by_time=False)
+    assert times.tolist() == stamps
+    assert sorted(zip(times.tolist(), map(bytes, payloads), strict=True)) == sorted(
+        (t, d) for _, t, d in ref
+    )
+
+
+def test_truncated_raises(tmp_path: Path) -> None:
+    mcap = write_bag(tmp_path / 'bag', True, n_imu=500)
+    data = mcap.read_bytes()
+    cut = tmp_path / 'cut.mcap'
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match='truncated MCAP file'):
+        list(scan_mcap(cut, {IMU}))
+    # a record running past the end of the data (trailing magic intact)
+    bad = tmp_path / 'bad.mcap'
+    bad.write_bytes(MAGIC + struct.pack('<BQ', 0x05, 1000) + b'\0' * 30 + MAGIC)
+    with pytest.raises(ValueError, match='truncated MCAP record'):
+        list(scan_mcap(bad, {IMU}))
+    # well-formed records but no footer
+    nofoot = tmp_path / 'nofoot.mcap'
+    nofoot.write_bytes(MAGIC + MAGIC)
+    with pytest.raises(ValueError, match='no footer'):
+        list(scan_mcap(nofoot, {IMU}))
+
+
+def test_not_mcap_raises(tmp_path: Path) -> None:
+    other = tmp_path / 'x.db3'
+    other.write_bytes(b'SQLite format 3\0' + b'\0' * 100)
+    with pytest.raises(ValueError, match='not an MCAP file'):
+        list(scan_mcap(other, {IMU}))
+    empty = tmp_path / 'empty.mcap'
+    empty.write_bytes(b'')
+    with pytest.raises(ValueError, match='not an MCAP file'):
+        list(scan_mcap(empty, {IMU}))
