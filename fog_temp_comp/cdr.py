@@ -423,8 +423,7 @@ def make_temperature_batch(
 class _Parsed:
     """Validated layout of a batch of serialized messages (all offsets in bytes)."""
 
-    raws: list[RawMessage]
-    data: bytes  # the messages joined
+    data: RawMessage  # one buffer holding every message (joined, or e.g. an MCAP chunk)
     starts: IntArray  # start of each message in ``data``
     lengths: IntArray
     little: NDArray[np.bool_]  # byte order of each message
@@ -441,13 +440,82 @@ def _as_list(raws: Iterable[RawMessage]) -> list[RawMessage]:
     return raws if isinstance(raws, list) else list(raws)
 
 
-def _join(raws: list[RawMessage]) -> tuple[bytes, IntArray, IntArray, NDArray[np.uint8]]:
-    lengths = np.fromiter(map(len, raws), dtype=np.int64, count=len(raws))
-    data = b''.join(raws)
-    if lengths.sum() != len(data):
-        raise ValueError('messages must be byte buffers (bytes, bytearray, memoryview of bytes)')
-    starts = np.cumsum(lengths) - lengths
-    return data, starts, lengths, np.frombuffer(data, dtype=np.uint8)
+def _as_batch(raws: Iterable[RawMessage] | Spans) -> list[RawMessage] | Spans:
+    return raws if isinstance(raws, Spans) else _as_list(raws)
+
+
+@dataclass(frozen=True)
+class Spans:
+    """N serialized messages inside one buffer: message k is ``buffer[starts[k]:][:lengths[k]]``.
+
+    What a bag reader that does not copy messages out yields (e.g.
+    :func:`fog_temp_comp.mcapscan.scan_mcap`: the spans of an MCAP chunk's message records).
+    """
+
+    buffer: RawMessage
+    starts: IntArray  # (N,) byte offsets
+    lengths: IntArray  # (N,) byte counts
+
+    @staticmethod
+    def join(raws: Sequence[RawMessage]) -> Spans:
+        """The messages copied into one buffer, back to back."""
+        lengths = np.fromiter(map(len, raws), dtype=np.int64, count=len(raws))
+        data = b''.join(raws)
+        if lengths.sum() != len(data):
+            raise ValueError(
+                'messages must be byte buffers (bytes, bytearray, memoryview of bytes)'
+            )
+        return Spans(data, np.cumsum(lengths) - lengths, lengths)
+
+    def __len__(self) -> int:
+        return int(self.starts.size)
+
+    def __getitem__(self, part: slice) -> Spans:
+        return Spans(self.buffer, self.starts[part], self.lengths[part])
+
+    def payloads(self) -> list[memoryview]:
+        """The messages as zero-copy views (one Python object each: the slow path)."""
+        view = memoryview(self.buffer).cast('B')
+        ends = self.starts + self.lengths
+        return [view[a:b] for a, b in zip(self.starts.tolist(), ends.tolist(), strict=True)]
+
+
+def _spans(raws: Iterable[RawMessage] | Spans) -> Spans:
+    if isinstance(raws, Spans):
+        return raws
+    return Spans.join(_as_list(raws))
+
+
+def _checked(spans: Spans) -> tuple[Spans, NDArray[np.uint8]]:
+    """The spans as int64 arrays, checked to lie in the buffer, and the buffer as bytes."""
+    buf = np.frombuffer(spans.buffer, dtype=np.uint8)
+    starts = np.asarray(spans.starts, dtype=np.int64)
+    lengths = np.asarray(spans.lengths, dtype=np.int64)
+    if starts.shape != lengths.shape or starts.ndim != 1:
+        raise ValueError('spans: starts and lengths must be 1-D arrays of one length')
+    outside = np.flatnonzero((starts < 0) | (lengths < 0) | (starts + lengths > buf.size))
+    if outside.size:
+        k = int(outside[0])
+        raise ValueError(f'message {k}: span {starts[k]}+{lengths[k]} exceeds the buffer')
+    return Spans(spans.buffer, starts, lengths), buf
+
+
+def _records(data: RawMessage, starts: IntArray, dtype: np.dtype[Any]) -> NDArray[Any]:
+    """Messages at ``starts`` of ``data`` (all of ``dtype.itemsize`` bytes) as records.
+
+    Back-to-back messages are viewed without a copy; others are gathered, one ``memcpy`` each,
+    through a view of the buffer with a stride of one byte.
+    """
+    size = dtype.itemsize
+    n = starts.size
+    if n == 0:
+        return np.empty(0, dtype=dtype)
+    first = int(starts[0])
+    if n == 1 or bool((np.diff(starts) == size).all()):
+        return np.frombuffer(data, dtype=dtype, count=n, offset=first)
+    nbytes = memoryview(data).nbytes
+    every_byte = np.ndarray((nbytes - size + 1,), dtype=dtype, buffer=data, strides=(1,))
+    return every_byte[starts]
 
 
 def _u32(buf: NDArray[np.uint8], pos: IntArray, little: NDArray[np.bool_] | bool) -> IntArray:
@@ -465,9 +533,9 @@ def _fail(base: int, what: str, index: int, reason: str) -> ValueError:
     return ValueError(f'{what} message {base + index}: {reason}')
 
 
-def _parse_cdr(raws: Iterable[RawMessage], n_floats: int, what: str, base: int = 0) -> _Parsed:
-    raws = _as_list(raws)
-    data, starts, lengths, buf = _join(raws)
+def _parse_cdr(spans: Spans, n_floats: int, what: str, base: int = 0) -> _Parsed:
+    spans, buf = _checked(spans)
+    data, starts, lengths = spans.buffer, spans.starts, spans.lengths
     short = np.flatnonzero(lengths < _CDR_MIN)
     if short.size:
         k = int(short[0])
@@ -509,7 +577,6 @@ def _parse_cdr(raws: Iterable[RawMessage], n_floats: int, what: str, base: int =
         raise _fail(base, what, int(unterminated[0]), 'frame_id is not NUL terminated')
     text_len = string_field - 1
     return _Parsed(
-        raws=raws,
         data=data,
         starts=starts,
         lengths=lengths,
@@ -525,10 +592,10 @@ def _parse_cdr(raws: Iterable[RawMessage], n_floats: int, what: str, base: int =
 
 
 def _parse_ros1(
-    raws: Iterable[RawMessage], n_floats: int, what: str, header_seq: bool | None, base: int = 0
+    spans: Spans, n_floats: int, what: str, header_seq: bool | None, base: int = 0
 ) -> _Parsed:
-    raws = _as_list(raws)
-    data, starts, lengths, buf = _join(raws)
+    spans, buf = _checked(spans)
+    data, starts, lengths = spans.buffer, spans.starts, spans.lengths
     body = 8 * n_floats
 
     def layout(seq: bool) -> tuple[IntArray, NDArray[np.bool_]]:
@@ -581,7 +648,6 @@ def _parse_ros1(
             raise _fail(base, what, k, reason)
     head = 16 if has_seq else 12
     return _Parsed(
-        raws=raws,
         data=data,
         starts=starts,
         lengths=lengths,
@@ -661,8 +727,8 @@ def _decode(n: int, blocks: Iterable[_Parsed], fields: FieldSpec, what: str) -> 
         if parsed.has_seq and seq is None:
             seq = np.empty(n, dtype=np.uint32)
         for idx, k in _groups(parsed) if size else []:
-            data = parsed.data if idx is None else b''.join([parsed.raws[i] for i in idx.tolist()])
-            records = np.frombuffer(data, dtype=_record_dtype(parsed, k, fields))
+            starts = parsed.starts if idx is None else parsed.starts[idx]
+            records = _records(parsed.data, starts, _record_dtype(parsed, k, fields))
             rows: Any = slice(base, base + size) if idx is None else idx + base
             sec[rows] = records['sec']
             nanosec[rows] = records['nanosec']
@@ -732,26 +798,30 @@ def _temperature_batch(decoded: _Decoded) -> TemperatureBatch:
 BLOCK = 8192
 
 
-def _cdr_blocks(raws: Iterable[RawMessage], n_floats: int, what: str) -> Iterator[_Parsed]:
-    """Parsed blocks of at most about BLOCK messages, one at a time (their buffers are freed)."""
-    raws = _as_list(raws)
-    if len(raws) <= BLOCK + BLOCK // 2:
-        yield _parse_cdr(raws, n_floats, what)
-        return
-    for start in range(0, len(raws), BLOCK):
-        yield _parse_cdr(raws[start : start + BLOCK], n_floats, what, start)
+def _blocks(n: int) -> list[tuple[int, int]]:
+    """(start, stop) of the blocks of an N-message batch (one block up to 1.5 BLOCK)."""
+    if n <= BLOCK + BLOCK // 2:
+        return [(0, n)]
+    return [(start, min(start + BLOCK, n)) for start in range(0, n, BLOCK)]
+
+
+def _cdr_blocks(
+    raws: Sequence[RawMessage] | Spans, n_floats: int, what: str
+) -> Iterator[_Parsed]:
+    """Parsed blocks of at most about BLOCK messages, one at a time (their buffers are freed).
+
+    Raw messages are joined a block at a time; spans are parsed in place.
+    """
+    for start, stop in _blocks(len(raws)):
+        yield _parse_cdr(_spans(raws[start:stop]), n_floats, what, start)
 
 
 def _ros1_blocks(
-    raws: Iterable[RawMessage], n_floats: int, what: str, header_seq: bool | None
+    raws: Sequence[RawMessage] | Spans, n_floats: int, what: str, header_seq: bool | None
 ) -> Iterator[_Parsed]:
     """As :func:`_cdr_blocks`; the first block's Header layout holds for all."""
-    raws = _as_list(raws)
-    if len(raws) <= BLOCK + BLOCK // 2:
-        yield _parse_ros1(raws, n_floats, what, header_seq)
-        return
-    for start in range(0, len(raws), BLOCK):
-        parsed = _parse_ros1(raws[start : start + BLOCK], n_floats, what, header_seq, start)
+    for start, stop in _blocks(len(raws)):
+        parsed = _parse_ros1(_spans(raws[start:stop]), n_floats, what, header_seq, start)
         header_seq = parsed.has_seq
         yield parsed
 
@@ -765,12 +835,12 @@ def _temperature_blocks(n: int, blocks: Iterator[_Parsed]) -> TemperatureBatch:
 
 
 # ---------------------------------------------------------------------------------- decoders
-def decode_imu_cdr(raws: Sequence[RawMessage]) -> ImuBatch:
+def decode_imu_cdr(raws: Sequence[RawMessage] | Spans) -> ImuBatch:
     """Decode CDR-serialized ``sensor_msgs/Imu`` messages (ROS 2: MCAP, sqlite3 bags).
 
     Parameters
     ----------
-    raws : sequence of bytes-like, length N
+    raws : sequence of bytes-like, or Spans, length N
         Serialized messages with their 4-byte encapsulation header; little and big endian may
         be mixed.
 
@@ -787,16 +857,16 @@ def decode_imu_cdr(raws: Sequence[RawMessage]) -> ImuBatch:
         index is in the text.
 
     """
-    raws = _as_list(raws)
+    raws = _as_batch(raws)
     return _imu_blocks(len(raws), _cdr_blocks(raws, IMU_FLOATS, IMU_NAME))
 
 
-def decode_temperature_cdr(raws: Sequence[RawMessage]) -> TemperatureBatch:
+def decode_temperature_cdr(raws: Sequence[RawMessage] | Spans) -> TemperatureBatch:
     """Decode CDR-serialized ``sensor_msgs/Temperature`` messages; see :func:`decode_imu_cdr`.
 
     Parameters
     ----------
-    raws : sequence of bytes-like, length N
+    raws : sequence of bytes-like, or Spans, length N
         Serialized messages with their encapsulation header.
 
     Returns
@@ -805,16 +875,16 @@ def decode_temperature_cdr(raws: Sequence[RawMessage]) -> TemperatureBatch:
         N messages, in input order.
 
     """
-    raws = _as_list(raws)
+    raws = _as_batch(raws)
     return _temperature_blocks(len(raws), _cdr_blocks(raws, TEMPERATURE_FLOATS, TEMPERATURE_NAME))
 
 
-def decode_imu_ros1(raws: Sequence[RawMessage], *, header_seq: bool | None = None) -> ImuBatch:
+def decode_imu_ros1(raws: Sequence[RawMessage] | Spans, *, header_seq: bool | None = None) -> ImuBatch:
     """Decode ROS 1 serialized ``sensor_msgs/Imu`` messages.
 
     Parameters
     ----------
-    raws : sequence of bytes-like, length N
+    raws : sequence of bytes-like, or Spans, length N
         Serialized messages (ROS 1 bag record data).
     header_seq : bool, optional
         Whether the Header has ``uint32 seq`` (ROS 1 ``std_msgs/Header``: True; bags written
@@ -834,18 +904,18 @@ def decode_imu_ros1(raws: Sequence[RawMessage], *, header_seq: bool | None = Non
         wrong ``header_seq``), or a frame_id is not UTF-8.
 
     """
-    raws = _as_list(raws)
+    raws = _as_batch(raws)
     return _imu_blocks(len(raws), _ros1_blocks(raws, IMU_FLOATS, IMU_NAME, header_seq))
 
 
 def decode_temperature_ros1(
-    raws: Sequence[RawMessage], *, header_seq: bool | None = None
+    raws: Sequence[RawMessage] | Spans, *, header_seq: bool | None = None
 ) -> TemperatureBatch:
     """Decode ROS 1 serialized ``sensor_msgs/Temperature``; see :func:`decode_imu_ros1`.
 
     Parameters
     ----------
-    raws : sequence of bytes-like, length N
+    raws : sequence of bytes-like, or Spans, length N
         Serialized messages.
     header_seq : bool, optional
         Whether the Header has ``uint32 seq``; None infers it.
@@ -856,7 +926,7 @@ def decode_temperature_ros1(
         N messages, in input order.
 
     """
-    raws = _as_list(raws)
+    raws = _as_batch(raws)
     blocks = _ros1_blocks(raws, TEMPERATURE_FLOATS, TEMPERATURE_NAME, header_seq)
     return _temperature_blocks(len(raws), blocks)
 

@@ -562,3 +562,56 @@ def test_take_selects_messages_and_their_frame_ids() -> None:
     assert cdr.encode_imu_cdr(corrected) == cdr.patch_imu_angular_velocity_cdr(
         cdr_raws([imus[k] for k in pick], IMU_TYPE), rates
     )
+
+
+def scattered(raws: list[bytes], rng: np.random.Generator) -> cdr.Spans:
+    """The messages inside one buffer at odd offsets, with junk before, between and after."""
+    parts, starts, position = [], [], 0
+    for raw in raws:
+        gap = bytes(rng.integers(0, 256, size=int(rng.integers(0, 40)), dtype=np.uint8))
+        parts += [gap, raw]
+        starts.append(position + len(gap))
+        position += len(gap) + len(raw)
+    parts.append(b'\xff' * 7)
+    lengths = np.array([len(r) for r in raws], dtype=np.int64)
+    return cdr.Spans(b''.join(parts), np.array(starts, dtype=np.int64), lengths)
+
+
+@pytest.mark.parametrize('order', ['little', 'mixed'])
+def test_spans_decode_like_raw_messages(order: str) -> None:
+    """Messages at arbitrary offsets of one buffer (an MCAP chunk) decode as the list does."""
+    rng = np.random.default_rng(21)
+    n = cdr.BLOCK + cdr.BLOCK // 2 + 77  # two blocks
+    pool = [random_frame(rng, k % 11) for k in range(12)]
+    frames = [pool[k] for k in rng.integers(0, len(pool), size=n)]
+    batch = cdr.make_imu_batch(rng.integers(0, 2**60, size=n), random_doubles(rng, (n, 3)), frames)
+    raws = cdr.encode_imu_cdr(batch)
+    if order == 'mixed':  # every third message big endian
+        big = cdr.encode_imu_cdr(batch, little_endian=False)
+        raws = [b if k % 3 == 0 else r for k, (r, b) in enumerate(zip(raws, big, strict=True))]
+    spans = scattered(raws, rng)
+    assert [bytes(p) for p in spans.payloads()] == raws
+    expected = cdr.decode_imu_cdr(raws)
+    for got in (cdr.decode_imu_cdr(spans), cdr.decode_imu_cdr(spans[: n // 2])):
+        m = len(got)
+        assert got.frame_ids == frames[:m]
+        assert_array_equal(got.stamps_ns, expected.stamps_ns[:m])
+        for name in IMU_FLOAT_FIELDS:
+            assert_array_equal(bits(getattr(got, name)), bits(getattr(expected, name)[:m]))
+    temps = cdr.encode_temperature_cdr(cdr.make_temperature_batch(np.arange(50), np.arange(50.0)))
+    got_t = cdr.decode_temperature_cdr(scattered(temps, rng))
+    assert_array_equal(got_t.temperature_degC, np.arange(50.0))
+    ros1 = cdr.encode_imu_ros1(batch, header_seq=True)
+    got_r = cdr.decode_imu_ros1(scattered(ros1, rng), header_seq=True)
+    assert_array_equal(bits(got_r.angular_velocity_rad_s), bits(batch.angular_velocity_rad_s))
+
+
+def test_spans_outside_the_buffer_or_truncated_raise() -> None:
+    raws = cdr.encode_imu_cdr(cdr.make_imu_batch(np.arange(4), np.ones((4, 3)), 'imu'))
+    spans = scattered(raws, np.random.default_rng(22))
+    past_end = cdr.Spans(spans.buffer, spans.starts + len(spans.buffer), spans.lengths)
+    with pytest.raises(ValueError, match='message 0: span .* exceeds the buffer'):
+        cdr.decode_imu_cdr(past_end)
+    short = cdr.Spans(spans.buffer, spans.starts, spans.lengths - np.array([0, 0, 8, 0]))
+    with pytest.raises(ValueError, match='message 2: .*bytes, expected'):
+        cdr.decode_imu_cdr(short)
