@@ -22,6 +22,8 @@ setup(
         'PyWavelets',
         'PyYAML',
         'rosbags',
+        'apsw',  # rosbags' SQLite binding; sqlitescan reads with it too
+        'backports.zstd; python_version < "3.14"',  # MCAP chunks (rosbags uses it too)
         'matplotlib',
         'allantools',
     ],

@@ -9,7 +9,10 @@ per second for:
 - ``cdr``: ``AnyReader.messages()`` + ``fog_temp_comp.cdr`` decoders, 10k raw messages at a
   time (``itertools.islice``), split by topic while reading; all fields out as arrays;
 - ``decode only``: the same decoders and ``deserialize`` on raw messages already in memory;
-- ``sqlite SELECT + cdr`` (sqlite3 only): the raw bytes straight from the bag's database.
+- ``fog_temp_comp: BagStream``: the project's reader, what ``calibrate``, ``evaluate`` and
+  ``read_record`` use: MCAP through ``mcapscan`` (Message Index, decoding in place), sqlite3
+  through ``sqlitescan`` (apsw, one query per topic), ROS 1 through ``AnyReader``; out come
+  stamps and rates / temperatures as arrays.
 
 Every number is the best of ``--repeat`` rounds; each round runs every path once (round
 robin), so that load from other processes affects all paths alike. Ratios are against
@@ -19,7 +22,6 @@ robin), so that load from other processes affects all paths alike. Ratios are ag
 from __future__ import annotations
 
 import argparse
-import sqlite3
 import tempfile
 from collections.abc import Callable
 from functools import partial
@@ -33,6 +35,7 @@ from rosbags.highlevel import AnyReader
 
 from fog_temp_comp import bagio, cdr
 from fog_temp_comp.bagio import IMU_TYPE, typestore
+from fog_temp_comp.stream import BagStream, Chunk
 
 IMU_TOPIC = '/imu/data_raw'
 TEMP_TOPIC = '/imu/temperature'
@@ -136,21 +139,26 @@ def read_cdr(path: Path) -> tuple[cdr.ImuBatch, cdr.TemperatureBatch]:
         reader.close()
 
 
-def read_sqlite_cdr(path: Path) -> tuple[cdr.ImuBatch, cdr.TemperatureBatch]:
-    """Raw bytes by SQL (ordered as rosbags orders them), then the cdr decoders."""
-    (db,) = sorted(path.glob('*.db3'))
-    with sqlite3.connect(db) as con:
-        topics = dict(con.execute('SELECT name, id FROM topics'))
-        query = 'SELECT data FROM messages WHERE topic_id = ? ORDER BY timestamp, id'
-        batches = []
-        for topic in (IMU_TOPIC, TEMP_TOPIC):
-            cursor = con.execute(query, (topics[topic],))
-            decode = cdr.decode_imu_cdr if topic == IMU_TOPIC else cdr.decode_temperature_cdr
-            parts = []
-            while rows := cursor.fetchmany(CHUNK):
-                parts.append(decode([r[0] for r in rows]))
-            batches.append(parts)
-    return cdr.ImuBatch.concatenate(batches[0]), cdr.TemperatureBatch.concatenate(batches[1])
+def read_stream(path: Path) -> dict[str, list[Chunk]]:
+    """The project's reader: every chunk of both streams."""
+    chunks: dict[str, list[Chunk]] = {'imu': [], 'temperature': []}
+    with BagStream(path, chunk_size=CHUNK) as stream:
+        for chunk in stream.chunks():
+            chunks[chunk.kind].append(chunk)
+    return chunks
+
+
+def check_stream(path: Path, chunks: dict[str, list[Chunk]]) -> None:
+    """BagStream's arrays equal rosbags' deserialize, bit for bit."""
+    reference = Reference(path)
+    imu_t = np.concatenate([c.stamps_s for c in chunks['imu']])
+    order = np.argsort(imu_t, kind='stable')
+    assert np.array_equal(imu_t[order], reference.imu_stamps_s)
+    rates = np.concatenate([c.values for c in chunks['imu']])
+    assert np.array_equal(rates[order], reference.rates_rad_s)
+    temp_t = np.concatenate([c.stamps_s for c in chunks['temperature']])
+    temp = np.concatenate([c.values for c in chunks['temperature']])
+    assert np.array_equal(temp[np.argsort(temp_t, kind='stable')], reference.temperature_degC)
 
 
 def raw_messages(path: Path) -> tuple[list[Any], list[Any], bool | None]:
@@ -180,14 +188,40 @@ def decode_only_rosbags(imu: list[Any], temp: list[Any], seq: bool | None) -> No
                 ts.deserialize_ros1(raw, msgtype)
 
 
+class Reference:
+    """Stamps (s), rates (rad/s) and temperatures (degC) by rosbags' deserialize, stamp-sorted."""
+
+    def __init__(self, path: Path) -> None:
+        imu_t, rates, temp_t, temps = [], [], [], []
+        reader = open_reader(path)
+        try:
+            for conn, _, raw in reader.messages():
+                msg = reader.deserialize(raw, conn.msgtype)
+                if conn.topic == IMU_TOPIC:
+                    w = msg.angular_velocity
+                    imu_t.append(bagio.stamp_to_s(msg.header.stamp))
+                    rates.append((w.x, w.y, w.z))
+                    self.frame_id = msg.header.frame_id
+                else:
+                    temp_t.append(bagio.stamp_to_s(msg.header.stamp))
+                    temps.append(msg.temperature)
+        finally:
+            reader.close()
+        order = np.argsort(imu_t, kind='stable')
+        self.imu_stamps_s = np.array(imu_t)[order]
+        self.rates_rad_s = np.array(rates)[order]
+        self.temperature_degC = np.array(temps)[np.argsort(temp_t, kind='stable')]
+
+
 def check(path: Path, imu: cdr.ImuBatch, temp: cdr.TemperatureBatch) -> None:
-    """The decoded arrays equal what read_record (rosbags deserialize) returns."""
-    record = bagio.read_record(path)
+    """The decoded arrays equal rosbags' deserialize, bit for bit."""
+    reference = Reference(path)
     order = np.argsort(imu.stamps_s, kind='stable')
-    assert np.array_equal(imu.stamps_s[order], record.imu_stamps_s)
-    assert np.array_equal(imu.angular_velocity_rad_s[order], record.rates_rad_s)
-    assert np.array_equal(temp.temperature_degC, record.temperature_degC)
-    assert imu.frame_id == record.frame_id
+    assert np.array_equal(imu.stamps_s[order], reference.imu_stamps_s)
+    assert np.array_equal(imu.angular_velocity_rad_s[order], reference.rates_rad_s)
+    temp_order = np.argsort(temp.stamps_s, kind='stable')
+    assert np.array_equal(temp.temperature_degC[temp_order], reference.temperature_degC)
+    assert imu.frame_id == reference.frame_id
 
 
 def main() -> None:
@@ -212,8 +246,7 @@ def main() -> None:
                 'rosbags: messages() + deserialize': partial(read_rosbags, path),
                 'cdr: messages() + cdr decoders': partial(read_cdr, path),
             }
-            if fmt == 'sqlite3':
-                cases['sqlite SELECT + cdr decoders'] = partial(read_sqlite_cdr, path)
+            cases['fog_temp_comp: BagStream'] = partial(read_stream, path)
             cases['decode only: rosbags deserialize'] = partial(decode_only_rosbags, *raws)
             cases['decode only: cdr decoders'] = partial(decode_only_cdr, *raws)
             best = dict.fromkeys(cases, float('inf'))
@@ -221,8 +254,10 @@ def main() -> None:
                 for name, case in cases.items():
                     seconds, result = best_of(1, case)
                     best[name] = min(best[name], seconds)
-                    if round_ == 0 and name.startswith(('cdr', 'sqlite')):
+                    if round_ == 0 and name.startswith('cdr'):
                         check(path, *result)
+                    if round_ == 0 and name.startswith('fog_temp_comp'):
+                        check_stream(path, result)
             rates = {name: n / seconds for name, seconds in best.items()}
             results[fmt] = rates
             print(f'  {fmt}: done', flush=True)
@@ -245,13 +280,13 @@ def main() -> None:
     print(table(headers, rows))
     print()
     print('ratio: against rosbags on the same bag (decode-only rows: against rosbags deserialize)')
-    goal = {f: results[f]['cdr: messages() + cdr decoders'] for f in formats}
     for fmt in formats:
         base = results[fmt]['rosbags: messages() + deserialize']
         floor = results[fmt]['floor: AnyReader.messages() only']
+        ours = results[fmt]['fog_temp_comp: BagStream']
         print(
-            f'goal >= 10x rosbags ({fmt}): cdr {goal[fmt] / base:.1f}x; '
-            f'the floor alone is {floor / base:.1f}x'
+            f'goal >= 10x rosbags ({fmt}): BagStream {ours / base:.1f}x; '
+            f'AnyReader.messages() alone is {floor / base:.1f}x'
         )
 
 

@@ -805,9 +805,7 @@ def _blocks(n: int) -> list[tuple[int, int]]:
     return [(start, min(start + BLOCK, n)) for start in range(0, n, BLOCK)]
 
 
-def _cdr_blocks(
-    raws: Sequence[RawMessage] | Spans, n_floats: int, what: str
-) -> Iterator[_Parsed]:
+def _cdr_blocks(raws: Sequence[RawMessage] | Spans, n_floats: int, what: str) -> Iterator[_Parsed]:
     """Parsed blocks of at most about BLOCK messages, one at a time (their buffers are freed).
 
     Raw messages are joined a block at a time; spans are parsed in place.
@@ -879,7 +877,9 @@ def decode_temperature_cdr(raws: Sequence[RawMessage] | Spans) -> TemperatureBat
     return _temperature_blocks(len(raws), _cdr_blocks(raws, TEMPERATURE_FLOATS, TEMPERATURE_NAME))
 
 
-def decode_imu_ros1(raws: Sequence[RawMessage] | Spans, *, header_seq: bool | None = None) -> ImuBatch:
+def decode_imu_ros1(
+    raws: Sequence[RawMessage] | Spans, *, header_seq: bool | None = None
+) -> ImuBatch:
     """Decode ROS 1 serialized ``sensor_msgs/Imu`` messages.
 
     Parameters

@@ -14,6 +14,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, TextIO
 
+import apsw
 import numpy as np
 from numpy.typing import NDArray
 from rosbags.highlevel import AnyReader
@@ -28,6 +29,7 @@ from fog_temp_comp.bagio import (
     stamp_to_s,
 )
 from fog_temp_comp.mcapscan import scan_mcap
+from fog_temp_comp.sqlitescan import plain_sqlite_files, scan_sqlite
 from fog_temp_comp.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
@@ -191,6 +193,10 @@ class BagStream:
         if mcap_files and self.temp_field is None and len(conns) == 2:
             yield from self._scan_mcap(mcap_files, decoders, conns)
             return
+        sqlite_files = plain_sqlite_files(self.path) if reader.is2 else None
+        if sqlite_files and self.temp_field is None:
+            yield from self._scan_sqlite(sqlite_files, decoders, conns)
+            return
         pending: dict[str, tuple[list[Any], list[int], list[Any]]] = {
             'imu': ([], [], []),
             'temperature': ([], [], []),
@@ -229,35 +235,51 @@ class BagStream:
     def _scan_mcap(
         self, files: list[Path], decoders: dict[int, Any], conns: list[Any]
     ) -> Iterator[Chunk]:
-        """Read MCAP chunks with :func:`fog_temp_comp.mcapscan.scan_mcap` (3x rosbags' reader)."""
+        """Read MCAP chunks with :func:`fog_temp_comp.mcapscan.scan_mcap`, decoded in place."""
         owner = {c.topic: c.id for c in conns}
         kind_of = {self.imu_topic: 'imu', self.temp_topic: 'temperature'}
         try:
             for file in files:
-                for topic, log_ns, raws in scan_mcap(file, set(owner)):
-                    if not raws:
-                        continue
+                for topic, log_ns, spans in scan_mcap(file, set(owner)):
                     if self.progress is not None:
-                        self.progress.update(len(raws), int(log_ns.max()), int(log_ns.min()))
-                    for start in range(0, len(raws), self.chunk_size):
+                        self.progress.update(len(spans), int(log_ns.max()), int(log_ns.min()))
+                    for start in range(0, len(spans), self.chunk_size):
                         part = slice(start, start + self.chunk_size)
-                        batch = (
-                            raws[part],
-                            log_ns[part].tolist(),
-                            [owner[topic]] * len(raws[part]),
-                        )
+                        batch = (spans[part], log_ns[part], [owner[topic]])
                         yield self._flush(kind_of[topic], batch, decoders)
         except ValueError as err:
+            raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
+
+    def _scan_sqlite(
+        self, files: list[Path], decoders: dict[int, Any], conns: list[Any]
+    ) -> Iterator[Chunk]:
+        """Read sqlite3 databases with :func:`fog_temp_comp.sqlitescan.scan_sqlite`."""
+        owner = {c.topic: c.id for c in conns}
+        kind_of = {self.imu_topic: 'imu', self.temp_topic: 'temperature'}
+        topics = {self.imu_topic: IMU_TYPE, self.temp_topic: TEMPERATURE_TYPE}
+        receive = self.time_source == 'receive'
+        try:
+            for file in files:
+                batches = scan_sqlite(file, topics, log_times=receive, batch_size=self.chunk_size)
+                for topic, log_ns, raws in batches:
+                    chunk = self._flush(kind_of[topic], (raws, log_ns, [owner[topic]]), decoders)
+                    if self.progress is not None:
+                        newest, oldest = chunk.stamps_s.max(), chunk.stamps_s.min()
+                        self.progress.update(
+                            len(raws), int(newest * NS_PER_S), int(oldest * NS_PER_S)
+                        )
+                    yield chunk
+        except (apsw.Error, ValueError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def _flush(
         self,
         kind: str,
-        batch: tuple[list[Any], list[int], list[Any]],
+        batch: tuple[Any, Any, list[Any]],  # (raw messages or Spans, log times ns, owners)
         decoders: dict[int, Any],
     ) -> Chunk:
         raws, logs, owners = batch
-        receive = np.asarray(logs, dtype=np.int64) / NS_PER_S
+        receive = np.asarray([] if logs is None else logs, dtype=np.int64) / NS_PER_S
         if kind == 'temperature' and self.temp_field is not None:
             field = self.temp_field
             values = np.array([get_field(msg, field) for msg in raws])

@@ -610,8 +610,8 @@ def test_spans_outside_the_buffer_or_truncated_raise() -> None:
     raws = cdr.encode_imu_cdr(cdr.make_imu_batch(np.arange(4), np.ones((4, 3)), 'imu'))
     spans = scattered(raws, np.random.default_rng(22))
     past_end = cdr.Spans(spans.buffer, spans.starts + len(spans.buffer), spans.lengths)
-    with pytest.raises(ValueError, match='message 0: span .* exceeds the buffer'):
+    with pytest.raises(ValueError, match=r'message 0: span .* exceeds the buffer'):
         cdr.decode_imu_cdr(past_end)
     short = cdr.Spans(spans.buffer, spans.starts, spans.lengths - np.array([0, 0, 8, 0]))
-    with pytest.raises(ValueError, match='message 2: .*bytes, expected'):
+    with pytest.raises(ValueError, match=r'message 2: .*bytes, expected'):
         cdr.decode_imu_cdr(short)

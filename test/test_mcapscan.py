@@ -10,7 +10,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from fog_temp_comp.bagio import IMU_TYPE, BagWriter, make_imu, write_chamber_bag
-from fog_temp_comp.mcapscan import MAGIC, scan_mcap
+from fog_temp_comp.mcapscan import MAGIC, ScanStats, scan_mcap
 
 IMU = '/imu/data_raw'
 TEMP = '/imu/temperature'
@@ -40,11 +40,14 @@ def rosbags_messages(bag: Path, topics: set[str]) -> list[tuple[str, int, bytes]
         return [(c.topic, t, bytes(d)) for c, t, d in reader.messages(connections=conns)]
 
 
-def scanned(mcap: Path, topics: set[str]) -> list[tuple[str, int, bytes]]:
+def scanned(
+    mcap: Path, topics: set[str], use_index: bool = True, stats: ScanStats | None = None
+) -> list[tuple[str, int, bytes]]:
     """Scanner output flattened in the order yielded (batch by batch)."""
     rows = []
-    for topic, times, payloads in scan_mcap(mcap, topics):
+    for topic, times, spans in scan_mcap(mcap, topics, use_index=use_index, stats=stats):
         assert times.dtype == np.int64
+        payloads = spans.payloads()
         assert len(payloads) == times.size
         rows += [(topic, t, bytes(d)) for t, d in zip(times.tolist(), payloads, strict=True)]
     return rows
@@ -54,13 +57,18 @@ def by_topic(msgs: list[tuple[str, int, bytes]], topic: str) -> list[tuple[int, 
     return [(t, d) for tp, t, d in msgs if tp == topic]
 
 
+@pytest.mark.parametrize('use_index', [True, False])
 @pytest.mark.parametrize('compress', [False, True])
-def test_equals_rosbags(tmp_path: Path, compress: bool) -> None:
+def test_equals_rosbags(tmp_path: Path, compress: bool, use_index: bool) -> None:
     mcap = write_bag(tmp_path / 'bag', compress)
     topics = {IMU, TEMP}
     ref = rosbags_messages(tmp_path / 'bag', topics)
-    got = scanned(mcap, topics)
+    stats = ScanStats()
+    got = scanned(mcap, topics, use_index, stats)
     assert len(got) == len(ref) == 6600
+    # rosbags writes Message Index records: every chunk is read through them, unless told not
+    assert (stats.indexed_chunks > 1) == use_index
+    assert (stats.walked_chunks > 1) != use_index
     # per topic: identical (log time, bytes) sequences
     for topic in topics:
         assert by_topic(got, topic) == by_topic(ref, topic)
@@ -70,8 +78,8 @@ def test_equals_rosbags(tmp_path: Path, compress: bool) -> None:
     assert sum(topic == IMU for topic, _, _ in batches) > 1  # several chunks
     rows = [
         (t, 0 if topic == TEMP else 1, topic, bytes(d))
-        for topic, times, payloads in batches
-        for t, d in zip(times.tolist(), payloads, strict=True)
+        for topic, times, spans in batches
+        for t, d in zip(times.tolist(), spans.payloads(), strict=True)
     ]
     rows.sort(key=lambda r: (r[0], r[1]))
     assert [(tp, t, d) for t, _, tp, d in rows] == ref
@@ -100,9 +108,9 @@ def test_unsorted_chunk(tmp_path: Path) -> None:
     ref = rosbags_messages(path, {IMU})
     assert [t for _, t, _ in ref] == sorted(stamps)
     assert scanned(mcap, {IMU}) == ref
-    ((_, times, payloads),) = scan_mcap(mcap, {IMU}, sort_by_time=False)
+    ((_, times, spans),) = scan_mcap(mcap, {IMU}, sort_by_time=False)
     assert times.tolist() == stamps
-    assert sorted(zip(times.tolist(), map(bytes, payloads), strict=True)) == sorted(
+    assert sorted(zip(times.tolist(), map(bytes, spans.payloads()), strict=True)) == sorted(
         (t, d) for _, t, d in ref
     )
 
@@ -135,3 +143,30 @@ def test_not_mcap_raises(tmp_path: Path) -> None:
     empty.write_bytes(b'')
     with pytest.raises(ValueError, match='not an MCAP file'):
         list(scan_mcap(empty, {IMU}))
+
+
+def first_index_entry(data: bytes) -> int:
+    """Byte position of the first (log time, offset) entry of the file's first Message Index."""
+    pos = len(MAGIC)
+    while True:  # walk the top-level records: opcode u8, length u64, body
+        op, length = struct.unpack_from('<BQ', data, pos)
+        if op == 0x07:
+            return pos + 9 + 6  # after channel id u16 and the array's byte length u32
+        pos += 9 + length
+
+
+@pytest.mark.parametrize('field', ['offset', 'log_time'])
+def test_index_not_matching_its_chunk_falls_back_to_walking(tmp_path: Path, field: str) -> None:
+    """A Message Index entry that points elsewhere (or has another log time) is not trusted."""
+    mcap = write_bag(tmp_path / 'bag', False, n_imu=3000)
+    ref = scanned(mcap, {IMU, TEMP})
+    data = bytearray(mcap.read_bytes())
+    entry = first_index_entry(bytes(data))
+    where = entry + (8 if field == 'offset' else 0)
+    struct.pack_into('<Q', data, where, struct.unpack_from('<Q', data, where)[0] + 1)
+    broken = tmp_path / 'broken.mcap'
+    broken.write_bytes(bytes(data))
+    stats = ScanStats()
+    assert scanned(broken, {IMU, TEMP}, stats=stats) == ref
+    assert stats.walked_chunks == 1
+    assert stats.indexed_chunks >= 1

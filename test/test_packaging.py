@@ -64,6 +64,7 @@ EXEC_DEPENDS = {
     'python3-scipy',
     'python3-pywt',
     'python3-yaml',
+    'python3-apsw',
     'ament_index_python',
 }
 
