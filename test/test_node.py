@@ -123,3 +123,34 @@ def test_filter_parameters_override_file_settings(ros_context: object, coeffs_fi
         assert node.compensator.denoise.method == 'iir'
     finally:
         node.destroy_node()
+
+
+@pytest.mark.parametrize('name', ['single', 'events', 'threads'])
+def test_executor_parameter(ros_context: object, coeffs_file: Path, name: str) -> None:
+    """``executor`` picks what ``main()`` spins with; an unknown name is refused."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    from fog_temp_comp.node import make_executor
+
+    node = CompensatorNode(
+        context=ros_context,
+        parameter_overrides=[
+            Parameter('coefficients_file', value=str(coeffs_file)),
+            Parameter('executor', value=name),
+        ],
+    )
+    try:
+        if name == 'threads':
+            with pytest.raises(ValueError, match="'threads' is not one of"):
+                make_executor(node)
+            return
+        executor = make_executor(node)
+        try:
+            if name == 'events':  # Jazzy: a factory function returning the C++ executor
+                assert type(executor).__name__ == 'EventsExecutor'
+            else:
+                assert isinstance(executor, SingleThreadedExecutor)
+        finally:
+            executor.shutdown()
+    finally:
+        node.destroy_node()

@@ -259,13 +259,14 @@ def test_cli_help(install_base: Path, sourced_env: dict[str, str]) -> None:
     assert 'calibrate' in result.stdout
 
 
-@pytest.fixture()
+@pytest.fixture(params=['single', 'events'])
 def compensator_process(
     install_base: Path,
     sourced_env: dict[str, str],
     tmp_path: Path,
+    request: pytest.FixtureRequest,
 ) -> Iterator[tuple[subprocess.Popen[bytes], Callable[[], str]]]:
-    """The installed node with the installed example parameters; killed if still running."""
+    """The installed node with the installed example parameters, on each executor."""
     params = install_base / PACKAGE / 'share' / PACKAGE / 'config' / 'compensator.yaml'
     log = tmp_path / 'compensator.log'
     with log.open('wb') as out:
@@ -275,6 +276,8 @@ def compensator_process(
                 '--ros-args',
                 '--params-file',
                 str(params),
+                '-p',
+                f'executor:={request.param}',
             ],
             env=sourced_env,
             cwd=install_base.parent,
