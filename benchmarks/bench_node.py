@@ -23,6 +23,12 @@ thread may wake late and publish the missed messages in a burst (Python's defaul
 interval), which a keep-last-5 queue can turn into drops even below the max throughput.
 ``--executor events`` runs the same cases on ``rclpy.experimental.EventsExecutor`` (C++).
 
+``--dut-process`` runs the DUT in a process of its own, as on a robot (driver and compensator
+are separate processes): the compensator is ``fog_temp_comp.node.main``, what ``ros2 run
+fog_temp_comp compensator`` starts, with ``-p executor:=<--executor>``; the relay spins the
+same way. Source and sink stay in this process (sink in a ``SingleThreadedExecutor``). The
+compensator's correction is checked on the received rates instead of its counters.
+
 ``dropped`` = published - received after a 0.5 s drain. ``added latency`` = compensator minus
 relay, at the same percentile. ``--rounds`` rounds run every case once (relay and compensator
 alternating first), so that load from other processes hits both alike; ``max`` reports the
@@ -35,6 +41,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -49,7 +58,7 @@ from rclpy.context import Context
 from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, Temperature
 
 from fog_temp_comp.node import CompensatorNode
@@ -57,14 +66,17 @@ from fog_temp_comp.node import CompensatorNode
 ROOT = Path(__file__).resolve().parents[1]
 COEFFICIENTS = ROOT / 'config' / 'example_coefficients.yaml'
 WINDOW = 4
+SINK_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=10_000, reliability=ReliabilityPolicy.BEST_EFFORT
+)
 NS = f'/bench_{os.getpid()}'
 
 
 class Relay(Node):
     """Do-nothing relay: same topics and QoS as the compensator, republishes what it gets."""
 
-    def __init__(self, context: Context) -> None:
-        super().__init__('relay', namespace=NS, context=context)
+    def __init__(self, context: Context, namespace: str = NS) -> None:
+        super().__init__('relay', namespace=namespace, context=context)
         self._publisher = self.create_publisher(Imu, 'imu/data', qos_profile_sensor_data)
         self.create_subscription(Imu, 'imu/data_raw', self._on_imu, qos_profile_sensor_data)
 
@@ -78,6 +90,7 @@ class Stats:
 
     sent: int = 0
     latency_ns: list[int] = field(default_factory=list)
+    last_rate_x: float = 0.0  # angular_velocity.x of the newest received message (rad/s)
     first_ns: int = 0
     last_ns: int = 0
 
@@ -85,8 +98,8 @@ class Stats:
 class Source(Node):
     """Publishes Imu stamped with the wall clock, and a Temperature each wall-clock second."""
 
-    def __init__(self, context: Context) -> None:
-        super().__init__('source', namespace=NS, context=context)
+    def __init__(self, context: Context, namespace: str = NS) -> None:
+        super().__init__('source', namespace=namespace, context=context)
         self.imu_pub = self.create_publisher(Imu, 'imu/data_raw', qos_profile_sensor_data)
         self.temp_pub = self.create_publisher(
             Temperature, 'imu/temperature', qos_profile_sensor_data
@@ -125,18 +138,80 @@ class Sink(Node):
         super().__init__('sink', namespace=NS, context=context, start_parameter_services=False)
         self.stats = stats
         self.on_receive: Callable[[], None] | None = None
-        self.create_subscription(Imu, 'imu/data', self._on_imu, qos_profile_sensor_data)
+        # best effort like the DUT's publisher, but a deep queue: the harness must not drop
+        self.create_subscription(Imu, 'imu/data', self._on_imu, SINK_QOS)
 
     def _on_imu(self, msg: Imu) -> None:
         now = time.time_ns()
         stamp = msg.header.stamp
         stats = self.stats
         stats.latency_ns.append(now - (stamp.sec * 1_000_000_000 + stamp.nanosec))
+        stats.last_rate_x = msg.angular_velocity.x
         stats.last_ns = now
         if not stats.first_ns:
             stats.first_ns = now
         if self.on_receive is not None:
             self.on_receive()
+
+
+def serve(kind: str, executor_name: str, namespace: str) -> None:
+    """Child process of ``--dut-process``: spin the relay, or run the compensator's main()."""
+    if kind == 'compensator':
+        from fog_temp_comp.node import main as compensator_main
+
+        raise SystemExit(
+            compensator_main(
+                [
+                    '--ros-args',
+                    '-r',
+                    f'__ns:={namespace}',
+                    '-p',
+                    f'coefficients_file:={COEFFICIENTS}',
+                    '-p',
+                    f'executor:={executor_name}',
+                ]
+            )
+        )
+    context = Context()
+    rclpy.init(context=context)
+    relay = Relay(context, namespace)
+    executor = make_executor(executor_name, context)
+    executor.add_node(relay)
+    try:
+        while context.ok():
+            executor.spin_once(timeout_sec=0.5)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        executor.shutdown()
+        relay.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+class DutProcess:
+    """The DUT in a child process (this script with ``--serve``); SIGINT and wait on close."""
+
+    def __init__(self, kind: str, executor_name: str) -> None:
+        command = [sys.executable, __file__, '--serve', kind, '--executor', executor_name]
+        self.proc = subprocess.Popen(
+            [*command, '--namespace', NS], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+        )
+
+    def check_alive(self) -> None:
+        """Raise with the child's stderr if it has exited."""
+        if self.proc.poll() is not None:
+            _, err = self.proc.communicate()
+            raise RuntimeError(f'DUT process exited with {self.proc.returncode}: {err.decode()}')
+
+    def close(self) -> None:
+        """Stop the child as Ctrl-C would (kill it if that takes over 10 s)."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
 
 
 def make_dut(kind: str, context: Context) -> Node:
@@ -166,28 +241,38 @@ def make_executor(name: str, context: Context) -> Executor:
 
 
 def run_case(
-    kind: str, mode: str, duration_s: float, executor_name: str = 'single'
+    kind: str,
+    mode: str,
+    duration_s: float,
+    executor_name: str = 'single',
+    dut_process: bool = False,
 ) -> dict[str, Any]:
     """One DUT in one mode: rate (msg/s), sent, dropped, latencies (ms) and percentiles."""
     context = Context()
     rclpy.init(context=context)
     stats = Stats()
-    executor = make_executor(executor_name, context)
+    # with the DUT in its own process, this process spins only the sink: single-threaded
+    executor = make_executor('single' if dut_process else executor_name, context)
     source = Source(context)
-    dut = make_dut(kind, context)
+    dut: Node | DutProcess = (
+        DutProcess(kind, executor_name) if dut_process else make_dut(kind, context)
+    )
     sink = Sink(context, stats)
     try:
-        executor.add_node(dut)
+        if isinstance(dut, Node):
+            executor.add_node(dut)
         executor.add_node(sink)
-        spin_until(
-            executor,
-            lambda: (
+
+        def discovered() -> bool:
+            if isinstance(dut, DutProcess):
+                dut.check_alive()
+            return (
                 source.imu_pub.get_subscription_count() > 0
-                and source.count_subscribers(f'{NS}/imu/data') > 0
+                and (kind == 'relay' or source.temp_pub.get_subscription_count() > 0)
                 and sink.count_publishers(f'{NS}/imu/data') > 0
-            ),
-            10.0,
-        )
+            )
+
+        spin_until(executor, discovered, 20.0)
         # warm-up: the data path works end to end and the compensator has a temperature
         source.next_temp_ns = 0
         spin_until(executor, lambda: bool(source.publish_imu()) or len(stats.latency_ns) > 0, 10.0)
@@ -199,15 +284,22 @@ def run_case(
         stats.first_ns = stats.last_ns = 0
         if mode == 'max':
             run_closed_loop(executor, source, sink, stats, duration_s)
+        elif dut_process:
+            run_paced_process(executor, stats, mode, duration_s, kind)
         else:
             run_open_loop(executor, source, stats, mode, duration_s)
         if isinstance(dut, CompensatorNode):  # it really corrected (had temperature)
             counters = dut.compensator.status.counters
             assert counters.imu_corrected > 0.9 * counters.imu_total, counters
+        elif kind == 'compensator':  # the source sends zero rates: corrected = -drift
+            assert stats.last_rate_x != source.imu.angular_velocity.x, 'not corrected'
     finally:
         executor.shutdown()
         for node in (sink, dut, source):
-            node.destroy_node()
+            if isinstance(node, DutProcess):
+                node.close()
+            else:
+                node.destroy_node()
         rclpy.shutdown(context=context)
     received = len(stats.latency_ns)
     span_s = (stats.last_ns - stats.first_ns) / 1e9
@@ -254,6 +346,62 @@ def run_closed_loop(
     while time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
     sink.on_receive = None
+    drain(executor)
+
+
+def pace(source: Source, rate_hz: float, duration_s: float) -> int:
+    """Publish Imu at ``rate_hz`` on an absolute schedule for ``duration_s``; the count sent."""
+    period_ns = 1e9 / rate_hz
+    start = time.perf_counter_ns()
+    end = start + duration_s * 1e9
+    k = 0
+    while True:
+        target = start + k * period_ns
+        if target > end:
+            return k
+        wait_ns = target - time.perf_counter_ns()
+        if wait_ns > 0:
+            time.sleep(wait_ns / 1e9)
+        source.publish_imu()
+        k += 1
+
+
+def serve_pacer(rate_hz: float, duration_s: float, with_temperature: bool, namespace: str) -> None:
+    """Child process of paced ``--dut-process`` cases: a Source alone, printing ``sent N``."""
+    context = Context()
+    rclpy.init(context=context)
+    source = Source(context, namespace)
+    try:
+        deadline = time.monotonic() + 20.0
+        while source.imu_pub.get_subscription_count() == 0 or (
+            with_temperature and source.temp_pub.get_subscription_count() == 0
+        ):
+            if time.monotonic() > deadline:
+                raise SystemExit('pacer: the DUT was not discovered')
+            time.sleep(0.01)
+        time.sleep(1.0)  # both ends matched
+        print(f'sent {pace(source, rate_hz, duration_s)}', flush=True)
+    finally:
+        source.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def run_paced_process(
+    executor: Executor, stats: Stats, mode: str, duration_s: float, kind: str
+) -> None:
+    """Paced mode with the source in a third process (no GIL shared with the sink)."""
+    command = [sys.executable, __file__, '--serve', 'pacer', '--namespace', NS]
+    command += ['--rate', mode, '--duration', str(duration_s)]
+    if kind == 'compensator':
+        command.append('--with-temperature')
+    pacer = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    while pacer.poll() is None:
+        executor.spin_once(timeout_sec=0.05)
+    out, err = pacer.communicate()
+    sent = [line for line in out.decode().splitlines() if line.startswith('sent ')]
+    if pacer.returncode != 0 or not sent:
+        raise RuntimeError(f'pacer failed ({pacer.returncode}): {out.decode()} {err.decode()}')
+    stats.sent = int(sent[-1].split()[1])
     drain(executor)
 
 
@@ -305,12 +453,28 @@ def main() -> None:
         help='SingleThreadedExecutor (default) or rclpy.experimental.EventsExecutor',
     )
     parser.add_argument('--rounds', type=int, default=None, help='rounds (default 3)')
+    parser.add_argument(
+        '--dut-process', action='store_true', help='run the DUT in a process of its own'
+    )
+    parser.add_argument(
+        '--serve', choices=['relay', 'compensator', 'pacer'], help=argparse.SUPPRESS
+    )
+    parser.add_argument('--namespace', default=NS, help=argparse.SUPPRESS)
+    parser.add_argument('--rate', type=float, help=argparse.SUPPRESS)
+    parser.add_argument('--with-temperature', action='store_true', help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.serve == 'pacer':
+        serve_pacer(args.rate, args.duration, args.with_temperature, args.namespace)
+        return
+    if args.serve:
+        serve(args.serve, args.executor, args.namespace)
+        return
     duration = args.duration or (3.0 if args.quick else 10.0)
     rounds = args.rounds or (1 if args.quick else 3)
     rmw = os.environ.get('RMW_IMPLEMENTATION', 'default')
     print(
         f'# bench_node: {rounds} x {duration:g} s per case, executor {args.executor}, '
+        f'DUT in {"its own process" if args.dut_process else "this process"}, '
         f'rmw {rmw}; {machine()}'
     )
     runs: dict[tuple[str, str], list[dict[str, Any]]] = {}
@@ -318,7 +482,7 @@ def main() -> None:
         for mode in args.modes:
             kinds = ('relay', 'compensator') if round_ % 2 == 0 else ('compensator', 'relay')
             for kind in kinds:
-                r = run_case(kind, mode, duration, args.executor)
+                r = run_case(kind, mode, duration, args.executor, args.dut_process)
                 runs.setdefault((kind, mode), []).append(r)
                 print(
                     f'  round {round_ + 1} {mode:>5} {kind:<11} {r["rate"]:9.1f} msg/s  '

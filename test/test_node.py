@@ -154,3 +154,26 @@ def test_executor_parameter(ros_context: object, coeffs_file: Path, name: str) -
             executor.shutdown()
     finally:
         node.destroy_node()
+
+
+def test_gyro_input_queue_is_deep_and_overridable(ros_context: object, coeffs_file: Path) -> None:
+    """Best effort like sensor data, but 100 deep (a lost gyro sample is lost to the INS)."""
+    from rclpy.qos import ReliabilityPolicy
+
+    from fog_temp_comp.node import IMU_INPUT_DEPTH
+
+    overrides = [Parameter('coefficients_file', value=str(coeffs_file))]
+    node = CompensatorNode(context=ros_context, parameter_overrides=overrides)
+    try:
+        qos = node._imu_sub.qos_profile
+        assert qos.depth == IMU_INPUT_DEPTH == 100
+        assert qos.reliability == ReliabilityPolicy.BEST_EFFORT
+        assert node._temp_sub.qos_profile.depth == 5
+    finally:
+        node.destroy_node()
+    overrides.append(Parameter('qos_overrides./imu/data_raw.subscription.depth', value=1000))
+    node = CompensatorNode(context=ros_context, parameter_overrides=overrides)
+    try:
+        assert node._imu_sub.qos_profile.depth == 1000
+    finally:
+        node.destroy_node()
