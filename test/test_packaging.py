@@ -298,6 +298,7 @@ def test_compensator_corrects_imu(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
@@ -332,6 +333,13 @@ def test_compensator_corrects_imu(
             received.append((w.x, w.y, w.z))
 
         node.create_subscription(Imu, 'imu/data', on_imu, qos_profile_sensor_data)
+        diagnostics: list[str] = []  # status names: the 1 Hz timer runs on this executor too
+        node.create_subscription(
+            DiagnosticArray,
+            '/diagnostics',
+            lambda msg: diagnostics.extend(s.name for s in msg.status),
+            10,
+        )
 
         def spin_until(
             done: Callable[[], bool],
@@ -384,6 +392,8 @@ def test_compensator_corrects_imu(
         temp_pub.publish(temp_msg)
         spin_until(lambda: any(r != raw for r in received), 10.0, 'corrected Imu', every=send)
 
+        spin_until(lambda: bool(diagnostics), 5.0, 'diagnostics')
+        assert any('fog_temp_compensator' in name for name in diagnostics), diagnostics
         # anything before the temperature arrived passes through unchanged; the rest is corrected
         for rate in received:
             if rate != raw:
