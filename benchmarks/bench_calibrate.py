@@ -20,7 +20,10 @@ size after imports. Paths:
 - ``read_record``: ``fog_temp_comp.bagio.read_record`` as it is now (it may already use the
   cdr decoders), then ``calibrate``;
 - ``cdr``: :func:`read_record_cdr` below (raw messages from ``AnyReader``, decoded 10k at a time
-  by ``fog_temp_comp.cdr``, only stamps and rates kept) then ``calibrate``.
+  by ``fog_temp_comp.cdr``, only stamps and rates kept) then ``calibrate``;
+- ``command``: ``fog-temp-comp calibrate BAG -o COEFFS.yaml --quiet`` as a user runs it
+  (``cli.main`` in the worker): streams the bag through ``reduce.reduce_bag`` (10 s gyro means,
+  never the whole record in memory), default estimator (kalman) and model.
 
 ``per_message``, ``read_record`` and ``cdr`` must fit the same coefficients, bit for bit
 (checked). With
@@ -49,7 +52,7 @@ from fog_temp_comp.denoise import DenoiseSettings
 from fog_temp_comp.record import ChamberRecord
 from fog_temp_comp.simulate import SimulationConfig, simulate_run
 
-PATHS = ('floor', 'rosbags', 'per_message', 'read_record', 'cdr')
+PATHS = ('floor', 'rosbags', 'per_message', 'read_record', 'cdr', 'command')
 
 
 # ---------------------------------------------------------------------------------- bag
@@ -291,7 +294,15 @@ def worker(kind: str, bag: Path) -> dict[str, Any]:
     baseline = reset_peak_rss()
     start = time.perf_counter()
     out: dict[str, Any] = {'path': kind}
-    if kind in ('floor', 'rosbags'):
+    if kind == 'command':
+        from fog_temp_comp.cli import main as cli_main
+
+        with tempfile.TemporaryDirectory() as tmp:
+            code = cli_main(['calibrate', str(bag), '-o', f'{tmp}/coeffs.yaml', '--quiet'])
+        assert code == 0, code
+        out['read_s'] = out['calibrate_s'] = float('nan')  # interleaved: only the total
+        out['messages'] = 0
+    elif kind in ('floor', 'rosbags'):
         count = 0
         with bagio.open_bag(bag) as reader:
             deserialize = reader.deserialize
@@ -379,10 +390,11 @@ def main() -> None:
         print(f'  {", ".join(fitted)} fitted identical coefficients')
     base = results.get('rosbags', {}).get('total_s', float('nan'))
     old = results.get('per_message', {}).get('total_s', float('nan'))
+    counted = next((r['messages'] for r in results.values() if r['messages']), 0)
     rows = [
         [
             kind,
-            r['messages'],
+            r['messages'] or counted,
             r['read_s'],
             r['calibrate_s'],
             r['total_s'],

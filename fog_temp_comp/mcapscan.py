@@ -26,6 +26,7 @@ import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -128,29 +129,21 @@ class _Scanner:
         if topic in self.topics and cid not in self.wanted:
             self.wanted[cid] = self.collect.setdefault(topic, ([], [], []))
 
-    def summary_channels(self, buf: memoryview, end: int) -> None:
-        """Register the Channel records of the summary section, if the footer points to one."""
-        footer = end - 29
-        if footer < len(MAGIC):
-            return
-        op, length, summary, _offsets, _crc = _FOOTER.unpack_from(buf, footer)
-        if op != _OP_FOOTER or length != 20 or not len(MAGIC) <= summary < footer:
-            return
-        pos = summary
-        while pos + 9 <= footer:
+    def summary_channels(self, summary: bytes) -> None:
+        """Register the Channel records of a summary section (stops at a malformed record)."""
+        buf = memoryview(summary)
+        pos = 0
+        while pos + 9 <= len(buf):
             op, length = _HEADER.unpack_from(buf, pos)
             nxt = pos + 9 + length
-            if nxt > footer:
+            if nxt > len(buf):
                 return
             if op == _OP_CHANNEL:
                 self.channel(buf, pos + 9, nxt)
             pos = nxt
 
-    def records(self, buf: memoryview, pos: int, end: int, top: bool) -> int:
-        """Walk the records of ``buf[pos:end]``; return where a chunk or footer was found.
-
-        Inside a chunk (``top`` false) walk to ``end``. Wanted messages go to ``collect``.
-        """
+    def records(self, buf: memoryview, pos: int, end: int) -> None:
+        """Walk the records of ``buf[pos:end]``; wanted messages go to ``collect``."""
         unpack_header = _HEADER.unpack_from
         unpack_full = _HEADER_MESSAGE.unpack_from
         wanted = self.wanted
@@ -182,51 +175,25 @@ class _Scanner:
             elif op == _OP_CHANNEL:
                 self.channel(buf, body, nxt)
                 wanted = self.wanted
-            elif top and op in (_OP_CHUNK, _OP_FOOTER):
-                return pos
             pos = nxt
-        return end
 
-    def chunk(self, buf: memoryview, pos: int) -> tuple[memoryview, int]:
-        """Decode the Chunk record at ``pos``: its (decompressed) records and the next offset."""
-        if pos + 9 > len(buf):
-            raise self._error(f'truncated MCAP record header at byte {pos}')
-        length = _U64.unpack_from(buf, pos + 1)[0]
-        body = pos + 9
-        nxt = body + length
-        if body + 32 > nxt or nxt > len(buf):
-            raise self._error(f'truncated MCAP chunk record at byte {pos}')
-        usize, _crc, clen = _CHUNK.unpack_from(buf, body)
-        cstart = body + 32
-        rpos = cstart + clen
-        if rpos + 8 > nxt:
+    def chunk(self, body: bytes, pos: int) -> memoryview:
+        """The (decompressed) records of the body of the Chunk record at file offset ``pos``."""
+        buf = memoryview(body)
+        if len(buf) < 32:
             raise self._error(f'MCAP chunk record too short at byte {pos}')
-        compression = bytes(buf[cstart:rpos]).decode()
+        usize, _crc, clen = _CHUNK.unpack_from(buf, 0)
+        rpos = 32 + clen
+        if rpos + 8 > len(buf):
+            raise self._error(f'MCAP chunk record too short at byte {pos}')
+        compression = bytes(buf[32:rpos]).decode()
         rlen = _U64.unpack_from(buf, rpos)[0]
-        if rpos + 8 + rlen > nxt:
+        if rpos + 8 + rlen > len(buf):
             raise self._error(f'truncated MCAP chunk records at byte {pos}')
         data = buf[rpos + 8 : rpos + 8 + rlen]
         if compression:
             data = memoryview(_decompress(compression, data, usize))
-        return data, nxt
-
-    def message_indexes(
-        self, buf: memoryview, pos: int, end: int
-    ) -> tuple[dict[int, NDArray[np.void]], int]:
-        """The Message Index records at ``pos`` (channel id -> entries) and the next offset."""
-        indexes: dict[int, NDArray[np.void]] = {}
-        while pos + 9 + _INDEX_HEAD.size <= end and buf[pos] == _OP_MESSAGE_INDEX:
-            length = _U64.unpack_from(buf, pos + 1)[0]
-            body = pos + 9
-            nxt = body + length
-            cid, nbytes = _INDEX_HEAD.unpack_from(buf, body)
-            if nxt > end or nbytes % 16 or body + _INDEX_HEAD.size + nbytes > nxt:
-                raise self._error(f'malformed MCAP message index record at byte {pos}')
-            indexes[cid] = np.frombuffer(
-                buf, dtype=_INDEX_ENTRY, count=nbytes // 16, offset=body + _INDEX_HEAD.size
-            )
-            pos = nxt
-        return indexes, pos
+        return data
 
     def indexed(self, records: memoryview, indexes: dict[int, NDArray[np.void]]) -> bool:
         """Collect the wanted messages of a chunk through its indexes; False if unusable.
@@ -346,34 +313,115 @@ def scan_mcap(
 
     """
     path = Path(path)
-    data = path.read_bytes()
-    if not data.startswith(MAGIC):
-        raise ValueError(f'{path}: not an MCAP file (bad magic)')
-    if len(data) < 2 * len(MAGIC) or not data.endswith(MAGIC):
-        raise ValueError(f'{path}: truncated MCAP file (no trailing magic)')
-    buf = memoryview(data)
-    end = len(data) - len(MAGIC)
     scanner = _Scanner(path, set(topics), sort_by_time)
-    if use_index:
-        scanner.summary_channels(buf, end)
-    pos = len(MAGIC)
-    while True:
-        pos = scanner.records(buf, pos, end, top=True)
-        yield from scanner.flush(buf)
-        if pos >= end:
-            raise ValueError(f'{path}: truncated MCAP file (no footer record)')
-        if buf[pos] == _OP_FOOTER:
-            return
-        records, pos = scanner.chunk(buf, pos)
-        indexes, pos = scanner.message_indexes(buf, pos, end)
-        if use_index and indexes and scanner.indexed(records, indexes):
-            if stats is not None:
-                stats.indexed_chunks += 1
-        else:
-            scanner.records(records, 0, len(records), top=False)
-            if stats is not None:
-                stats.walked_chunks += 1
-        yield from scanner.flush(records)
+    with path.open('rb') as file:
+        reader = _RecordReader(file, path)
+        if use_index:
+            summary = reader.summary()
+            if summary:
+                scanner.summary_channels(summary)
+        loose = bytearray()  # unchunked Channel and Message records, walked in batches
+        pos = len(MAGIC)
+        while True:
+            op, length = reader.header(pos)
+            body_pos = pos + 9
+            pos = body_pos + length
+            if op in (_OP_CHUNK, _OP_FOOTER) or len(loose) > _LOOSE_BATCH:
+                yield from _walk_loose(scanner, loose)
+            if op == _OP_FOOTER:
+                return
+            if op == _OP_CHUNK:
+                records = scanner.chunk(reader.read(body_pos, length), body_pos - 9)
+                indexes, pos = reader.message_indexes(pos)
+                if use_index and indexes and scanner.indexed(records, indexes):
+                    if stats is not None:
+                        stats.indexed_chunks += 1
+                else:
+                    scanner.records(records, 0, len(records))
+                    if stats is not None:
+                        stats.walked_chunks += 1
+                yield from scanner.flush(records)
+            elif op in (_OP_MESSAGE, _OP_CHANNEL):
+                loose += reader.read(body_pos - 9, length + 9)
+            # other records (header, schemas, attachments, metadata, indexes) are skipped
+
+
+#: unchunked records are walked once this many bytes have gathered
+_LOOSE_BATCH = 8 << 20
+
+
+def _walk_loose(scanner: _Scanner, loose: bytearray) -> Iterator[Batch]:
+    """Walk the gathered unchunked records, yield their batches, and empty ``loose``."""
+    if not loose:
+        return
+    buf = memoryview(bytes(loose))
+    loose.clear()
+    scanner.records(buf, 0, len(buf))
+    yield from scanner.flush(buf)
+
+
+class _RecordReader:
+    """Reads an MCAP file record by record (one chunk in memory at a time, not the file)."""
+
+    def __init__(self, file: BinaryIO, path: Path) -> None:
+        self.file = file
+        self.path = path
+        size = file.seek(0, 2)
+        file.seek(0)
+        if file.read(len(MAGIC)) != MAGIC:
+            raise ValueError(f'{path}: not an MCAP file (bad magic)')
+        file.seek(max(size - len(MAGIC), 0))
+        if size < 2 * len(MAGIC) or file.read(len(MAGIC)) != MAGIC:
+            raise ValueError(f'{path}: truncated MCAP file (no trailing magic)')
+        self.end = size - len(MAGIC)  # records lie in [len(MAGIC), end)
+
+    def read(self, pos: int, size: int) -> bytes:
+        """``size`` bytes at ``pos`` (within the records)."""
+        self.file.seek(pos)
+        data = self.file.read(size)
+        if len(data) != size:  # pragma: no cover - header() checks the bounds first
+            raise ValueError(f'{self.path}: truncated MCAP record at byte {pos}')
+        return data
+
+    def header(self, pos: int) -> tuple[int, int]:
+        """(opcode, body length) of the record at ``pos``; raises if it runs past the end."""
+        if pos + 9 > self.end:
+            raise ValueError(f'{self.path}: truncated MCAP file (no footer record)')
+        op, length = _HEADER.unpack(self.read(pos, 9))
+        if pos + 9 + length > self.end:
+            raise ValueError(
+                f'{self.path}: truncated MCAP record (opcode {op:#04x}) at byte {pos}'
+            )
+        return op, length
+
+    def summary(self) -> bytes:
+        """The summary section the footer points to, or b'' (none, or not understood)."""
+        footer = self.end - 29
+        if footer < len(MAGIC):
+            return b''
+        op, length, start, _offsets, _crc = _FOOTER.unpack(self.read(footer, 29))
+        if op != _OP_FOOTER or length != 20 or not len(MAGIC) <= start < footer:
+            return b''
+        return self.read(start, footer - start)
+
+    def message_indexes(self, pos: int) -> tuple[dict[int, NDArray[np.void]], int]:
+        """The Message Index records at ``pos`` (channel id -> entries) and the next offset."""
+        indexes: dict[int, NDArray[np.void]] = {}
+        while pos + 9 <= self.end:
+            op, length = _HEADER.unpack(self.read(pos, 9))
+            if op != _OP_MESSAGE_INDEX:
+                break
+            if pos + 9 + length > self.end or length < _INDEX_HEAD.size:
+                raise ValueError(f'{self.path}: malformed MCAP message index at byte {pos}')
+            body = self.read(pos + 9, length)
+            cid, nbytes = _INDEX_HEAD.unpack_from(body, 0)
+            if nbytes % 16 or _INDEX_HEAD.size + nbytes > length:
+                raise ValueError(f'{self.path}: malformed MCAP message index at byte {pos}')
+            indexes[cid] = np.frombuffer(
+                body, dtype=_INDEX_ENTRY, count=nbytes // 16, offset=_INDEX_HEAD.size
+            )
+            pos += 9 + length
+        return indexes, pos
 
 
 def _benchmark(path: str, topics: set[str]) -> None:  # pragma: no cover

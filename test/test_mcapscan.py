@@ -170,3 +170,36 @@ def test_index_not_matching_its_chunk_falls_back_to_walking(tmp_path: Path, fiel
     assert scanned(broken, {IMU, TEMP}, stats=stats) == ref
     assert stats.walked_chunks == 1
     assert stats.indexed_chunks >= 1
+
+
+def unchunked_copy(mcap: Path, out: Path) -> Path:
+    """The file's chunk contents (uncompressed) written as top-level records, with a footer."""
+    data = mcap.read_bytes()
+    parts = [MAGIC]
+    pos = len(MAGIC)
+    while True:
+        op, length = struct.unpack_from('<BQ', data, pos)
+        if op == 0x02:  # footer
+            break
+        if op == 0x06:  # chunk: (start, end, size, crc), compression '', records
+            body = pos + 9
+            clen = struct.unpack_from('<I', data, body + 28)[0]
+            assert clen == 0, 'expects an uncompressed bag'
+            rlen = struct.unpack_from('<Q', data, body + 32)[0]
+            parts.append(data[body + 40 : body + 40 + rlen])
+        pos += 9 + length
+    parts += [struct.pack('<BQQQI', 0x02, 20, 0, 0, 0), MAGIC]
+    out.write_bytes(b''.join(parts))
+    return out
+
+
+def test_unchunked_records_equal_chunked(tmp_path: Path) -> None:
+    """Messages outside chunks (allowed by MCAP) are walked and give the same messages."""
+    mcap = write_bag(tmp_path / 'bag', False, n_imu=2000)
+    flat = unchunked_copy(mcap, tmp_path / 'flat.mcap')
+    stats = ScanStats()
+    got = scanned(flat, {IMU, TEMP}, stats=stats)
+    assert stats.indexed_chunks == stats.walked_chunks == 0
+    ref = scanned(mcap, {IMU, TEMP})
+    for topic in (IMU, TEMP):
+        assert by_topic(got, topic) == by_topic(ref, topic)
