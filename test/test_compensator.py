@@ -188,3 +188,37 @@ def test_correction_does_not_jump_when_the_filter_fills(model: DriftModel, metho
         assert steps[ready_at] <= np.percentile(around, 99.9) + 1e-12
     # before ready it already corrects with its best estimate (not zero Tdot)
     assert comp.status.tdot_degC_per_min == pytest.approx(0.5, abs=0.1)
+
+
+@pytest.mark.parametrize('method', ['kalman', 'wavelet', 'iir', 'llr', 'none'])
+def test_memory_stays_bounded_per_message(method: str) -> None:
+    """Once warm, correcting more messages allocates nothing that stays (tracemalloc)."""
+    import gc
+    import tracemalloc
+
+    model = true_model()
+    compensator = Compensator(model, DenoiseSettings(method=method))
+    clock = iter(range(10**9))
+
+    def feed(n_imu: int) -> None:
+        for _ in range(n_imu):
+            k = next(clock)
+            stamp = 1000.0 + k * 0.1
+            if k % 10 == 0:  # 1 Hz temperature, 10 Hz gyro
+                compensator.add_temperature(stamp, 20.0 + 5.0 * math.sin(k * 1e-4))
+            compensator.correct_xyz(stamp, 1e-4, 2e-4, 3e-4)
+
+    feed(52_000)  # 5200 s: past every window's fill (wavelet: 512 bins of 10 s)
+    growth = []  # per window of 10k messages; a leak grows every one of them
+    tracemalloc.start()
+    try:
+        for _ in range(2):
+            gc.collect()
+            before, _ = tracemalloc.get_traced_memory()
+            feed(10_000)
+            gc.collect()
+            growth.append(tracemalloc.get_traced_memory()[0] - before)
+    finally:
+        tracemalloc.stop()
+    # one-off allocations (a cache, a warning registry entry) may land in one window only
+    assert min(growth) < 5_000, f'{method}: bytes kept per 10k messages: {growth}'
