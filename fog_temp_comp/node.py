@@ -249,14 +249,14 @@ class CompensatorNode(Node):
         )
         self.declare_parameter(
             'executor',
-            'single',
+            'auto',
             ParameterDescriptor(
-                description="executor of `ros2 run`: 'single' (SingleThreadedExecutor) or "
-                "'events' (rclpy.experimental.EventsExecutor, Jazzy and later: about half the "
-                'per-message overhead, for gyros at 1 kHz and more; on Humble it falls back to '
-                "'single' with a warning)",
+                description="executor of `ros2 run`: 'events' (rclpy.experimental."
+                'EventsExecutor, Jazzy and later: keeps up with a 2 kHz gyro), '
+                "'single' (SingleThreadedExecutor), or 'auto' (events where rclpy has it, "
+                "else single); 'events' without it falls back to single with a warning",
                 read_only=True,
-                additional_constraints="one of 'single', 'events'",
+                additional_constraints="one of 'auto', 'events', 'single'",
             ),
         )
         self.declare_parameter(
@@ -393,18 +393,19 @@ class CompensatorNode(Node):
 def make_executor(node: Node) -> Executor:
     """The executor the node's ``executor`` parameter names (see its description)."""
     name = node.get_parameter('executor').value
-    if name == 'events':
+    if name not in ('auto', 'events', 'single'):
+        raise ValueError(f"parameter executor: {name!r} is not one of 'auto', 'events', 'single'")
+    if name in ('auto', 'events'):
         try:
             from rclpy.experimental import EventsExecutor  # Jazzy and later
         except ImportError:
-            node.get_logger().warning(
-                'executor events: rclpy.experimental.EventsExecutor is not available in this '
-                'ROS distribution; using the SingleThreadedExecutor'
-            )
+            if name == 'events':
+                node.get_logger().warning(
+                    'executor events: rclpy.experimental.EventsExecutor is not available in '
+                    'this ROS distribution; using the SingleThreadedExecutor'
+                )
         else:
             return EventsExecutor(context=node.context)
-    elif name != 'single':
-        raise ValueError(f"parameter executor: {name!r} is not one of 'single', 'events'")
     return SingleThreadedExecutor(context=node.context)
 
 

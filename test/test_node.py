@@ -125,7 +125,7 @@ def test_filter_parameters_override_file_settings(ros_context: object, coeffs_fi
         node.destroy_node()
 
 
-@pytest.mark.parametrize('name', ['single', 'events', 'threads'])
+@pytest.mark.parametrize('name', ['auto', 'single', 'events', 'threads'])
 def test_executor_parameter(ros_context: object, coeffs_file: Path, name: str) -> None:
     """``executor`` picks what ``main()`` spins with; an unknown name is refused."""
     from rclpy.executors import SingleThreadedExecutor
@@ -146,7 +146,7 @@ def test_executor_parameter(ros_context: object, coeffs_file: Path, name: str) -
             return
         executor = make_executor(node)
         try:
-            if name == 'events':  # Jazzy: a factory function returning the C++ executor
+            if name in ('auto', 'events'):  # Jazzy: a factory returning the C++ executor
                 assert type(executor).__name__ == 'EventsExecutor'
             else:
                 assert isinstance(executor, SingleThreadedExecutor)
