@@ -10,13 +10,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.model import TERMS, DriftModel
+from fog_temp_comp.model import SCALAR_TERMS, DriftModel
 from fog_temp_comp.tdot import TdotEstimate, TdotEstimator, make_estimator
 from fog_temp_comp.units import RAD_S_PER_DEG_H, S_PER_MIN
 
@@ -176,8 +175,8 @@ class Compensator:
         self._pending: list[tuple[float, float]] = []  # candidate samples of a temperature step
         self._last_temperature = math.nan
         # scalar evaluation of the model (the per-message hot path; no small numpy arrays)
-        self._term_functions: list[Callable[[Any, Any], Any]] = [
-            TERMS[term][1] for term in model.terms
+        self._term_functions: list[Callable[[float, float], float]] = [
+            SCALAR_TERMS[term] for term in model.terms
         ]
         self._coefficient_rows = model.coefficients.tolist()
         self._horizon_s = 2 * denoise.tdot_period_s + self._guard.temperature_timeout_s
@@ -371,7 +370,7 @@ class Compensator:
         status.tdot_used_degC_per_min = r_used
         cx = cy = cz = 0.0
         for term, row in zip(self._term_functions, self._coefficient_rows, strict=True):
-            value = float(term(t_used, r_used))
+            value = term(t_used, r_used)
             cx += value * row[0]
             cy += value * row[1]
             cz += value * row[2]

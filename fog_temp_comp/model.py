@@ -27,6 +27,15 @@ TERMS: dict[str, tuple[str, Callable[[FloatArray, FloatArray], FloatArray]]] = {
     'T2': ('dt2_deg_h_per_degC2', lambda t, r: t * t),
     'T_Tdot': ('dttdot_deg_h_per_degC2_per_min', lambda t, r: t * r),
 }
+#: the same functions on Python floats, for the per-message hot path (a numpy call on a scalar
+#: costs microseconds)
+SCALAR_TERMS: dict[str, Callable[[float, float], float]] = {
+    'const': lambda t, r: 1.0,
+    'T': lambda t, r: t,
+    'Tdot': lambda t, r: r,
+    'T2': lambda t, r: t * t,
+    'T_Tdot': lambda t, r: t * r,
+}
 #: the paper's model, in order
 PAPER_TERMS = ('const', 'T', 'Tdot')
 #: candidate models beyond the paper's, simplest first (see :mod:`fog_temp_comp.selection`)

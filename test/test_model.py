@@ -88,3 +88,17 @@ def test_compensator_evaluates_any_model_like_drift_deg_h() -> None:
     expected = model.drift_deg_h(status.temperature_used_degC, status.tdot_used_degC_per_min)
     assert_allclose(status.correction_deg_h, expected, rtol=1e-12)
     assert_allclose(status.tdot_used_degC_per_min, 0.8, rtol=1e-3)
+
+
+def test_scalar_terms_equal_the_vectorised_ones() -> None:
+    """The hot path's float functions give what the array functions give, term by term."""
+    from fog_temp_comp.model import SCALAR_TERMS
+
+    assert set(SCALAR_TERMS) == set(TERMS)
+    t = np.array([-40.0, 0.0, 12.5, 60.0])
+    r = np.array([-1.0, 0.0, 0.3, 0.05])
+    for name, (_, vectorised) in TERMS.items():
+        expected = np.broadcast_to(vectorised(t, r), t.shape)
+        got = [SCALAR_TERMS[name](float(a), float(b)) for a, b in zip(t, r, strict=True)]
+        assert all(type(v) is float for v in got), name
+        np.testing.assert_array_equal(got, expected, err_msg=name)
