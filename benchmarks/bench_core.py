@@ -139,7 +139,9 @@ def _nan_last(value: float) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='10 min of gyro instead of 1 h')
-    parser.add_argument('--methods', nargs='+', default=['wavelet', 'iir', 'none'])
+    parser.add_argument(
+        '--methods', nargs='+', default=['kalman', 'wavelet', 'iir', 'llr', 'none']
+    )
     parser.add_argument('--repeat', type=int, default=None, help='rounds (default 3)')
     args = parser.parse_args()
     duration = 600.0 if args.quick else 3600.0
