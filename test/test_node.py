@@ -177,3 +177,51 @@ def test_gyro_input_queue_is_deep_and_overridable(ros_context: object, coeffs_fi
         assert node._imu_sub.qos_profile.depth == 1000
     finally:
         node.destroy_node()
+
+
+@pytest.mark.parametrize('name', ['auto', 'single'])
+def test_diagnostics_timer_runs_on_sim_time_under_each_executor(
+    ros_context: object, coeffs_file: Path, name: str
+) -> None:
+    """The executor ``main()`` builds fires the 1 Hz diagnostics on /clock time."""
+    import time
+
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rosgraph_msgs.msg import Clock
+
+    from fog_temp_comp.node import make_executor
+
+    node = CompensatorNode(
+        context=ros_context,
+        parameter_overrides=[
+            Parameter('coefficients_file', value=str(coeffs_file)),
+            Parameter('use_sim_time', value=True),
+            Parameter('executor', value=name),
+        ],
+    )
+    probe = rclpy.create_node('sim_clock_probe', context=ros_context)
+    executor = make_executor(node)
+    try:
+        executor.add_node(node)
+        executor.add_node(probe)
+        stamps: list[int] = []
+        probe.create_subscription(
+            DiagnosticArray, '/diagnostics', lambda m: stamps.append(m.header.stamp.sec), 10
+        )
+        clock = probe.create_publisher(Clock, '/clock', 10)
+        sim_ns = 1_000_000_000_000
+        deadline = time.monotonic() + 10.0
+        while len(stamps) < 3 and time.monotonic() < deadline:
+            sim_ns += 100_000_000  # 0.1 s of sim time per step
+            msg = Clock()
+            msg.clock.sec, msg.clock.nanosec = divmod(sim_ns, 1_000_000_000)
+            clock.publish(msg)
+            executor.spin_once(timeout_sec=0.02)
+        assert len(stamps) >= 3, stamps
+        assert all(1000 <= s <= sim_ns // 1_000_000_000 for s in stamps), stamps  # sim time
+        assert stamps == sorted(stamps)
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
