@@ -409,23 +409,10 @@ def run_paced_process(
 def run_open_loop(
     executor: Executor, source: Source, stats: Stats, mode: str, duration_s: float
 ) -> None:
-    period_ns = 1e9 / float(mode)
     done = threading.Event()
 
     def publish() -> None:
-        start = time.perf_counter_ns()
-        end = start + duration_s * 1e9
-        k = 0
-        while True:
-            target = start + k * period_ns
-            if target > end:
-                break
-            wait_ns = target - time.perf_counter_ns()
-            if wait_ns > 0:
-                time.sleep(wait_ns / 1e9)
-            source.publish_imu()
-            k += 1
-        stats.sent = k
+        stats.sent = pace(source, float(mode), duration_s)
         done.set()
 
     thread = threading.Thread(target=publish, daemon=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from fog_temp_comp.bagio import write_chamber_bag
+from fog_temp_comp.bagio import IMU_TYPE, BagWriter, make_imu, write_chamber_bag
 from fog_temp_comp.simulate import SimulatedRun, SimulationConfig
 
 #: a short chamber: 10..30 degC cycles with 10 min soaks, 1 Hz gyro and temperature
@@ -36,4 +36,17 @@ def write_run(path: Path, fmt: str, run: SimulatedRun, **kwargs: Any) -> Path:
         temperature_degC=run.temperature_degC,
         **kwargs,
     )
+    return path
+
+
+#: log times (ns) written out of order, with ties: readers must sort them as rosbags does
+UNSORTED_STAMPS_NS = (5, 3, 3, 9, 1, 7, 3)
+
+
+def write_unsorted_imu_bag(path: Path, fmt: str, topic: str) -> Path:
+    """A bag of Imu messages written in the order of :data:`UNSORTED_STAMPS_NS`."""
+    with BagWriter(path, fmt) as writer:
+        writer.add_topic(topic, IMU_TYPE)
+        for k, ns in enumerate(UNSORTED_STAMPS_NS):
+            writer.write(topic, ns, make_imu(ns, f'f{k}', [k, 0, 0]))
     return path

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from fog_temp_comp.bagio import IMU_TYPE, BagWriter, make_imu, write_chamber_bag
+from fog_temp_comp.bagio import write_chamber_bag
 from fog_temp_comp.mcapscan import MAGIC, ScanStats, scan_mcap
+
+from simdata import UNSORTED_STAMPS_NS, write_unsorted_imu_bag
 
 IMU = '/imu/data_raw'
 TEMP = '/imu/temperature'
@@ -98,12 +100,8 @@ def test_topic_filter(tmp_path: Path, compress: bool) -> None:
 
 def test_unsorted_chunk(tmp_path: Path) -> None:
     """Messages written out of log-time order: sorted per chunk as rosbags does, or file order."""
-    path = tmp_path / 'bag'
-    stamps = [5, 3, 3, 9, 1, 7, 3]
-    with BagWriter(path, 'mcap') as writer:
-        writer.add_topic(IMU, IMU_TYPE)
-        for k, ns in enumerate(stamps):
-            writer.write(IMU, ns, make_imu(ns, f'f{k}', [k, 0, 0]))
+    path = write_unsorted_imu_bag(tmp_path / 'bag', 'mcap', IMU)
+    stamps = list(UNSORTED_STAMPS_NS)
     (mcap,) = path.glob('*.mcap')
     ref = rosbags_messages(path, {IMU})
     assert [t for _, t, _ in ref] == sorted(stamps)

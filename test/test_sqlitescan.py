@@ -12,9 +12,11 @@ from rosbags.rosbag2 import Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
 
 from fog_temp_comp import bagio
-from fog_temp_comp.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagError, BagWriter, make_imu
+from fog_temp_comp.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagError
 from fog_temp_comp.sqlitescan import plain_sqlite_files, scan_sqlite
 from fog_temp_comp.stream import BagStream
+
+from simdata import UNSORTED_STAMPS_NS, write_unsorted_imu_bag
 
 IMU = '/imu/data_raw'
 TEMP = '/imu/temperature'
@@ -73,14 +75,9 @@ def test_equals_rosbags(tmp_path: Path) -> None:
 
 
 def test_out_of_order_writes_come_sorted_like_rosbags(tmp_path: Path) -> None:
-    bag = tmp_path / 'bag'
-    stamps = [5, 3, 3, 9, 1, 7, 3]
-    with BagWriter(bag, 'sqlite3') as writer:
-        writer.add_topic(IMU, IMU_TYPE)
-        for k, ns in enumerate(stamps):
-            writer.write(IMU, ns, make_imu(ns, f'f{k}', [k, 0, 0]))
+    bag = write_unsorted_imu_bag(tmp_path / 'bag', 'sqlite3', IMU)
     ref = rosbags_messages(bag, IMU)
-    assert [t for t, _ in ref] == sorted(stamps)
+    assert [t for t, _ in ref] == sorted(UNSORTED_STAMPS_NS)
     (db,) = plain_sqlite_files(bag) or []
     assert scanned(db)[IMU] == ref
 
