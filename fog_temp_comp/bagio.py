@@ -106,7 +106,12 @@ def resolve_topic(reader: AnyReader, topic: str | None, msgtype: str, flag: str)
     With ``topic`` given it must exist and carry ``msgtype`` (a missing leading slash is
     accepted); without, the bag must have exactly one topic of that type.
     """
-    topics = {name: info.msgtype for name, info in reader.topics.items()}
+    topics = {name: info.msgtype or '' for name, info in reader.topics.items()}
+    return resolve_topic_in(topics, topic, msgtype, flag)
+
+
+def resolve_topic_in(topics: dict[str, str], topic: str | None, msgtype: str, flag: str) -> str:
+    """:func:`resolve_topic` on a ``{topic name: message type}`` mapping."""
     if topic is not None:
         for name in (topic, _normalise(topic)):
             if name in topics:

@@ -28,7 +28,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-__all__ = ['plain_sqlite_files', 'scan_sqlite']
+__all__ = ['plain_sqlite_files', 'scan_sqlite', 'topic_types']
 
 Batch = tuple[str, NDArray[np.int64] | None, list[bytes]]
 
@@ -55,6 +55,32 @@ def plain_sqlite_files(path: str | Path) -> list[Path] | None:
     if not files or not all(f.suffix == '.db3' and f.is_file() for f in files):
         return None
     return files
+
+
+def topic_types(files: list[Path]) -> dict[str, str]:
+    """``{topic name: message type}`` over the ``topics`` tables of the databases.
+
+    Raises
+    ------
+    apsw.Error
+        A file is not a rosbag2 database.
+
+    """
+    topics: dict[str, str] = {}
+    for db in files:
+        connection = _connect(db)
+        try:
+            for name, msgtype in connection.execute('SELECT name, type FROM topics'):
+                topics.setdefault(str(name), str(msgtype))
+        finally:
+            connection.close()
+    return topics
+
+
+def _connect(db: str | Path) -> apsw.Connection:
+    """Read-only, immutable connection (no locking, no journal)."""
+    uri = f'file:{Path(db).resolve()}?immutable=1'
+    return apsw.Connection(uri, flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
 
 
 @contextmanager
@@ -105,8 +131,7 @@ def scan_sqlite(
         The file is not a rosbag2 database or is damaged.
 
     """
-    uri = f'file:{Path(db).resolve()}?immutable=1'
-    connection = apsw.Connection(uri, flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
+    connection = _connect(db)
     try:
         for topic, msgtype in topics.items():
             ids = [

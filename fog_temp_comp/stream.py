@@ -26,10 +26,11 @@ from fog_temp_comp.bagio import (
     BagError,
     open_bag,
     resolve_topic,
+    resolve_topic_in,
     stamp_to_s,
 )
 from fog_temp_comp.mcapscan import scan_mcap
-from fog_temp_comp.sqlitescan import plain_sqlite_files, scan_sqlite
+from fog_temp_comp.sqlitescan import plain_sqlite_files, scan_sqlite, topic_types
 from fog_temp_comp.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
@@ -145,12 +146,26 @@ class BagStream:
         self._gyro_topic = gyro_topic
         self._temp_topic = temp_topic
         self._context: Any = None
+        self._open = False
+        self._sqlite_files: list[Path] | None = None
         self.reader: AnyReader | None = None
         self.imu_topic = ''
         self.temp_topic = ''
         self.frame_id = ''
 
     def __enter__(self) -> BagStream:
+        self._sqlite_files = plain_sqlite_files(self.path) if self.temp_field is None else None
+        if self._sqlite_files:  # read without rosbags: its open counts every row first
+            try:
+                topics = topic_types(self._sqlite_files)
+            except apsw.Error as err:
+                raise BagError(f'{self.path}: cannot open bag: {err}') from err
+            self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
+            self.temp_topic = resolve_topic_in(
+                topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
+            )
+            self._open = True
+            return self
         self._context = open_bag(self.path)
         reader = self._context.__enter__()
         try:
@@ -166,6 +181,7 @@ class BagStream:
             self._context.__exit__(*sys.exc_info())
             raise
         self.reader = reader
+        self._open = True
         return self
 
     def __exit__(
@@ -174,8 +190,10 @@ class BagStream:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self._context.__exit__(exc_type, exc, tb)
+        if self.reader is not None:
+            self._context.__exit__(exc_type, exc, tb)
         self.reader = None
+        self._open = False
 
     def chunks(self) -> Iterator[Chunk]:
         """Chunks of each stream in bag order; every message appears exactly once.
@@ -184,18 +202,18 @@ class BagStream:
         (no Python object per message); a ``temp_field`` of another type is deserialized per
         message with rosbags.
         """
-        reader = self.reader
-        if reader is None:
+        if not self._open:
             raise RuntimeError('BagStream is not open')
+        if self._sqlite_files:
+            yield from self._scan_sqlite(self._sqlite_files)
+            return
+        reader = self.reader
+        assert reader is not None
         conns = [c for c in reader.connections if c.topic in (self.imu_topic, self.temp_topic)]
         decoders = {c.id: _decoder(c, reader.is2) for c in conns}
         mcap_files = self._mcap_files()
         if mcap_files and self.temp_field is None and len(conns) == 2:
             yield from self._scan_mcap(mcap_files, decoders, conns)
-            return
-        sqlite_files = plain_sqlite_files(self.path) if reader.is2 else None
-        if sqlite_files and self.temp_field is None:
-            yield from self._scan_sqlite(sqlite_files, decoders, conns)
             return
         pending: dict[str, tuple[list[Any], list[int], list[Any]]] = {
             'imu': ([], [], []),
@@ -250,13 +268,12 @@ class BagStream:
         except ValueError as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
-    def _scan_sqlite(
-        self, files: list[Path], decoders: dict[int, Any], conns: list[Any]
-    ) -> Iterator[Chunk]:
+    def _scan_sqlite(self, files: list[Path]) -> Iterator[Chunk]:
         """Read sqlite3 databases with :func:`fog_temp_comp.sqlitescan.scan_sqlite`."""
-        owner = {c.topic: c.id for c in conns}
         kind_of = {self.imu_topic: 'imu', self.temp_topic: 'temperature'}
         topics = {self.imu_topic: IMU_TYPE, self.temp_topic: TEMPERATURE_TYPE}
+        decoders = {0: cdr.decode_imu_cdr, 1: cdr.decode_temperature_cdr}
+        owner = {self.imu_topic: 0, self.temp_topic: 1}
         receive = self.time_source == 'receive'
         try:
             for file in files:

@@ -156,3 +156,21 @@ def test_damaged_database_gives_bag_error(tmp_path: Path) -> None:
     db.write_bytes(bytes(data))
     with pytest.raises(BagError, match='cannot'):
         bagio.read_record(bag)
+
+
+def test_not_a_database_gives_bag_error(tmp_path: Path) -> None:
+    """A .db3 that is not SQLite fails with the bag's name, not an apsw traceback."""
+    bad = tmp_path / 'bad.db3'
+    bad.write_bytes(b'this is not a database' * 100)
+    with pytest.raises(BagError, match=r'bad\.db3: cannot open bag'):
+        bagio.read_record(bad)
+
+
+def test_topics_come_from_the_database_without_rosbags(tmp_path: Path) -> None:
+    """Topic resolution on a plain sqlite3 bag: errors name the bag's topics and types."""
+    bag = write_bag(tmp_path / 'bag', n_imu=100)
+    with pytest.raises(BagError, match=r'--gyro-topic /nope: not in bag; topics: .*/imu/data_raw'):
+        bagio.read_record(bag, gyro_topic='/nope')
+    wrong_type = '--gyro-topic imu/temperature: has type sensor_msgs/msg/Temperature'
+    with pytest.raises(BagError, match=wrong_type):
+        bagio.read_record(bag, gyro_topic='imu/temperature')
