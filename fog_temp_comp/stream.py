@@ -272,7 +272,7 @@ class BagStream:
         """Read sqlite3 databases with :func:`fog_temp_comp.sqlitescan.scan_sqlite`."""
         kind_of = {self.imu_topic: 'imu', self.temp_topic: 'temperature'}
         topics = {self.imu_topic: IMU_TYPE, self.temp_topic: TEMPERATURE_TYPE}
-        decoders = {0: cdr.decode_imu_cdr, 1: cdr.decode_temperature_cdr}
+        decoders = {0: cdr.decode_imu_rates_cdr, 1: cdr.decode_temperature_cdr}
         owner = {self.imu_topic: 0, self.temp_topic: 1}
         receive = self.time_source == 'receive'
         try:
@@ -325,10 +325,10 @@ def _decoder(conn: Any, is_ros2: bool) -> Any:
     """Batch decoder of a connection's messages."""
     imu = conn.msgtype == IMU_TYPE
     if is_ros2:
-        return cdr.decode_imu_cdr if imu else cdr.decode_temperature_cdr
+        return cdr.decode_imu_rates_cdr if imu else cdr.decode_temperature_cdr
     seq = cdr.ros1_header_has_seq(conn.msgdef.data)
     if imu:
-        return lambda raws: cdr.decode_imu_ros1(raws, header_seq=seq)
+        return lambda raws: cdr.decode_imu_rates_ros1(raws, header_seq=seq)
     return lambda raws: cdr.decode_temperature_ros1(raws, header_seq=seq)
 
 

@@ -615,3 +615,36 @@ def test_spans_outside_the_buffer_or_truncated_raise() -> None:
     short = cdr.Spans(spans.buffer, spans.starts, spans.lengths - np.array([0, 0, 8, 0]))
     with pytest.raises(ValueError, match=r'message 2: .*bytes, expected'):
         cdr.decode_imu_cdr(short)
+
+
+@pytest.mark.parametrize('wire', ['cdr', 'cdr-mixed', 'cdr-spans', 'ros1'])
+def test_rates_decode_equals_the_full_decode(wire: str) -> None:
+    """decode_imu_rates_* give the full decode's header and angular velocity, bit for bit."""
+    rng = np.random.default_rng(23)
+    n = cdr.BLOCK + 300
+    pool = [random_frame(rng, k % 9) for k in range(7)]
+    frames = [pool[k] for k in rng.integers(0, len(pool), size=n)]
+    batch = cdr.make_imu_batch(rng.integers(0, 2**60, size=n), random_doubles(rng, (n, 3)), frames)
+    if wire == 'ros1':
+        raws: Any = cdr.encode_imu_ros1(batch, header_seq=True)
+        full = cdr.decode_imu_ros1(raws, header_seq=True)
+        rates = cdr.decode_imu_rates_ros1(raws, header_seq=True)
+        assert rates.seq is not None and full.seq is not None
+        assert_array_equal(rates.seq, full.seq)
+    else:
+        raws = cdr.encode_imu_cdr(batch)
+        if wire == 'cdr-mixed':
+            big = cdr.encode_imu_cdr(batch, little_endian=False)
+            raws = [b if k % 2 else r for k, (r, b) in enumerate(zip(raws, big, strict=True))]
+        if wire == 'cdr-spans':
+            raws = scattered(raws, rng)
+        full = cdr.decode_imu_cdr(raws)
+        rates = cdr.decode_imu_rates_cdr(raws)
+    assert rates.frame_id_table == full.frame_id_table
+    assert_array_equal(rates.frame_id_index, full.frame_id_index)
+    assert_array_equal(rates.stamps_ns, full.stamps_ns)
+    assert_array_equal(bits(rates.angular_velocity_rad_s), bits(full.angular_velocity_rad_s))
+    halves = [rates.take(np.arange(0, n // 2)), rates.take(np.arange(n // 2, n))]
+    joined = cdr.ImuRateBatch.concatenate(halves)
+    assert joined.frame_ids == frames
+    assert_array_equal(bits(joined.angular_velocity_rad_s), bits(rates.angular_velocity_rad_s))
