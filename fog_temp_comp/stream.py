@@ -2,6 +2,11 @@
 
 A :class:`BagStream` yields :class:`Chunk` arrays of at most ``chunk_size`` messages, so long
 chamber runs (24 h at 100 Hz is 8.6 M Imu messages) can be reduced on the fly.
+
+Read paths, fastest first: MCAP through :mod:`fog_temp_comp.mcapscan` (Message Index, decoding
+in place), plain rosbag2 sqlite3 through :mod:`fog_temp_comp.sqlitescan` (apsw, without
+opening rosbags), everything else (ROS 1, compressed sqlite3, ``--temp-field`` of another
+type) through rosbags' ``AnyReader``. All decode with :mod:`fog_temp_comp.cdr`.
 """
 
 from __future__ import annotations
@@ -198,9 +203,10 @@ class BagStream:
     def chunks(self) -> Iterator[Chunk]:
         """Chunks of each stream in bag order; every message appears exactly once.
 
-        Standard ``sensor_msgs`` messages are decoded in batches with :mod:`fog_temp_comp.cdr`
-        (no Python object per message); a ``temp_field`` of another type is deserialized per
-        message with rosbags.
+        Within a stream, chunks follow the bag's log-time order (MCAP: chunk by chunk; the
+        streams may interleave differently than in the bag). Standard ``sensor_msgs`` messages
+        are decoded in batches with :mod:`fog_temp_comp.cdr` (no Python object per message); a
+        ``temp_field`` of another type is deserialized per message with rosbags.
         """
         if not self._open:
             raise RuntimeError('BagStream is not open')
