@@ -52,6 +52,7 @@ _OP_CHANNEL = 0x04
 _OP_MESSAGE = 0x05
 _OP_CHUNK = 0x06
 _OP_MESSAGE_INDEX = 0x07
+_OP_STATISTICS = 0x0B
 
 _HEADER = struct.Struct('<BQ')  # opcode, record length
 _HEADER_MESSAGE = struct.Struct('<BQH4xQ')  # opcode, length, channel id, (sequence), log time
@@ -61,7 +62,10 @@ _CHUNK = struct.Struct('<16xQII')  # (start, end), uncompressed size, crc, compr
 _FOOTER = struct.Struct('<BQQQI')  # opcode, length, summary start, summary offset start, crc
 _INDEX_HEAD = struct.Struct('<HI')  # channel id, byte length of the (log time, offset) array
 _INDEX_ENTRY = np.dtype([('log_time', '<u8'), ('offset', '<u8')])
+_U32 = struct.Struct('<I')
 _U64 = struct.Struct('<Q')
+_STATISTICS_HEAD = 42  # counts and times before the channel message counts
+_CHANNEL_COUNT = struct.Struct('<HQ')  # channel id, message count
 
 Batch = tuple[str, NDArray[np.int64], Spans]
 
@@ -111,6 +115,8 @@ class _Scanner:
         self.pending: list[
             tuple[str, NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]
         ] = []
+        self.channel_counts: dict[int, int] | None = None  # from the Statistics record
+        self.yielded: dict[str, int] = {}  # messages yielded per topic
 
     def _error(self, what: str) -> ValueError:
         return ValueError(f'{self.path}: {what}')
@@ -140,7 +146,34 @@ class _Scanner:
                 return
             if op == _OP_CHANNEL:
                 self.channel(buf, pos + 9, nxt)
+            elif op == _OP_STATISTICS and length >= _STATISTICS_HEAD + 4:
+                body = pos + 9 + _STATISTICS_HEAD
+                size = _U32.unpack_from(buf, body)[0]
+                if body + 4 + size <= nxt and size % _CHANNEL_COUNT.size == 0:
+                    self.channel_counts = dict(
+                        _CHANNEL_COUNT.iter_unpack(buf[body + 4 : body + 4 + size])
+                    )
             pos = nxt
+
+    def check_counts(self) -> None:
+        """At the end: the messages yielded per topic match the file's Statistics record.
+
+        A Message Index that leaves out messages would otherwise lose them silently.
+        """
+        if self.channel_counts is None:
+            return
+        expected: dict[str, int] = {}
+        for cid, count in self.channel_counts.items():
+            topic = self.channel_topic.get(cid)
+            if topic in self.topics:
+                expected[topic] = expected.get(topic, 0) + count
+        for topic, count in expected.items():
+            got = self.yielded.get(topic, 0)
+            if got != count:
+                raise self._error(
+                    f'{got} messages found on {topic}, but the file statistics count {count} '
+                    '(damaged message index?)'
+                )
 
     def records(self, buf: memoryview, pos: int, end: int) -> None:
         """Walk the records of ``buf[pos:end]``; wanted messages go to ``collect``."""
@@ -262,6 +295,7 @@ class _Scanner:
                 order = order[np.argsort(t[order], kind='stable')]
             if not bool((order[1:] > order[:-1]).all()):
                 t, start, length = t[order], start[order], length[order]
+            self.yielded[topic] = self.yielded.get(topic, 0) + t.size
             yield topic, t, Spans(buffer, start, length)
 
 
@@ -329,6 +363,7 @@ def scan_mcap(
             if op in (_OP_CHUNK, _OP_FOOTER) or len(loose) > _LOOSE_BATCH:
                 yield from _walk_loose(scanner, loose)
             if op == _OP_FOOTER:
+                scanner.check_counts()
                 return
             if op == _OP_CHUNK:
                 records = scanner.chunk(reader.read(body_pos, length), body_pos - 9)

@@ -201,3 +201,18 @@ def test_unchunked_records_equal_chunked(tmp_path: Path) -> None:
     ref = scanned(mcap, {IMU, TEMP})
     for topic in (IMU, TEMP):
         assert by_topic(got, topic) == by_topic(ref, topic)
+
+
+def test_index_missing_messages_is_an_error_not_a_loss(tmp_path: Path) -> None:
+    """An index that lists fewer messages than the chunk holds is caught by the statistics."""
+    mcap = write_bag(tmp_path / 'bag', False, n_imu=3000)
+    data = bytearray(mcap.read_bytes())
+    entry = first_index_entry(bytes(data))
+    nbytes_at = entry - 4  # the u32 byte length of the (log time, offset) array
+    nbytes = struct.unpack_from('<I', data, nbytes_at)[0]
+    struct.pack_into('<I', data, nbytes_at, nbytes - 16)  # drop the chunk's last entry
+    short = tmp_path / 'short.mcap'
+    short.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match='but the file statistics count'):
+        scanned(short, {IMU, TEMP})
+    assert len(scanned(short, {IMU, TEMP}, use_index=False)) == 3300  # walking finds them all
