@@ -463,10 +463,10 @@ class ChunkReplayer:
             return None
         raws = [raw for _, _, raw in items]
         if self.ros2:
-            return (cdr.decode_imu_cdr if imu else cdr.decode_temperature_cdr)(raws)
+            return (cdr.decode_imu_rates_cdr if imu else cdr.decode_temperature_cdr)(raws)
         seq = self._seq[items[0][0].id]
         if imu:
-            return cdr.decode_imu_ros1(raws, header_seq=seq)
+            return cdr.decode_imu_rates_ros1(raws, header_seq=seq)
         return cdr.decode_temperature_ros1(raws, header_seq=seq)
 
     def _patch(self, items: list[tuple[Any, int, bytes]], rates: list[Any]) -> list[bytes]:
