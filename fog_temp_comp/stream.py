@@ -35,6 +35,7 @@ from fog_temp_comp.bagio import (
     stamp_to_s,
 )
 from fog_temp_comp.mcapscan import scan_mcap
+from fog_temp_comp.ros1scan import Ros1Bag, Ros1FormatError
 from fog_temp_comp.sqlitescan import plain_sqlite_files, scan_sqlite, topic_types
 from fog_temp_comp.units import NS_PER_S
 
@@ -153,6 +154,7 @@ class BagStream:
         self._context: Any = None
         self._open = False
         self._sqlite_files: list[Path] | None = None
+        self._ros1: Ros1Bag | None = None
         self.reader: AnyReader | None = None
         self.imu_topic = ''
         self.temp_topic = ''
@@ -169,6 +171,10 @@ class BagStream:
             self.temp_topic = resolve_topic_in(
                 topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
             )
+            self._open = True
+            return self
+        self._ros1 = self._open_ros1() if self.temp_field is None else None
+        if self._ros1 is not None:
             self._open = True
             return self
         self._context = open_bag(self.path)
@@ -188,6 +194,27 @@ class BagStream:
         self.reader = reader
         self._open = True
         return self
+
+    def _open_ros1(self) -> Ros1Bag | None:
+        """The bag as a :class:`Ros1Bag` with its topics resolved, or None to use rosbags.
+
+        None for anything but an indexed ROS 1 bag with one connection per wanted topic.
+        """
+        if self.path.suffix != '.bag' or not self.path.is_file():
+            return None
+        try:
+            bag = Ros1Bag(self.path)
+        except (Ros1FormatError, KeyError, OSError):
+            return None
+        topics = bag.topics()
+        self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
+        self.temp_topic = resolve_topic_in(
+            topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
+        )
+        wanted = [c for c in bag.connections if c.topic in (self.imu_topic, self.temp_topic)]
+        if len(wanted) != 2 or any(c.msgtype != topics[c.topic] for c in wanted):
+            return None
+        return bag
 
     def __exit__(
         self,
@@ -212,6 +239,9 @@ class BagStream:
             raise RuntimeError('BagStream is not open')
         if self._sqlite_files:
             yield from self._scan_sqlite(self._sqlite_files)
+            return
+        if self._ros1 is not None:
+            yield from self._scan_ros1(self._ros1)
             return
         reader = self.reader
         assert reader is not None
@@ -272,6 +302,27 @@ class BagStream:
                         batch = (spans[part], log_ns[part], [owner[topic]])
                         yield self._flush(kind_of[topic], batch, decoders)
         except ValueError as err:
+            raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
+
+    def _scan_ros1(self, bag: Ros1Bag) -> Iterator[Chunk]:
+        """Read an indexed ROS 1 bag with :class:`fog_temp_comp.ros1scan.Ros1Bag`."""
+        kind_of = {self.imu_topic: 'imu', self.temp_topic: 'temperature'}
+        seq = {c.topic: cdr.ros1_header_has_seq(c.msgdef) for c in bag.connections}
+        imu_seq, temp_seq = seq[self.imu_topic], seq[self.temp_topic]
+        decoders: dict[int, Any] = {
+            0: lambda raws: cdr.decode_imu_rates_ros1(raws, header_seq=imu_seq),
+            1: lambda raws: cdr.decode_temperature_ros1(raws, header_seq=temp_seq),
+        }
+        owner = {self.imu_topic: 0, self.temp_topic: 1}
+        try:
+            for topic, log_ns, spans in bag.scan({self.imu_topic, self.temp_topic}):
+                if self.progress is not None:
+                    self.progress.update(len(spans), int(log_ns.max()), int(log_ns.min()))
+                for start in range(0, len(spans), self.chunk_size):
+                    part = slice(start, start + self.chunk_size)
+                    batch = (spans[part], log_ns[part], [owner[topic]])
+                    yield self._flush(kind_of[topic], batch, decoders)
+        except (ValueError, KeyError, OSError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def _scan_sqlite(self, files: list[Path]) -> Iterator[Chunk]:

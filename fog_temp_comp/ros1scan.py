@@ -1,0 +1,304 @@
+"""Fast raw reading of ROS 1 bags (format 2.0), without a Python object per message.
+
+rosbags' ROS 1 reader builds a Python object for every index entry when it opens a bag and
+another per message when it reads. :class:`Ros1Bag` reads the connections and chunk infos from
+the bag's index section, and :meth:`Ros1Bag.scan` reads a chunk at a time: the ``IDXDATA``
+records after each chunk give every message's time and offset (``np.frombuffer``), and the
+message records are checked and located with numpy. The payloads go to the decoders of
+:mod:`fog_temp_comp.cdr` as :class:`~fog_temp_comp.cdr.Spans`.
+
+A chunk whose message records do not all share the first one's header layout (legal, but not
+what ``rosbag`` or rosbags write) is read record by record instead. A bag this module cannot
+read at all (not indexed, encrypted, unknown compression, several connections on one wanted
+topic) raises :class:`Ros1FormatError` from the constructor, before anything is returned.
+
+Order: chunks in file order; within a chunk, messages stable-sorted by time (as with MCAP).
+"""
+
+from __future__ import annotations
+
+import bz2
+import struct
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fog_temp_comp.cdr import Spans
+
+try:
+    from lz4.frame import decompress as _lz4_decompress
+except ImportError:  # pragma: no cover
+    _lz4_decompress = None
+
+__all__ = ['Ros1Bag', 'Ros1Connection', 'Ros1FormatError']
+
+IntArray = NDArray[np.int64]
+MAGIC = b'#ROSBAG V2.0\n'
+_OP_MSG_DATA = 0x02
+_OP_BAG_HEADER = 0x03
+_OP_INDEX_DATA = 0x04
+_OP_CHUNK = 0x05
+_OP_CHUNK_INFO = 0x06
+_OP_CONNECTION = 0x07
+_INDEX_ENTRY = np.dtype([('sec', '<u4'), ('nsec', '<u4'), ('offset', '<u4')])
+_U32 = struct.Struct('<I')
+
+
+class Ros1FormatError(ValueError):
+    """The bag is not one this reader handles; read it with rosbags instead."""
+
+
+@dataclass(frozen=True)
+class Ros1Connection:
+    """A connection of the bag: id, topic, message type (``pkg/msg/Name``), definition."""
+
+    id: int
+    topic: str
+    msgtype: str
+    msgdef: str
+
+
+def _fields(header: bytes) -> dict[str, bytes]:
+    """The ``name=value`` fields of a record header."""
+    out: dict[str, bytes] = {}
+    pos = 0
+    while pos + 4 <= len(header):
+        size = _U32.unpack_from(header, pos)[0]
+        name, sep, value = header[pos + 4 : pos + 4 + size].partition(b'=')
+        if not sep or pos + 4 + size > len(header):
+            raise Ros1FormatError('malformed ROS 1 record header')
+        out[name.decode()] = value
+        pos += 4 + size
+    return out
+
+
+def _msgtype(name: str) -> str:
+    """``pkg/Name`` as rosbags names it, ``pkg/msg/Name``."""
+    package, _, message = name.rpartition('/')
+    return name if package.endswith('/msg') else f'{package}/msg/{message}'
+
+
+def _decompressor(name: str) -> Callable[[bytes], bytes]:
+    if name == 'none':
+        return lambda data: data
+    if name == 'bz2':
+        return bz2.decompress
+    if name == 'lz4' and _lz4_decompress is not None:
+        return _lz4_decompress
+    raise Ros1FormatError(f'unsupported ROS 1 chunk compression {name!r}')
+
+
+class Ros1Bag:
+    """An indexed ROS 1 bag: its connections, and a fast scan of chosen topics.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.bag`` file.
+
+    Raises
+    ------
+    Ros1FormatError
+        Not a ROS 1 bag of format 2.0, not indexed, encrypted, or damaged index.
+
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        with self.path.open('rb') as file:
+            if file.read(len(MAGIC)) != MAGIC:
+                raise Ros1FormatError(f'{self.path}: not a ROS 1 bag of format 2.0')
+            header, _ = self._record(file)
+            fields = _fields(header)
+            if fields.get('op') != bytes([_OP_BAG_HEADER]):
+                raise Ros1FormatError(f'{self.path}: no bag header record')
+            if fields.get('encryptor'):
+                raise Ros1FormatError(f'{self.path}: encrypted bag')
+            index_pos = struct.unpack('<Q', fields['index_pos'])[0]
+            conn_count = _U32.unpack(fields['conn_count'])[0]
+            chunk_count = _U32.unpack(fields['chunk_count'])[0]
+            if index_pos == 0:
+                raise Ros1FormatError(f'{self.path}: bag is not indexed')
+            file.seek(index_pos)
+            self.connections: list[Ros1Connection] = []
+            for _ in range(conn_count):
+                header, data = self._record(file)
+                fields = _fields(header)
+                info = _fields(data)
+                if fields.get('op') != bytes([_OP_CONNECTION]):
+                    raise Ros1FormatError(f'{self.path}: damaged connection records')
+                self.connections.append(
+                    Ros1Connection(
+                        _U32.unpack(fields['conn'])[0],
+                        '/' + fields['topic'].decode().lstrip('/'),
+                        _msgtype(info['type'].decode()),
+                        info.get('message_definition', b'').decode(),
+                    )
+                )
+            self.chunk_positions: list[int] = []
+            for _ in range(chunk_count):
+                header, _ = self._record(file)
+                fields = _fields(header)
+                if fields.get('op') != bytes([_OP_CHUNK_INFO]):
+                    raise Ros1FormatError(f'{self.path}: damaged chunk info records')
+                self.chunk_positions.append(struct.unpack('<Q', fields['chunk_pos'])[0])
+
+    def _record(self, file: BinaryIO) -> tuple[bytes, bytes]:
+        """(header, data) of the record at the file's position."""
+        try:
+            header = file.read(_U32.unpack(file.read(4))[0])
+            data = file.read(_U32.unpack(file.read(4))[0])
+        except struct.error:
+            raise Ros1FormatError(f'{self.path}: truncated record') from None
+        return header, data
+
+    def topics(self) -> dict[str, str]:
+        """``{topic: message type}`` (the first connection's type for a topic)."""
+        out: dict[str, str] = {}
+        for conn in self.connections:
+            out.setdefault(conn.topic, conn.msgtype)
+        return out
+
+    def scan(self, topics: set[str]) -> Iterator[tuple[str, IntArray, Spans]]:
+        """Per chunk and wanted topic: (topic, times ns, spans of the message data)."""
+        conns = {c.id: c.topic for c in self.connections if c.topic in topics}
+        for topic in set(conns.values()):
+            if list(conns.values()).count(topic) > 1:
+                raise Ros1FormatError(f'{self.path}: several connections on {topic}')
+        with self.path.open('rb') as file:
+            for position in self.chunk_positions:
+                file.seek(position)
+                header, data = self._record(file)
+                fields = _fields(header)
+                if fields.get('op') != bytes([_OP_CHUNK]):
+                    raise Ros1FormatError(f'{self.path}: no chunk at byte {position}')
+                records = _decompressor(fields['compression'].decode())(data)
+                indexes: dict[int, NDArray[np.void]] = {}
+                while True:
+                    start = file.tell()
+                    head = file.read(4)
+                    if len(head) < 4:
+                        break
+                    header = file.read(_U32.unpack(head)[0])
+                    fields = _fields(header)
+                    if fields.get('op') != bytes([_OP_INDEX_DATA]):
+                        file.seek(start)
+                        break
+                    body = file.read(_U32.unpack(file.read(4))[0])
+                    conn = _U32.unpack(fields['conn'])[0]
+                    if conn in conns:
+                        indexes[conn] = np.frombuffer(body, dtype=_INDEX_ENTRY)
+                for conn, entries in indexes.items():
+                    yield from self._messages(records, conns[conn], conn, entries)
+
+    def _messages(
+        self, records: bytes, topic: str, conn: int, entries: NDArray[np.void]
+    ) -> Iterator[tuple[str, IntArray, Spans]]:
+        """The messages of one connection in one chunk, located through its index entries."""
+        if entries.size == 0:
+            return
+        times = entries['sec'].astype(np.int64) * 1_000_000_000 + entries['nsec']
+        offsets = entries['offset'].astype(np.int64)
+        starts, lengths = self._locate(records, offsets, conn, times)
+        order = np.argsort(times, kind='stable')
+        yield topic, times[order], Spans(records, starts[order], lengths[order])
+
+    def _locate(
+        self, records: bytes, offsets: IntArray, conn: int, times: IntArray
+    ) -> tuple[IntArray, IntArray]:
+        """Data start and length of the message records at ``offsets``, checked.
+
+        Fast path: every record's header has the first one's layout (fields, order, sizes), so
+        the conn and time values sit at the same places; checked with numpy. Otherwise each
+        record is parsed in Python.
+        """
+        size = len(records)
+        buf = np.frombuffer(records, dtype=np.uint8)
+        if offsets.min() < 0 or offsets.max() + 4 > size:
+            raise Ros1FormatError(f'{self.path}: index offset outside its chunk')
+        first = int(offsets[0])
+        header_len = _U32.unpack_from(records, first)[0]
+        layout = _header_layout(records[first + 4 : first + 4 + header_len])
+        if layout is not None and offsets.max() + 8 + header_len <= size:
+            head = buf[offsets[:, None] + 4 + np.arange(header_len)]
+            lens = buf[offsets[:, None] + np.arange(4)].astype(np.int64)
+            same_len = (lens[:, 0] | lens[:, 1] << 8 | lens[:, 2] << 16 | lens[:, 3] << 24) == (
+                header_len
+            )
+            mask, conn_at, time_at = layout
+            template = np.frombuffer(records[first + 4 : first + 4 + header_len], np.uint8)
+            same = same_len & (head[:, mask] == template[mask]).all(axis=1)
+            conn_ok = _le(head, conn_at, 4) == conn
+            time_ok = (_le(head, time_at, 4) * 1_000_000_000 + _le(head, time_at + 4, 4)) == (
+                times
+            )
+            if bool((same & conn_ok & time_ok).all()):
+                at = offsets + 4 + header_len
+                data_len = _le(buf[at[:, None] + np.arange(4)], 0, 4)
+                starts = at + 4
+                if bool((starts + data_len <= size).all()):
+                    return starts, data_len
+        return self._locate_slowly(records, offsets, conn, times)
+
+    def _locate_slowly(
+        self, records: bytes, offsets: IntArray, conn: int, times: IntArray
+    ) -> tuple[IntArray, IntArray]:
+        """:meth:`_locate` one record at a time (any header layout)."""
+        starts, lengths = [], []
+        for offset, time in zip(offsets.tolist(), times.tolist(), strict=True):
+            header_len = _U32.unpack_from(records, offset)[0]
+            fields = _fields(records[offset + 4 : offset + 4 + header_len])
+            at = offset + 4 + header_len
+            data_len = _U32.unpack_from(records, at)[0]
+            sec, nsec = struct.unpack('<II', fields.get('time', b'\0' * 8))
+            if (
+                fields.get('op') != bytes([_OP_MSG_DATA])
+                or _U32.unpack(fields.get('conn', b'\xff' * 4))[0] != conn
+                or sec * 1_000_000_000 + nsec != time
+                or at + 4 + data_len > len(records)
+            ):
+                raise Ros1FormatError(f'{self.path}: index entry does not match its record')
+            starts.append(at + 4)
+            lengths.append(data_len)
+        return np.array(starts, dtype=np.int64), np.array(lengths, dtype=np.int64)
+
+
+def _le(rows: NDArray[np.uint8], at: int, size: int) -> IntArray:
+    """Little-endian unsigned integers of ``size`` bytes at column ``at`` of byte rows."""
+    out = np.zeros(rows.shape[0], dtype=np.int64)
+    for j in reversed(range(size)):
+        out = (out << 8) | rows[:, at + j]
+    return out
+
+
+def _header_layout(header: bytes) -> tuple[NDArray[np.bool_], int, int] | None:
+    """For a message record header: (mask of its non-value bytes, conn value at, time at).
+
+    None if it is not an ``op=2`` header with 4-byte ``conn`` and 8-byte ``time`` fields.
+    """
+    mask = np.ones(len(header), dtype=bool)
+    where: dict[str, tuple[int, int]] = {}
+    pos = 0
+    while pos + 4 <= len(header):
+        size = _U32.unpack_from(header, pos)[0]
+        field = header[pos + 4 : pos + 4 + size]
+        name, sep, value = field.partition(b'=')
+        if not sep or pos + 4 + size > len(header):
+            return None
+        value_at = pos + 4 + len(name) + 1
+        where[name.decode(errors='replace')] = (value_at, len(value))
+        if name in (b'conn', b'time'):
+            mask[value_at : value_at + len(value)] = False
+        pos += 4 + size
+    if pos != len(header) or where.get('conn', (0, 0))[1] != 4:
+        return None
+    if where.get('time', (0, 0))[1] != 8 or 'op' not in where:
+        return None
+    op_at = where['op'][0]
+    if header[op_at : op_at + 1] != bytes([_OP_MSG_DATA]):
+        return None
+    return mask, where['conn'][0], where['time'][0]
