@@ -3,11 +3,13 @@
 A :class:`BagStream` yields :class:`Chunk` arrays of at most ``chunk_size`` messages, so long
 chamber runs (24 h at 100 Hz is 8.6 M Imu messages) can be reduced on the fly.
 
-Read paths: MCAP through :mod:`fog_temp_comp.mcapscan` (Message Index, decoding in place),
-indexed ROS 1 through :mod:`fog_temp_comp.ros1scan` (``IDXDATA``), plain rosbag2 sqlite3
-through :mod:`fog_temp_comp.sqlitescan` (apsw), all without opening rosbags' reader; anything
-else (compressed sqlite3, ``--temp-field`` of another type, unusual bags) through rosbags'
-``AnyReader``. All decode with :mod:`fog_temp_comp.cdr`.
+Read paths: MCAP through :mod:`fog_temp_comp.mcapscan` (Message Index, decoding in place;
+rosbags' reader only resolves the topics, from the file's summary), indexed ROS 1 through
+:mod:`fog_temp_comp.ros1scan` (``IDXDATA``) and plain rosbag2 sqlite3 through
+:mod:`fog_temp_comp.sqlitescan` (apsw), both without rosbags, whose open reads every index
+entry (ROS 1) or counts every row (sqlite3); anything else (compressed sqlite3,
+``--temp-field`` of another type, unusual bags) through rosbags' ``AnyReader``. All decode
+with :mod:`fog_temp_comp.cdr`.
 """
 
 from __future__ import annotations
