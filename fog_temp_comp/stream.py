@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -293,53 +293,57 @@ class BagStream:
         self, files: list[Path], decoders: dict[int, Any], conns: list[Any]
     ) -> Iterator[Chunk]:
         """Read MCAP chunks with :func:`fog_temp_comp.mcapscan.scan_mcap`, decoded in place."""
-        owner = {c.topic: c.id for c in conns}
-        kind_of = {self.imu_topic: 'imu', self.temp_topic: 'temperature'}
+        by_topic = {c.topic: decoders[c.id] for c in conns}
         try:
             for file in files:
-                for topic, log_ns, spans in scan_mcap(file, set(owner)):
-                    if self.progress is not None:
-                        self.progress.update(len(spans), int(log_ns.max()), int(log_ns.min()))
-                    for start in range(0, len(spans), self.chunk_size):
-                        part = slice(start, start + self.chunk_size)
-                        batch = (spans[part], log_ns[part], [owner[topic]])
-                        yield self._flush(kind_of[topic], batch, decoders)
+                yield from self._from_spans(scan_mcap(file, set(by_topic)), by_topic)
         except ValueError as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
+    def _kinds(self) -> dict[str, str]:
+        """Topic -> chunk kind."""
+        return {self.imu_topic: 'imu', self.temp_topic: 'temperature'}
+
+    def _from_spans(
+        self, batches: Iterable[tuple[str, NDArray[np.int64], cdr.Spans]], decoders: dict[str, Any]
+    ) -> Iterator[Chunk]:
+        """Chunks of at most ``chunk_size`` from the fast readers' (topic, log ns, spans)."""
+        kind_of = self._kinds()
+        for topic, log_ns, spans in batches:
+            if self.progress is not None:
+                self.progress.update(len(spans), int(log_ns.max()), int(log_ns.min()))
+            for start in range(0, len(spans), self.chunk_size):
+                part = slice(start, start + self.chunk_size)
+                batch = (spans[part], log_ns[part], [topic])
+                yield self._flush(kind_of[topic], batch, decoders)
+
     def _scan_ros1(self, bag: Ros1Bag) -> Iterator[Chunk]:
         """Read an indexed ROS 1 bag with :class:`fog_temp_comp.ros1scan.Ros1Bag`."""
-        kind_of = {self.imu_topic: 'imu', self.temp_topic: 'temperature'}
         seq = {c.topic: cdr.ros1_header_has_seq(c.msgdef) for c in bag.connections}
         imu_seq, temp_seq = seq[self.imu_topic], seq[self.temp_topic]
-        decoders: dict[int, Any] = {
-            0: lambda raws: cdr.decode_imu_rates_ros1(raws, header_seq=imu_seq),
-            1: lambda raws: cdr.decode_temperature_ros1(raws, header_seq=temp_seq),
+        decoders: dict[str, Any] = {
+            self.imu_topic: lambda raws: cdr.decode_imu_rates_ros1(raws, header_seq=imu_seq),
+            self.temp_topic: lambda raws: cdr.decode_temperature_ros1(raws, header_seq=temp_seq),
         }
-        owner = {self.imu_topic: 0, self.temp_topic: 1}
         try:
-            for topic, log_ns, spans in bag.scan({self.imu_topic, self.temp_topic}):
-                if self.progress is not None:
-                    self.progress.update(len(spans), int(log_ns.max()), int(log_ns.min()))
-                for start in range(0, len(spans), self.chunk_size):
-                    part = slice(start, start + self.chunk_size)
-                    batch = (spans[part], log_ns[part], [owner[topic]])
-                    yield self._flush(kind_of[topic], batch, decoders)
+            yield from self._from_spans(bag.scan(set(decoders)), decoders)
         except (ValueError, KeyError, OSError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def _scan_sqlite(self, files: list[Path]) -> Iterator[Chunk]:
         """Read sqlite3 databases with :func:`fog_temp_comp.sqlitescan.scan_sqlite`."""
-        kind_of = {self.imu_topic: 'imu', self.temp_topic: 'temperature'}
+        kind_of = self._kinds()
         topics = {self.imu_topic: IMU_TYPE, self.temp_topic: TEMPERATURE_TYPE}
-        decoders = {0: cdr.decode_imu_rates_cdr, 1: cdr.decode_temperature_cdr}
-        owner = {self.imu_topic: 0, self.temp_topic: 1}
+        decoders = {
+            self.imu_topic: cdr.decode_imu_rates_cdr,
+            self.temp_topic: cdr.decode_temperature_cdr,
+        }
         receive = self.time_source == 'receive'
         try:
             for file in files:
                 batches = scan_sqlite(file, topics, log_times=receive, batch_size=self.chunk_size)
                 for topic, log_ns, raws in batches:
-                    chunk = self._flush(kind_of[topic], (raws, log_ns, [owner[topic]]), decoders)
+                    chunk = self._flush(kind_of[topic], (raws, log_ns, [topic]), decoders)
                     if self.progress is not None:
                         newest, oldest = chunk.stamps_s.max(), chunk.stamps_s.min()
                         self.progress.update(
@@ -353,7 +357,7 @@ class BagStream:
         self,
         kind: str,
         batch: tuple[Any, Any, list[Any]],  # (raw messages or Spans, log times ns, owners)
-        decoders: dict[int, Any],
+        decoders: dict[Any, Any],  # owner (connection id or topic) -> batch decoder
     ) -> Chunk:
         raws, logs, owners = batch
         receive = np.asarray([] if logs is None else logs, dtype=np.int64) / NS_PER_S
