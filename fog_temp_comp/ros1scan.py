@@ -225,10 +225,7 @@ class Ros1Bag:
         layout = _header_layout(records[first + 4 : first + 4 + header_len])
         if layout is not None and offsets.max() + 8 + header_len <= size:
             head = buf[offsets[:, None] + 4 + np.arange(header_len)]
-            lens = buf[offsets[:, None] + np.arange(4)].astype(np.int64)
-            same_len = (lens[:, 0] | lens[:, 1] << 8 | lens[:, 2] << 16 | lens[:, 3] << 24) == (
-                header_len
-            )
+            same_len = _le(buf[offsets[:, None] + np.arange(4)], 0, 4) == header_len
             mask, conn_at, time_at = layout
             template = np.frombuffer(records[first + 4 : first + 4 + header_len], np.uint8)
             same = same_len & (head[:, mask] == template[mask]).all(axis=1)
