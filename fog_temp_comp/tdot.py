@@ -102,6 +102,19 @@ def _pairs(stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[tuple[float
     return list(zip(t.tolist(), x.tolist(), strict=True))
 
 
+def _add_each(
+    estimator: TdotEstimator, stamps_s: ArrayLike, temperature_degC: ArrayLike
+) -> list[TdotEstimate]:
+    """``add`` each sample in order; the estimates of the samples that produced one."""
+    out = []
+    for stamp, value in _pairs(stamps_s, temperature_degC):
+        if estimator.add(stamp, value):
+            estimate = estimator.estimate
+            assert estimate is not None
+            out.append(estimate)
+    return out
+
+
 class GridTdotEstimator:
     """The paper's estimator: 10 s grid means, slope between bins, then a denoiser.
 
@@ -141,8 +154,8 @@ class GridTdotEstimator:
     def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
         """Feed samples shape (n,) in order; the denoiser filters the new bins as one block.
 
-        Same estimates as :meth:`add` on each sample (the Butterworth block runs ``sosfilt``
-        with carried state, equal to sample-by-sample filtering to rounding).
+        Same estimates as :meth:`add` on each sample (the Butterworth filter steps the same
+        arithmetic either way, bit for bit).
         """
         points = []
         first: TdotEstimate | None = None
@@ -249,12 +262,7 @@ class LocalLinearTdotEstimator:
 
     def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
         """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
-        out = []
-        for stamp, value in _pairs(stamps_s, temperature_degC):
-            if self.add(stamp, value):
-                assert self._estimate is not None
-                out.append(self._estimate)
-        return out
+        return _add_each(self, stamps_s, temperature_degC)
 
     def _close(self) -> None:
         assert self._index is not None
@@ -378,12 +386,7 @@ class KalmanTdotEstimator:
 
     def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
         """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
-        out = []
-        for stamp, value in _pairs(stamps_s, temperature_degC):
-            if self.add(stamp, value):
-                assert self._estimate is not None
-                out.append(self._estimate)
-        return out
+        return _add_each(self, stamps_s, temperature_degC)
 
     @property
     def estimate(self) -> TdotEstimate | None:
