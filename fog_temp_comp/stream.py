@@ -14,6 +14,7 @@ with :mod:`fog_temp_comp.cdr`.
 
 from __future__ import annotations
 
+import struct
 import sys
 import time
 from collections.abc import Iterable, Iterator
@@ -297,7 +298,7 @@ class BagStream:
         try:
             for file in files:
                 yield from self._from_spans(scan_mcap(file, set(by_topic)), by_topic)
-        except ValueError as err:
+        except (ValueError, struct.error) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def _kinds(self) -> dict[str, str]:
@@ -327,7 +328,7 @@ class BagStream:
         }
         try:
             yield from self._from_spans(bag.scan(set(decoders)), decoders)
-        except (ValueError, KeyError, OSError) as err:
+        except (ValueError, KeyError, OSError, struct.error) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def _scan_sqlite(self, files: list[Path]) -> Iterator[Chunk]:

@@ -147,3 +147,38 @@ def test_not_a_ros1_bag_or_not_indexed(tmp_path: Path) -> None:
     unindexed.write_bytes(bytes(data))
     with pytest.raises(Ros1FormatError, match='not indexed'):
         Ros1Bag(unindexed)
+
+
+def test_index_entry_not_matching_its_record_is_a_bag_error(tmp_path: Path) -> None:
+    """A damaged IDXDATA offset fails loudly with the bag's name; the valid bag reads fully."""
+    path = write_bag(tmp_path / 'run.bag', n_imu=500)
+    bag = Ros1Bag(path)
+    data = bytearray(path.read_bytes())
+    with path.open('rb') as file:
+        file.seek(bag.chunk_positions[0])
+        bag._record(file)  # the chunk
+        at = file.tell()
+        header, _ = bag._record(file)  # its first IDXDATA record
+    assert b'op=\x04' in header
+    entry = at + 4 + len(header) + 4  # first (sec, nsec, offset) entry
+    offset = int.from_bytes(data[entry + 8 : entry + 12], 'little')
+    data[entry + 8 : entry + 12] = (offset + 1).to_bytes(4, 'little')
+    broken = tmp_path / 'broken.bag'
+    broken.write_bytes(bytes(data))
+    with pytest.raises(bagio.BagError, match=r'broken\.bag: cannot read messages'):
+        bagio.read_record(broken)
+    record = bagio.read_record(path)
+    assert record.imu_stamps_s.size == 500 and record.temp_stamps_s.size == 50
+
+
+def test_truncated_inside_the_chunks_is_a_bag_error(tmp_path: Path) -> None:
+    """Index intact at the end, a chunk's records overwritten: a clear error, no traceback."""
+    path = write_bag(tmp_path / 'run.bag', n_imu=2000)
+    bag = Ros1Bag(path)
+    data = bytearray(path.read_bytes())
+    start = bag.chunk_positions[-1]
+    data[start : start + 64] = b'\xff' * 64  # the last chunk's record header
+    broken = tmp_path / 'broken.bag'
+    broken.write_bytes(bytes(data))
+    with pytest.raises(bagio.BagError, match=r'broken\.bag'):
+        bagio.read_record(broken)
