@@ -31,15 +31,23 @@ def _add_topics(parser: argparse.ArgumentParser) -> None:
 
 def _add_guard(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     parser.add_argument(
+        '--clamp-tdot',
+        action='store_true',
+        help='clamp Tdot to the calibrated range (default: the linear Tdot terms are applied '
+        f'beyond it, up to +-{GuardSettings().tdot_limit_degC_per_min:g} degC/min, as in the '
+        "paper's protocol: fit on one cycle rate, judge on faster ones)",
+    )
+    parser.add_argument(
         '--extrapolate-tdot',
         action='store_true',
-        help='apply the model beyond the calibrated Tdot range instead of clamping Tdot to it '
-        "(the paper's protocol: fit on one cycle rate, judge on faster ones)",
+        help='(deprecated: now the default) apply the Tdot terms beyond the calibrated range',
     )
 
 
 def _guard(args: argparse.Namespace) -> GuardSettings:
-    return GuardSettings(clamp_tdot=not args.extrapolate_tdot)
+    if args.extrapolate_tdot:
+        print('note: --extrapolate-tdot is the default now; the flag is ignored', file=sys.stderr)
+    return GuardSettings(clamp_tdot=args.clamp_tdot)
 
 
 def _add_denoise(parser: argparse.ArgumentParser, default: str | None) -> None:
@@ -239,7 +247,7 @@ def run(args: argparse.Namespace) -> int:
             tolerance=args.tolerance,
             validate=tuple(args.validate),
             report_dir=args.report,
-            extrapolate_tdot=args.extrapolate_tdot,
+            clamp_tdot=_guard(args).clamp_tdot,
             quiet=args.quiet,
         )
         return commands.calibrate_command(args.bags, args.output, options=options)

@@ -58,6 +58,7 @@ def model_equation(terms: tuple[str, ...]) -> str:
         'Tdot': '{k} * Tdot [degC/min]',
         'T2': '{k} * T^2 [degC^2]',
         'T_Tdot': '{k} * T [degC] * Tdot [degC/min]',
+        'Tdot_lag': '{k} * lag(Tdot, tdot_lag_s) [degC/min]',
     }
     parts = [names.get(t, '{k} * ' + t).format(k=coefficient_key(t)) for t in terms]
     return 'D [deg/h] = ' + ' + '.join(parts)

@@ -132,7 +132,7 @@ class CalibrateOptions:
     tolerance: float = 0.02
     validate: tuple[Path, ...] = ()
     report_dir: Path | None = None
-    extrapolate_tdot: bool = False
+    clamp_tdot: bool = False
     quiet: bool = True
 
 
@@ -163,7 +163,7 @@ def calibrate_command(
         gyro_topic=gyro_topic or opt.gyro_topic,
         temp_topic=temp_topic or opt.temp_topic,
     )
-    guard = GuardSettings(clamp_tdot=not opt.extrapolate_tdot)
+    guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
     read = dict(
         gyro_topic=opt.gyro_topic,
         temp_topic=opt.temp_topic,
@@ -516,20 +516,30 @@ def evaluate_command(
 
 
 def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) -> list[str]:
-    """Say when the calibrated-range guard limited the correction of a run."""
+    """Say when the calibrated-range guard limited or extrapolated the correction of a run."""
     notes = []
     total = max(counters.imu_total, 1)
     model = coeffs.model
-    for count, what, rng, unit, flag in (
-        (counters.imu_tdot_clamped, 'Tdot', model.tdot_range_degC_per_min, 'degC/min',
-         '--extrapolate-tdot'),
-        (counters.imu_temperature_clamped, 'temperature', model.temperature_range_degC, 'degC',
-         None),
-    ):  # fmt: skip
+    t_rng, r_rng = model.temperature_range_degC, model.tdot_range_degC_per_min
+    for count, text in (
+        (
+            counters.imu_temperature_clamped,
+            f'temperature left the calibrated range [{t_rng.low:.3g}, {t_rng.high:.3g}] degC '
+            'and was clamped',
+        ),
+        (
+            counters.imu_tdot_clamped,
+            'Tdot was clamped (to the calibrated range with --clamp-tdot, else to '
+            'tdot_limit_degC_per_min)',
+        ),
+        (
+            counters.imu_tdot_extrapolated,
+            f'Tdot left the calibrated range [{r_rng.low:.3g}, {r_rng.high:.3g}] degC/min; the '
+            'linear Tdot terms were applied beyond it',
+        ),
+    ):
         if count:
-            hint = f'; {flag} applies the linear term beyond it' if flag else ''
             notes.append(
-                f'note: {name}: {what} left the calibrated range [{rng.low:.3g}, {rng.high:.3g}] '
-                f'{unit} for {100 * count / total:.0f} % of the gyro samples and was clamped{hint}'
+                f'note: {name}: {text} for {100 * count / total:.0f} % of the gyro samples'
             )
     return notes

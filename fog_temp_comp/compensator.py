@@ -35,8 +35,16 @@ class GuardSettings:
     stale_policy : str
         With stale temperature: ``'hold'`` keeps applying the last correction, ``'none'`` passes
         the gyro rate through uncorrected.
-    clamp_temperature, clamp_tdot : bool
-        Clamp T and Tdot to the calibrated range (no silent extrapolation; reported either way).
+    clamp_temperature : bool
+        Clamp T to the calibrated range (a polynomial in T is not extrapolated; reported).
+    clamp_tdot : bool
+        Clamp Tdot to the calibrated range. Off by default: the Tdot terms are linear physics
+        (the Shupe effect), so a model fitted on a 0.2 degC/min ramp is applied to a faster
+        warm-up, up to ``tdot_limit_degC_per_min``; beyond the calibrated range is reported
+        (``tdot_out_of_range``, counter ``imu_tdot_extrapolated``).
+    tdot_limit_degC_per_min : float
+        Bound on ``|Tdot|`` (and the lagged Tdot) fed to the model when ``clamp_tdot`` is off,
+        degC/min; values beyond it are clamped to it (reported as clamped).
     time_jump_threshold_s : float
         A stamp this far behind the previous one is a time jump (bag looped, clock reset) and
         resets the filter state; a smaller step back is an out-of-order message.
@@ -51,7 +59,8 @@ class GuardSettings:
     temperature_timeout_s: float = 10.0
     stale_policy: str = 'hold'
     clamp_temperature: bool = True
-    clamp_tdot: bool = True
+    clamp_tdot: bool = False
+    tdot_limit_degC_per_min: float = 5.0
     time_jump_threshold_s: float = 1.0
     max_temperature_step_degC: float = 2.0
     max_temperature_rate_degC_per_min: float = 20.0
@@ -67,6 +76,7 @@ class GuardSettings:
             'time_jump_threshold_s',
             'max_temperature_step_degC',
             'max_temperature_rate_degC_per_min',
+            'tdot_limit_degC_per_min',
         ):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and value > 0 and math.isfinite(value)):
@@ -90,7 +100,8 @@ class CompensatorCounters:
     imu_nonfinite: int = 0  # NaN/inf component(s) left as they were, others corrected
     imu_zero_stamp: int = 0  # no usable stamp: corrected with the current correction
     imu_temperature_clamped: int = 0  # corrected with T clamped to the calibrated range
-    imu_tdot_clamped: int = 0  # corrected with Tdot clamped to the calibrated range
+    imu_tdot_clamped: int = 0  # corrected with Tdot clamped (calibrated range, or the limit)
+    imu_tdot_extrapolated: int = 0  # corrected with Tdot beyond the calibrated range (linear)
     temperature_accepted: int = 0
     temperature_rejected: int = 0  # NaN/inf value or stamp
     temperature_duplicate: int = 0
@@ -131,6 +142,8 @@ class CompensatorStatus:
     tdot_raw_degC_per_min: float = math.nan
     temperature_used_degC: float = math.nan
     tdot_used_degC_per_min: float = 0.0
+    tdot_lag_used_degC_per_min: float = 0.0
+    tdot_std_degC_per_min: float = math.nan
     temperature_clamped: bool = False
     tdot_clamped: bool = False
     temperature_out_of_range: bool = False
@@ -175,7 +188,7 @@ class Compensator:
         self._pending: list[tuple[float, float]] = []  # candidate samples of a temperature step
         self._last_temperature = math.nan
         # scalar evaluation of the model (the per-message hot path; no small numpy arrays)
-        self._term_functions: list[Callable[[float, float], float]] = [
+        self._term_functions: list[Callable[[float, float, float], float]] = [
             SCALAR_TERMS[term] for term in model.terms
         ]
         self._coefficient_rows = model.coefficients.tolist()
@@ -240,6 +253,7 @@ class Compensator:
             status.temperature_degC = estimate.temperature_degC
             status.tdot_degC_per_min = estimate.tdot_degC_per_min
             status.tdot_raw_degC_per_min = estimate.raw_tdot_degC_per_min
+            status.tdot_std_degC_per_min = estimate.tdot_std_degC_per_min
         status.estimator_ready = self._estimator.ready
         return True
 
@@ -348,7 +362,11 @@ class Compensator:
         if estimate is None:
             return
         status = self.status
+        guard = self._guard
         tdot = estimate.tdot_degC_per_min
+        tdot_lag = estimate.tdot_lag_degC_per_min
+        if math.isnan(tdot_lag):
+            tdot_lag = tdot
         # the estimate refers to a past instant (grid bins lag); extrapolate at most this far
         elapsed_s = min(max(stamp_s - estimate.stamp_s, 0.0), self._horizon_s)
         temperature = estimate.temperature_degC + tdot * elapsed_s / S_PER_MIN
@@ -356,21 +374,26 @@ class Compensator:
         t_low, t_high, r_low, r_high = t_range.low, t_range.high, r_range.low, r_range.high
         status.temperature_out_of_range = not t_low <= temperature <= t_high
         status.tdot_out_of_range = not r_low <= tdot <= r_high
-        t_used = (
-            min(max(temperature, t_low), t_high) if self.guard.clamp_temperature else (temperature)
-        )
-        r_used = min(max(tdot, r_low), r_high) if self.guard.clamp_tdot else tdot
+        t_used = min(max(temperature, t_low), t_high) if guard.clamp_temperature else temperature
+        if not guard.clamp_tdot:
+            r_high = guard.tdot_limit_degC_per_min
+            r_low = -r_high
+        r_used = min(max(tdot, r_low), r_high)
+        rl_used = min(max(tdot_lag, r_low), r_high)
         status.temperature_clamped = t_used != temperature
-        status.tdot_clamped = r_used != tdot
+        status.tdot_clamped = r_used != tdot or rl_used != tdot_lag
         if status.temperature_clamped:
             status.counters.imu_temperature_clamped += 1
         if status.tdot_clamped:
             status.counters.imu_tdot_clamped += 1
+        elif status.tdot_out_of_range:
+            status.counters.imu_tdot_extrapolated += 1
         status.temperature_used_degC = t_used
         status.tdot_used_degC_per_min = r_used
+        status.tdot_lag_used_degC_per_min = rl_used
         cx = cy = cz = 0.0
         for term, row in zip(self._term_functions, self._coefficient_rows, strict=True):
-            value = term(t_used, r_used)
+            value = term(t_used, r_used, rl_used)
             cx += value * row[0]
             cy += value * row[1]
             cz += value * row[2]

@@ -227,6 +227,16 @@ class DenoiseSettings:
         Time constant of the first-order lag from the temperature sensor to the fibre coil, s
         (0: the sensor reads the coil). Any method: its temperature and Tdot output pass
         through the lag (:mod:`fog_temp_comp.coil`); ``calibrate`` can fit it.
+    tdot_lag_s : float
+        Time constant of the first-order lag that makes the model term ``Tdot_lag`` from Tdot,
+        s (0: ``Tdot_lag`` is Tdot itself). With the ``Tdot`` term it forms a lead-lag from
+        sensor to coil of either sign (:mod:`fog_temp_comp.model`); ``calibrate`` chooses it.
+    tdot_shrink_sigmas : float
+        Shrink Tdot toward 0 where it is not significant: Tdot is multiplied by
+        ``max(0, 1 - (k * sigma / Tdot)^2)`` (a non-negative garrote) with ``k`` this value and
+        ``sigma`` the estimator's posterior standard deviation of Tdot (method ``'kalman'``
+        only; 0: off). Large at start-up, so the Tdot terms enter as the estimate becomes
+        trustworthy; at constant temperature it keeps estimator noise out of the output.
 
     """
 
@@ -247,6 +257,8 @@ class DenoiseSettings:
     temperature_noise_degC: float = 0.02
     temperature_quantum_degC: float = 0.0625
     coil_lag_s: float = 0.0
+    tdot_lag_s: float = 0.0
+    tdot_shrink_sigmas: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field; raise ValueError naming the offending field."""
@@ -295,7 +307,13 @@ class DenoiseSettings:
         if walk <= 0.0:
             raise ValueError(f'kalman_rate_walk_degC_per_min_per_sqrt_s must be > 0, got {walk!r}')
         object.__setattr__(self, 'kalman_rate_walk_degC_per_min_per_sqrt_s', walk)
-        for name in ('temperature_noise_degC', 'temperature_quantum_degC', 'coil_lag_s'):
+        for name in (
+            'temperature_noise_degC',
+            'temperature_quantum_degC',
+            'coil_lag_s',
+            'tdot_lag_s',
+            'tdot_shrink_sigmas',
+        ):
             value = _check_float(name, getattr(self, name))
             if value < 0.0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)!r}')

@@ -68,7 +68,7 @@ def build_report(
         if status.tdot_clamped:
             reasons.append((WARN, 'Tdot outside calibrated range, clamped'))
         elif status.tdot_out_of_range:
-            reasons.append((WARN, 'Tdot outside calibrated range, extrapolating'))
+            reasons.append((WARN, 'Tdot outside calibrated range, extrapolating the linear terms'))
     for name, text in _WARN_COUNTERS.items():
         delta = getattr(counters, name) - getattr(previous, name)
         if delta > 0:

@@ -2,9 +2,16 @@
 
 The paper's model is ``D [deg/h] = D0 + DT * T [degC] + DTdot * Tdot [degC/min]``; every term has a
 named coefficient whose key carries its unit, so the YAML file and the code say the same thing.
-Beyond the paper, ``T2`` (``T^2``, a curvature of the static drift) and ``T_Tdot`` (``T * Tdot``,
-a temperature-dependent rate sensitivity) are available; the YAML's ``terms`` list says which
-terms a model has.
+Beyond the paper, ``T2`` (``T^2``, a curvature of the static drift), ``T_Tdot`` (``T * Tdot``,
+a temperature-dependent rate sensitivity) and ``Tdot_lag`` are available; the YAML's ``terms``
+list says which terms a model has.
+
+``Tdot_lag`` is Tdot through a first-order lag of time constant ``tdot_lag_s`` (the ``denoise``
+block). With ``Tdot`` beside it, the pair is a lead-lag from the sensor's Tdot to the coil's:
+``b0 * Tdot + b1 * lag(Tdot)`` is ``(b0 + b1 + b0 * tau * s) / (1 + tau * s)`` times Tdot, a
+lag of the coil behind the sensor when ``b0`` is small, a lead (the sensor behind the coil) when
+``b1`` has the opposite sign of ``b0``, and the paper's model when ``b1 = 0``. Per axis, so
+coils at different places get their own.
 """
 
 from __future__ import annotations
@@ -19,23 +26,28 @@ from fog_temp_comp.units import AXES
 
 FloatArray = NDArray[np.float64]
 
-#: term name -> (coefficient key with unit, function of (T degC, Tdot degC/min))
-TERMS: dict[str, tuple[str, Callable[[FloatArray, FloatArray], FloatArray]]] = {
-    'const': ('d0_deg_h', lambda t, r: np.ones_like(t)),
-    'T': ('dt_deg_h_per_degC', lambda t, r: t),
-    'Tdot': ('dtdot_deg_h_per_degC_per_min', lambda t, r: r),
-    'T2': ('dt2_deg_h_per_degC2', lambda t, r: t * t),
-    'T_Tdot': ('dttdot_deg_h_per_degC2_per_min', lambda t, r: t * r),
+#: term name -> (coefficient key with unit, function of (T degC, Tdot degC/min, lagged Tdot
+#: degC/min))
+TERMS: dict[str, tuple[str, Callable[[FloatArray, FloatArray, FloatArray], FloatArray]]] = {
+    'const': ('d0_deg_h', lambda t, r, rl: np.ones_like(t)),
+    'T': ('dt_deg_h_per_degC', lambda t, r, rl: t),
+    'Tdot': ('dtdot_deg_h_per_degC_per_min', lambda t, r, rl: r),
+    'T2': ('dt2_deg_h_per_degC2', lambda t, r, rl: t * t),
+    'T_Tdot': ('dttdot_deg_h_per_degC2_per_min', lambda t, r, rl: t * r),
+    'Tdot_lag': ('dtdot_lag_deg_h_per_degC_per_min', lambda t, r, rl: rl),
 }
 #: the same functions on Python floats, for the per-message hot path (a numpy call on a scalar
 #: costs microseconds)
-SCALAR_TERMS: dict[str, Callable[[float, float], float]] = {
-    'const': lambda t, r: 1.0,
-    'T': lambda t, r: t,
-    'Tdot': lambda t, r: r,
-    'T2': lambda t, r: t * t,
-    'T_Tdot': lambda t, r: t * r,
+SCALAR_TERMS: dict[str, Callable[[float, float, float], float]] = {
+    'const': lambda t, r, rl: 1.0,
+    'T': lambda t, r, rl: t,
+    'Tdot': lambda t, r, rl: r,
+    'T2': lambda t, r, rl: t * t,
+    'T_Tdot': lambda t, r, rl: t * r,
+    'Tdot_lag': lambda t, r, rl: rl,
 }
+#: terms that are linear in Tdot (applied beyond the calibrated Tdot range, up to a bound)
+TDOT_TERMS = ('Tdot', 'T_Tdot', 'Tdot_lag')
 #: the paper's model, in order
 PAPER_TERMS = ('const', 'T', 'Tdot')
 #: candidate models beyond the paper's, simplest first (see :mod:`fog_temp_comp.selection`)
@@ -56,7 +68,10 @@ def coefficient_key(term: str) -> str:
 
 
 def design_matrix(
-    temperature_degC: ArrayLike, tdot_degC_per_min: ArrayLike, terms: Sequence[str]
+    temperature_degC: ArrayLike,
+    tdot_degC_per_min: ArrayLike,
+    terms: Sequence[str],
+    tdot_lag_degC_per_min: ArrayLike | None = None,
 ) -> FloatArray:
     """Regressors of the drift model.
 
@@ -66,6 +81,8 @@ def design_matrix(
         Gyro temperature and its rate.
     terms : sequence of str
         Term names from :data:`TERMS`.
+    tdot_lag_degC_per_min : array_like, shape (N,), optional
+        Tdot through the ``tdot_lag_s`` lag (term ``Tdot_lag``); default: Tdot itself.
 
     Returns
     -------
@@ -78,9 +95,16 @@ def design_matrix(
         raise ValueError(
             f'temperature and Tdot must be 1-D of equal length, got {t.shape}, {r.shape}'
         )
+    rl = (
+        r
+        if tdot_lag_degC_per_min is None
+        else np.atleast_1d(np.asarray(tdot_lag_degC_per_min, dtype=np.float64))
+    )
+    if rl.shape != r.shape:
+        raise ValueError(f'lagged Tdot must have the shape of Tdot, got {rl.shape}, {r.shape}')
     for term in terms:
         coefficient_key(term)
-    return np.stack([TERMS[term][1](t, r) for term in terms], axis=-1)
+    return np.stack([TERMS[term][1](t, r, rl) for term in terms], axis=-1)
 
 
 @dataclass(frozen=True)
@@ -139,10 +163,16 @@ class DriftModel:
         object.__setattr__(self, 'coefficients', coeffs)
         object.__setattr__(self, 'terms', tuple(self.terms))
 
-    def drift_deg_h(self, temperature_degC: ArrayLike, tdot_degC_per_min: ArrayLike) -> FloatArray:
+    def drift_deg_h(
+        self,
+        temperature_degC: ArrayLike,
+        tdot_degC_per_min: ArrayLike,
+        tdot_lag_degC_per_min: ArrayLike | None = None,
+    ) -> FloatArray:
         """Modelled drift in deg/h: shape (N, 3) for inputs of shape (N,), (3,) for scalars."""
         scalar = np.ndim(temperature_degC) == 0
-        drift = design_matrix(temperature_degC, tdot_degC_per_min, self.terms) @ self.coefficients
+        x = design_matrix(temperature_degC, tdot_degC_per_min, self.terms, tdot_lag_degC_per_min)
+        drift = x @ self.coefficients
         return drift[0] if scalar else drift
 
     def coefficient(self, term: str) -> FloatArray:

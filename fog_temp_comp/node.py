@@ -84,6 +84,16 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
         _T.DOUBLE,
         'first-order lag from the temperature sensor to the fibre coil (s), 0 = none',
     ),
+    'tdot_lag_s': (
+        'tdot_lag_s',
+        _T.DOUBLE,
+        'lag (s) making the Tdot_lag term (the lead-lag from sensor to coil), 0 = none',
+    ),
+    'tdot_shrink_sigmas': (
+        'tdot_shrink_sigmas',
+        _T.DOUBLE,
+        'shrink Tdot toward 0 below this many posterior std (start-up, soaks), kalman; 0 = off',
+    ),
 }
 _GUARD_DEFAULTS = GuardSettings()
 #: input guards: name -> (default, text)
@@ -102,7 +112,12 @@ GUARD_PARAMETERS: dict[str, tuple[Any, str]] = {
     ),
     'clamp_tdot': (
         _GUARD_DEFAULTS.clamp_tdot,
-        'clamp Tdot to the calibrated range (else extrapolate the linear term, reported)',
+        'clamp Tdot to the calibrated range (default off: the linear Tdot terms are applied '
+        'beyond it up to tdot_limit_degC_per_min, reported)',
+    ),
+    'tdot_limit_degC_per_min': (
+        _GUARD_DEFAULTS.tdot_limit_degC_per_min,
+        'bound on |Tdot| fed to the model when clamp_tdot is off (degC/min)',
     ),
     'time_jump_threshold_s': (
         _GUARD_DEFAULTS.time_jump_threshold_s,

@@ -88,6 +88,10 @@ class SimulationConfig:
         T * Tdot.
     bias_random_walk_deg_h_per_sqrt_h : float
         Rate random walk of the gyro bias (a slowly wandering bias), deg/h/sqrt(h).
+    sensor_lag_s : float
+        Time constant of a first-order lag from the fibre coil to the temperature sensor, s:
+        the sensor sits *behind* the coil and reads it late (0: the sensor reads the housing,
+        which the coil follows through ``coil_lag_s``).
 
     """
 
@@ -116,6 +120,7 @@ class SimulationConfig:
     t2_coefficients: tuple[float, float, float] = (0.0, 0.0, 0.0)
     t_tdot_coefficients: tuple[float, float, float] = (0.0, 0.0, 0.0)
     bias_random_walk_deg_h_per_sqrt_h: float = 0.0
+    sensor_lag_s: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ('imu_hz', 'temp_hz', 'lag_s', 'soak_duration_s'):
@@ -126,6 +131,7 @@ class SimulationConfig:
             'chamber_period_s',
             'cycle_oscillation_degC',
             'bias_random_walk_deg_h_per_sqrt_h',
+            'sensor_lag_s',
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
@@ -342,6 +348,10 @@ def simulate_run(
         coil_t, coil_tdot = first_order_lag(housing_t, dt, cfg.coil_lag_s)
     else:
         coil_t, coil_tdot = housing_t, housing_tdot
+    # what the temperature sensor reads: the housing, or the coil through its own lag
+    sensor_t = (
+        first_order_lag(coil_t, dt, cfg.sensor_lag_s)[0] if cfg.sensor_lag_s > 0 else (housing_t)
+    )
 
     n_imu = int(np.floor(duration * cfg.imu_hz))
     t_imu = np.arange(n_imu) / cfg.imu_hz
@@ -362,7 +372,7 @@ def simulate_run(
 
     n_temp = int(np.floor(duration * cfg.temp_hz))
     t_temp = np.arange(n_temp) / cfg.temp_hz
-    temp = np.interp(t_temp, t_grid, housing_t) + rng.normal(0.0, cfg.temp_noise_degC, n_temp)
+    temp = np.interp(t_temp, t_grid, sensor_t) + rng.normal(0.0, cfg.temp_noise_degC, n_temp)
     if cfg.temp_quantum_degC > 0:
         temp = np.round(temp / cfg.temp_quantum_degC) * cfg.temp_quantum_degC
     return SimulatedRun(

@@ -20,7 +20,9 @@ kalman     :class:`KalmanTdotEstimator`: Kalman filter on (T, Tdot) with a rando
 ========== =============================================================================
 
 With ``coil_lag_s > 0`` the estimate (temperature and Tdot) passes through the sensor-to-coil
-lag (:class:`CoilLagEstimator`, :mod:`fog_temp_comp.coil`).
+lag (:class:`CoilLagEstimator`, :mod:`fog_temp_comp.coil`). Last, :class:`TdotShaper` shrinks
+an insignificant Tdot toward 0 (``tdot_shrink_sigmas``) and makes the lagged Tdot of the model
+term ``Tdot_lag`` (``tdot_lag_s``).
 
 Every estimator gives the same result fed one sample at a time (:meth:`add`) or in blocks
 (:meth:`add_block`). :func:`offline_estimates` is what calibration uses over a whole record.
@@ -52,20 +54,29 @@ __all__ = [
     'LocalLinearTdotEstimator',
     'TdotEstimate',
     'TdotEstimator',
+    'TdotShaper',
     'make_estimator',
     'offline_estimates',
     'run_estimator',
+    'shrink_tdot',
 ]
 
 
 @dataclass(frozen=True)
 class TdotEstimate:
-    """An estimate valid at ``stamp_s``: temperature (degC) and its rate (degC/min)."""
+    """An estimate valid at ``stamp_s``: temperature (degC) and its rate (degC/min).
+
+    ``tdot_std_degC_per_min`` is the estimator's posterior standard deviation of Tdot (NaN where
+    the estimator has none); ``tdot_lag_degC_per_min`` is Tdot through the ``tdot_lag_s`` lag
+    (NaN before :class:`TdotShaper`).
+    """
 
     stamp_s: float
     temperature_degC: float
     tdot_degC_per_min: float
     raw_tdot_degC_per_min: float = math.nan
+    tdot_std_degC_per_min: float = math.nan
+    tdot_lag_degC_per_min: float = math.nan
 
 
 class TdotEstimator(Protocol):
@@ -359,7 +370,9 @@ class KalmanTdotEstimator:
             self._t, self._v = z, 0.0
             self._p00, self._p01 = self.r, 0.0
             self._p11 = (self.PRIOR_TDOT_DEGC_PER_MIN / S_PER_MIN) ** 2
-            self._estimate = TdotEstimate(stamp_s, z, 0.0)
+            self._estimate = TdotEstimate(
+                stamp_s, z, 0.0, tdot_std_degC_per_min=self.PRIOR_TDOT_DEGC_PER_MIN
+            )
             return True
         dt = stamp_s - self._stamp
         if not dt > 0.0:
@@ -381,7 +394,12 @@ class KalmanTdotEstimator:
         self._stamp = stamp_s
         if not self._ready and abs(self._p11 - previous) <= 1e-3 * self._p11:
             self._ready = True
-        self._estimate = TdotEstimate(stamp_s, self._t, self._v * S_PER_MIN)
+        self._estimate = TdotEstimate(
+            stamp_s,
+            self._t,
+            self._v * S_PER_MIN,
+            tdot_std_degC_per_min=math.sqrt(max(self._p11, 0.0)) * S_PER_MIN,
+        )
         return True
 
     def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
@@ -428,6 +446,7 @@ class CoilLagEstimator:
             self._lag_t.update(e.stamp_s, e.temperature_degC),
             self._lag_r.update(e.stamp_s, e.tdot_degC_per_min),
             e.raw_tdot_degC_per_min,
+            e.tdot_std_degC_per_min,
         )
         return self._estimate
 
@@ -462,8 +481,87 @@ class CoilLagEstimator:
         self._estimate = None
 
 
+def shrink_tdot(tdot_degC_per_min: float, std_degC_per_min: float, sigmas: float) -> float:
+    """Non-negative garrote of Tdot: ``tdot * max(0, 1 - (sigmas * std / tdot)^2)``, degC/min.
+
+    Unchanged when ``sigmas`` is 0 or the standard deviation is unknown (NaN).
+    """
+    if not sigmas > 0.0 or math.isnan(std_degC_per_min):
+        return tdot_degC_per_min
+    threshold = sigmas * std_degC_per_min
+    if abs(tdot_degC_per_min) <= threshold:
+        return 0.0
+    return tdot_degC_per_min * (1.0 - (threshold / tdot_degC_per_min) ** 2)
+
+
+class TdotShaper:
+    """Any estimator followed by the Tdot shrinkage and the ``Tdot_lag`` lag.
+
+    Tdot is shrunk toward 0 by :func:`shrink_tdot` with ``settings.tdot_shrink_sigmas``, then
+    its lag of ``settings.tdot_lag_s`` (s) fills ``tdot_lag_degC_per_min`` (the shrunk Tdot
+    itself when the time constant is 0).
+
+    Parameters
+    ----------
+    inner : TdotEstimator
+        The estimator (possibly with the coil lag).
+    settings : DenoiseSettings
+        ``tdot_shrink_sigmas`` and ``tdot_lag_s``.
+
+    """
+
+    def __init__(self, inner: TdotEstimator, settings: DenoiseSettings) -> None:
+        self.inner = inner
+        self._sigmas = settings.tdot_shrink_sigmas
+        self._lag = CoilLag(settings.tdot_lag_s)
+        self._estimate: TdotEstimate | None = None
+
+    def _apply(self, e: TdotEstimate) -> TdotEstimate:
+        tdot = shrink_tdot(e.tdot_degC_per_min, e.tdot_std_degC_per_min, self._sigmas)
+        self._estimate = dataclasses.replace(
+            e, tdot_degC_per_min=tdot, tdot_lag_degC_per_min=self._lag.update(e.stamp_s, tdot)
+        )
+        return self._estimate
+
+    def add(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Feed the inner estimator; shape its new estimate."""
+        if not self.inner.add(stamp_s, temperature_degC):
+            return False
+        estimate = self.inner.estimate
+        assert estimate is not None
+        self._apply(estimate)
+        return True
+
+    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
+        """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
+        return [self._apply(e) for e in self.inner.add_block(stamps_s, temperature_degC)]
+
+    @property
+    def estimate(self) -> TdotEstimate | None:
+        """The shaped latest estimate."""
+        return self._estimate
+
+    @property
+    def ready(self) -> bool:
+        """Whether the inner estimator is warmed up."""
+        return self.inner.ready
+
+    def reset(self) -> None:
+        """Forget all samples."""
+        self.inner.reset()
+        self._lag.reset()
+        self._estimate = None
+
+
 def make_estimator(settings: DenoiseSettings) -> TdotEstimator:
-    """The online Tdot estimator selected by ``settings.method`` (lagged if ``coil_lag_s``)."""
+    """The online Tdot estimator selected by ``settings.method``.
+
+    Followed by the coil lag if ``coil_lag_s``, then always by :class:`TdotShaper`.
+    """
+    return TdotShaper(_lagged_estimator(settings), settings)
+
+
+def _lagged_estimator(settings: DenoiseSettings) -> TdotEstimator:
     base: TdotEstimator
     if settings.method in GRID_METHODS:
         base = GridTdotEstimator(settings)
@@ -480,11 +578,17 @@ def make_estimator(settings: DenoiseSettings) -> TdotEstimator:
 
 @dataclass(frozen=True)
 class EstimateSeries:
-    """A stream of estimates as arrays, each shape (n,): stamp s, degC, degC/min."""
+    """A stream of estimates as arrays, each shape (n,): stamp s, degC, degC/min.
+
+    ``tdot_std_degC_per_min`` (posterior std, NaN where unknown) and ``tdot_lag_degC_per_min``
+    (Tdot through the ``tdot_lag_s`` lag; None until :meth:`shaped`) are optional.
+    """
 
     stamp_s: FloatArray
     temperature_degC: FloatArray
     tdot_degC_per_min: FloatArray
+    tdot_std_degC_per_min: FloatArray | None = None
+    tdot_lag_degC_per_min: FloatArray | None = None
 
     @staticmethod
     def from_estimates(estimates: list[TdotEstimate]) -> EstimateSeries:
@@ -493,6 +597,8 @@ class EstimateSeries:
             np.array([e.stamp_s for e in estimates], dtype=np.float64),
             np.array([e.temperature_degC for e in estimates], dtype=np.float64),
             np.array([e.tdot_degC_per_min for e in estimates], dtype=np.float64),
+            np.array([e.tdot_std_degC_per_min for e in estimates], dtype=np.float64),
+            np.array([e.tdot_lag_degC_per_min for e in estimates], dtype=np.float64),
         )
 
     def lagged(self, coil_lag_s: float) -> EstimateSeries:
@@ -503,6 +609,22 @@ class EstimateSeries:
             self.stamp_s,
             coil_lag(self.stamp_s, self.temperature_degC, coil_lag_s),
             coil_lag(self.stamp_s, self.tdot_degC_per_min, coil_lag_s),
+            self.tdot_std_degC_per_min,
+        )
+
+    def shaped(self, tdot_shrink_sigmas: float, tdot_lag_s: float) -> EstimateSeries:
+        """What :class:`TdotShaper` does online, on the whole series (same result)."""
+        tdot = self.tdot_degC_per_min
+        std = self.tdot_std_degC_per_min
+        if tdot_shrink_sigmas > 0 and std is not None:
+            threshold = tdot_shrink_sigmas * np.where(np.isnan(std), 0.0, std)
+            with np.errstate(divide='ignore', invalid='ignore'):
+                gain = np.where(np.abs(tdot) > threshold, 1.0 - (threshold / tdot) ** 2, 0.0)
+            tdot = tdot * gain
+        return dataclasses.replace(
+            self,
+            tdot_degC_per_min=tdot,
+            tdot_lag_degC_per_min=coil_lag(self.stamp_s, tdot, tdot_lag_s),
         )
 
 
@@ -540,7 +662,9 @@ def offline_estimates(
     stamps_s, temperature_degC : array_like, shape (n,)
         Temperature samples (s, degC), stamps non-decreasing.
     coil_lag : bool
-        Apply ``settings.coil_lag_s``.
+        Apply ``settings.coil_lag_s`` and then the shaping of :class:`TdotShaper` (Tdot
+        shrinkage, ``Tdot_lag``), as online; False returns the estimator's own output (for a
+        caller that lags it itself, then calls :meth:`EstimateSeries.shaped`).
     online : bool
         Run the online estimator causally for the grid methods too (what the node computes;
         for ``'wavelet'`` this includes the sliding window's edge effects and delay).
@@ -556,6 +680,12 @@ def offline_estimates(
         )
         series = EstimateSeries(stamp[1:], temp[1:], denoise_offline(tdot_raw[1:], settings))
     else:
-        no_lag = dataclasses.replace(settings, coil_lag_s=0.0)
-        series = run_estimator(no_lag, stamps_s, temperature_degC)
-    return series.lagged(settings.coil_lag_s) if coil_lag else series
+        unshaped = dataclasses.replace(
+            settings, coil_lag_s=0.0, tdot_lag_s=0.0, tdot_shrink_sigmas=0.0
+        )
+        series = run_estimator(unshaped, stamps_s, temperature_degC)
+    if not coil_lag:
+        return series
+    return series.lagged(settings.coil_lag_s).shaped(
+        settings.tdot_shrink_sigmas, settings.tdot_lag_s
+    )

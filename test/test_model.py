@@ -97,8 +97,12 @@ def test_scalar_terms_equal_the_vectorised_ones() -> None:
     assert set(SCALAR_TERMS) == set(TERMS)
     t = np.array([-40.0, 0.0, 12.5, 60.0])
     r = np.array([-1.0, 0.0, 0.3, 0.05])
+    rl = np.array([-0.5, 0.1, 0.2, 0.0])
     for name, (_, vectorised) in TERMS.items():
-        expected = np.broadcast_to(vectorised(t, r), t.shape)
-        got = [SCALAR_TERMS[name](float(a), float(b)) for a, b in zip(t, r, strict=True)]
+        expected = np.broadcast_to(vectorised(t, r, rl), t.shape)
+        got = [
+            SCALAR_TERMS[name](float(a), float(b), float(c))
+            for a, b, c in zip(t, r, rl, strict=True)
+        ]
         assert all(type(v) is float for v in got), name
         np.testing.assert_array_equal(got, expected, err_msg=name)

@@ -18,6 +18,7 @@ from fog_temp_comp.tdot import (
     KalmanTdotEstimator,
     LocalLinearTdotEstimator,
     TdotEstimate,
+    TdotShaper,
     make_estimator,
     offline_estimates,
     run_estimator,
@@ -116,11 +117,18 @@ def test_noise_free_ramp_is_tracked(name: str) -> None:
 
 
 def test_make_estimator_types() -> None:
-    assert type(make_estimator(SETTINGS['wavelet'])) is GridTdotEstimator
-    assert type(make_estimator(SETTINGS['iir'])) is GridTdotEstimator
-    assert type(make_estimator(SETTINGS['llr'])) is LocalLinearTdotEstimator
-    assert type(make_estimator(SETTINGS['kalman'])) is KalmanTdotEstimator
-    lagged = make_estimator(SETTINGS['kalman_lag'])
+    """Every estimator ends in the shaper (shrinkage, Tdot_lag); the coil lag sits before it."""
+
+    def inner(settings: DenoiseSettings) -> object:
+        shaper = make_estimator(settings)
+        assert type(shaper) is TdotShaper
+        return shaper.inner
+
+    assert type(inner(SETTINGS['wavelet'])) is GridTdotEstimator
+    assert type(inner(SETTINGS['iir'])) is GridTdotEstimator
+    assert type(inner(SETTINGS['llr'])) is LocalLinearTdotEstimator
+    assert type(inner(SETTINGS['kalman'])) is KalmanTdotEstimator
+    lagged = inner(SETTINGS['kalman_lag'])
     assert type(lagged) is CoilLagEstimator
     assert type(lagged.inner) is KalmanTdotEstimator
 
@@ -199,7 +207,9 @@ def test_kalman_ignores_repeated_stamp() -> None:
     est = KalmanTdotEstimator(DenoiseSettings(method='kalman'))
     assert est.add(T0, 20.0)
     assert not est.add(T0, 25.0)
-    assert est.estimate == TdotEstimate(T0, 20.0, 0.0)
+    assert est.estimate == TdotEstimate(
+        T0, 20.0, 0.0, tdot_std_degC_per_min=KalmanTdotEstimator.PRIOR_TDOT_DEGC_PER_MIN
+    )
 
 
 def test_llr_matches_polyfit_over_last_bins() -> None:
