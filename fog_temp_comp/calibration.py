@@ -23,12 +23,13 @@ from fog_temp_comp.fitstats import (
     AxisFitStats,
     IdentifiabilityError,
     check_identifiability,
-    fit_drift,
+    fit_ols,
     fit_summary,
 )
 from fog_temp_comp.grid import bin_means, temperature_grid
 from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range, design_matrix
 from fog_temp_comp.record import ChamberRecord
+from fog_temp_comp.tdot import EstimateSeries, offline_estimates
 from fog_temp_comp.units import DEG_H_PER_RAD_S
 
 FloatArray = NDArray[np.float64]
@@ -47,12 +48,25 @@ class CalibrationError(ValueError):
 class GridTable:
     """Calibration rows of one or more bags on the Tdot grid.
 
-    ``temperature_degC``, ``tdot_degC_per_min``: (K,); ``rate_deg_h``: (K, 3) gyro bin means.
+    ``temperature_degC``, ``tdot_degC_per_min``, ``tdot_lag_degC_per_min`` (Tdot through the
+    ``tdot_lag_s`` lag, for the ``Tdot_lag`` term; None means Tdot itself): (K,);
+    ``rate_deg_h``: (K, 3) gyro bin means.
     """
 
     temperature_degC: FloatArray
     tdot_degC_per_min: FloatArray
     rate_deg_h: FloatArray
+    tdot_lag_degC_per_min: FloatArray | None = None
+
+    @property
+    def tdot_lag(self) -> FloatArray:
+        """The lagged Tdot column, degC/min (Tdot itself when the table has none)."""
+        lag = self.tdot_lag_degC_per_min
+        return self.tdot_degC_per_min if lag is None else lag
+
+    def design(self, terms: Sequence[str]) -> FloatArray:
+        """Regressors of ``terms`` on these rows, shape (K, len(terms))."""
+        return design_matrix(self.temperature_degC, self.tdot_degC_per_min, terms, self.tdot_lag)
 
     @staticmethod
     def concatenate(tables: Sequence[GridTable]) -> GridTable:
@@ -61,6 +75,7 @@ class GridTable:
             np.concatenate([t.temperature_degC for t in tables]),
             np.concatenate([t.tdot_degC_per_min for t in tables]),
             np.concatenate([t.rate_deg_h for t in tables]),
+            np.concatenate([t.tdot_lag for t in tables]),
         )
 
 
@@ -68,7 +83,7 @@ def grid_table(
     record: ChamberRecord,
     settings: DenoiseSettings,
     *,
-    series: tuple[FloatArray, FloatArray, FloatArray] | None = None,
+    series: EstimateSeries | None = None,
     online_tdot: bool = False,
 ) -> GridTable:
     """Calibration rows of one bag: grid bins holding both gyro samples and T/Tdot estimates.
@@ -82,10 +97,11 @@ def grid_table(
         temperature and the offline-denoised slope between bins (whole-record ``wden`` for the
         wavelet, as in the paper); ``'llr'`` and ``'kalman'`` run the online estimator causally
         over the record (:func:`fog_temp_comp.tdot.offline_estimates`). A ``coil_lag_s`` lags
-        both temperature and Tdot, as the node does.
-    series : tuple of 3 ndarray, each shape (n,), optional
-        Precomputed, already lagged estimates ``(stamp_s, temperature_degC,
-        tdot_degC_per_min)`` to use instead (e.g. while searching the lag).
+        both temperature and Tdot, and the shaping (``tdot_shrink_sigmas``, ``tdot_lag_s``)
+        follows, as in the node.
+    series : EstimateSeries, optional
+        Precomputed estimates, already lagged and shaped, to use instead (e.g. while searching
+        a time constant).
     online_tdot : bool
         Grid methods too run the online estimator causally over the record (the Tdot the node
         will compute, e.g. the sliding wavelet with its edge effects) instead of the offline
@@ -94,17 +110,14 @@ def grid_table(
     Returns
     -------
     GridTable
-        Per bin: mean temperature (degC) and Tdot (degC/min) of the estimates in it, and the
-        gyro rate mean (deg/h).
+        Per bin: mean temperature (degC), Tdot and lagged Tdot (degC/min) of the estimates in
+        it, and the gyro rate mean (deg/h).
 
     """
-    # local imports: this function may only grow inside its body (shared file)
     from fog_temp_comp.denoise import GRID_METHODS
-    from fog_temp_comp.tdot import EstimateSeries, offline_estimates
 
     period = settings.tdot_period_s
     if series is None:
-        estimates: EstimateSeries
         if settings.method in GRID_METHODS and not online_tdot:
             _, stamp, temp, tdot_raw = temperature_grid(
                 record.temp_stamps_s, record.temperature_degC, period
@@ -115,20 +128,34 @@ def grid_table(
                     f'{record.path}: too few temperature bins ({tdot_raw.size + 1})'
                 )
             tdot = denoise_offline(tdot_raw, settings)
-            estimates = EstimateSeries(stamp, temp, tdot).lagged(settings.coil_lag_s)
+            series = (
+                EstimateSeries(stamp, temp, tdot)
+                .lagged(settings.coil_lag_s)
+                .shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s)
+            )
         else:
-            estimates = offline_estimates(
+            series = offline_estimates(
                 settings, record.temp_stamps_s, record.temperature_degC, online=True
             )
-        series = (estimates.stamp_s, estimates.temperature_degC, estimates.tdot_degC_per_min)
-    t_idx, _, means = bin_means(series[0], np.stack(series[1:], axis=1), period)
+    return table_of(record, series, period)
+
+
+def table_of(record: ChamberRecord, series: EstimateSeries, period_s: float) -> GridTable:
+    """Grid rows of one record from its (lagged, shaped) estimates, bins of ``period_s`` s."""
+    lag = series.tdot_lag_degC_per_min
+    columns = [
+        series.temperature_degC,
+        series.tdot_degC_per_min,
+        series.tdot_degC_per_min if lag is None else lag,
+    ]
+    t_idx, _, means = bin_means(series.stamp_s, np.stack(columns, axis=1), period_s)
     if t_idx.size < 2:
         raise CalibrationError(f'{record.path}: too few temperature bins ({t_idx.size})')
-    g_idx, _, rate = bin_means(record.imu_stamps_s, record.rates_rad_s, period)
+    g_idx, _, rate = bin_means(record.imu_stamps_s, record.rates_rad_s, period_s)
     common, ti, gi = np.intersect1d(t_idx, g_idx, assume_unique=True, return_indices=True)
     if common.size == 0:
         raise CalibrationError(f'{record.path}: gyro and temperature stamps do not overlap')
-    return GridTable(means[ti, 0], means[ti, 1], rate[gi] * DEG_H_PER_RAD_S)
+    return GridTable(means[ti, 0], means[ti, 1], rate[gi] * DEG_H_PER_RAD_S, means[ti, 2])
 
 
 def fit_table(
@@ -142,11 +169,10 @@ def fit_table(
     n, p = table.rate_deg_h.shape[0], len(terms)
     if n <= p:
         raise CalibrationError(f'{n} grid rows cannot fit {p} coefficients')
-    a = design_matrix(table.temperature_degC, table.tdot_degC_per_min, terms)
+    a = table.design(terms)
     if np.linalg.matrix_rank(a) < p:
         raise CalibrationError('design matrix is rank deficient; the terms are not identifiable')
-    return fit_drift(table.temperature_degC, table.tdot_degC_per_min, table.rate_deg_h, terms,
-                     lag=lag)  # fmt: skip
+    return fit_ols(a, table.rate_deg_h, names=tuple(terms), lag=lag)
 
 
 def check_identifiable(table: GridTable, terms: Sequence[str]) -> list[str]:
@@ -227,17 +253,11 @@ def calibrate_detailed(
     CalibrationResult
 
     """
-    # local imports: this function may only grow inside its body (shared file)
     import dataclasses
 
     from scipy import ndimage
 
     from fog_temp_comp.coil import search_time_constant
-
-    def astuple(e: EstimateSeries) -> tuple[FloatArray, FloatArray, FloatArray]:
-        return e.stamp_s, e.temperature_degC, e.tdot_degC_per_min
-
-    from fog_temp_comp.tdot import EstimateSeries, offline_estimates
 
     if not records:
         raise CalibrationError('no records to calibrate on')
@@ -255,14 +275,18 @@ def calibrate_detailed(
         def tables(tau: float) -> list[GridTable]:
             lagged = dataclasses.replace(settings, coil_lag_s=tau)
             return [
-                grid_table(r, lagged, series=astuple(b.lagged(tau)))
+                table_of(
+                    r,
+                    b.lagged(tau).shaped(lagged.tdot_shrink_sigmas, lagged.tdot_lag_s),
+                    lagged.tdot_period_s,
+                )
                 for r, b in zip(records, bases, strict=True)
             ]
 
         def objective(tau: float) -> float:
             parts = tables(tau)
             t = GridTable.concatenate(parts)
-            a = design_matrix(t.temperature_degC, t.tdot_degC_per_min, terms)
+            a = t.design(terms)
             resid = t.rate_deg_h - a @ np.linalg.lstsq(a, t.rate_deg_h, rcond=None)[0]
             total, start = 0.0, 0
             for part in parts:

@@ -44,6 +44,15 @@ def _add_guard(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> Non
     )
 
 
+def _terms(args: argparse.Namespace) -> tuple[str, ...] | None:
+    """``--terms`` as a tuple; None (choose by cross-validation) only when nothing was asked."""
+    if args.terms is not None:
+        return tuple(t.strip() for t in args.terms.split(',') if t.strip())
+    if args.denoise is not None:
+        return ('const', 'T', 'Tdot')
+    return None
+
+
 def _guard(args: argparse.Namespace) -> GuardSettings:
     if args.extrapolate_tdot:
         print('note: --extrapolate-tdot is the default now; the flag is ignored', file=sys.stderr)
@@ -91,7 +100,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
     p.add_argument('-o', '--output', type=Path, required=True, metavar='COEFFS.yaml')
     _add_topics(p)
-    _add_denoise(p, 'kalman')
+    _add_denoise(p, None)
     g = p.add_argument_group('input')
     g.add_argument(
         '--temp-field',
@@ -121,10 +130,13 @@ def build_parser() -> argparse.ArgumentParser:
     g = p.add_argument_group('model')
     g.add_argument(
         '--terms',
-        default='const,T,Tdot',
+        default=None,
         metavar='LIST',
-        help=f'model terms, comma separated, from {sorted(TERMS)} '
-        '(default const,T,Tdot, the paper)',
+        help=f'model terms, comma separated, from {sorted(TERMS)}. Default: calibrate '
+        'chooses the terms, the sensor-to-coil lead-lag and the Kalman settings by '
+        'cross-validation on the bags (any of --terms, --denoise, --fit-coil-lag, '
+        '--online-tdot or --leave-one-run-out fits what is asked instead; --terms '
+        "const,T,Tdot is the paper's model)",
     )
     g.add_argument(
         '--no-constant',
@@ -165,8 +177,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument(
         '--tolerance',
         type=float,
-        default=0.02,
-        help='keep the simplest candidate within this fraction of the best (0.02)',
+        default=None,
+        help='keep the simplest candidate within this fraction of the best score '
+        '(default 0.01 when calibrate chooses the model, else 0.02)',
     )
     g.add_argument(
         '--validate',
@@ -234,8 +247,8 @@ def run(args: argparse.Namespace) -> int:
             temp_topic=args.temp_topic,
             temp_field=args.temp_field,
             time_source=args.time_source,
-            settings=dataclasses.replace(RECOMMENDED_SETTINGS, method=args.denoise),
-            terms=tuple(t.strip() for t in args.terms.split(',') if t.strip()),
+            settings=dataclasses.replace(RECOMMENDED_SETTINGS, method=args.denoise or 'kalman'),
+            terms=_terms(args),
             fit_coil_lag=args.fit_coil_lag,
             online_tdot=args.online_tdot,
             hac_lag=args.hac_lag,

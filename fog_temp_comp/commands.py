@@ -120,7 +120,8 @@ class CalibrateOptions:
     temp_field: str | None = None
     time_source: str = 'header'
     settings: DenoiseSettings = RECOMMENDED_SETTINGS
-    terms: tuple[str, ...] = PAPER_TERMS
+    #: model terms; None (the default) lets calibrate choose the pipeline by cross-validation
+    terms: tuple[str, ...] | None = None
     fit_coil_lag: bool = False
     online_tdot: bool = False
     hac_lag: int | None = None
@@ -129,7 +130,9 @@ class CalibrateOptions:
     no_constant: bool = False
     heldout: tuple[Path, ...] = ()
     leave_one_run_out: bool = False
-    tolerance: float = 0.02
+    #: keep the simplest candidate within this fraction of the best (None: 0.01 when calibrate
+    #: chooses the model, 0.02 for the held-out selection of a given estimator)
+    tolerance: float | None = None
     validate: tuple[Path, ...] = ()
     report_dir: Path | None = None
     clamp_tdot: bool = False
@@ -155,7 +158,7 @@ def calibrate_command(
     if not output.parent.is_dir():
         raise ValueError(f'-o {output}: directory {output.parent} does not exist')
     opt = options or CalibrateOptions()
-    if not opt.terms:
+    if opt.terms is not None and not opt.terms:
         raise ValueError('--terms: give at least one model term')
     opt = dataclasses.replace(
         opt,
@@ -174,11 +177,35 @@ def calibrate_command(
     earth, provenance = _earth_correction(opt)
     period = opt.settings.tdot_period_s
     records = [earth(reduce_record(b, period, **read)) for b in bags]  # type: ignore[arg-type]
-    if opt.heldout or opt.leave_one_run_out:
+    automatic = (
+        opt.terms is None
+        and not opt.fit_coil_lag
+        and not opt.online_tdot
+        and not opt.leave_one_run_out
+        and opt.settings.method == 'kalman'
+    )
+    if automatic:
+        from fog_temp_comp import model_choice
+
+        heldout_records = [earth(read_record(b, **read)) for b in opt.heldout]  # type: ignore[arg-type]
+        result, cv_scores, cv_chosen = model_choice.choose_and_calibrate(
+            records,
+            opt.settings,
+            heldout=heldout_records,
+            tolerance=model_choice.TOLERANCE if opt.tolerance is None else opt.tolerance,
+            hac_lag=opt.hac_lag,
+            provenance=provenance,
+        )
+        print(model_choice.format_scores(cv_scores, cv_chosen), file=stdout)
+    elif opt.heldout or opt.leave_one_run_out:
         heldout = [earth(read_record(b, **read)) for b in opt.heldout] or None  # type: ignore[arg-type]
         candidates = default_candidates(opt.settings)
         coeffs, chosen, results = select_and_calibrate(
-            candidates, records, heldout, guard=guard, tolerance=opt.tolerance
+            candidates,
+            records,
+            heldout,
+            guard=guard,
+            tolerance=0.02 if opt.tolerance is None else opt.tolerance,
         )
         print(format_results(results, chosen), file=stdout)
         candidate = chosen.candidate
@@ -194,7 +221,7 @@ def calibrate_command(
         result = calibrate_detailed(
             records,
             opt.settings,
-            terms=opt.terms,
+            terms=opt.terms or PAPER_TERMS,
             fit_coil_lag=opt.fit_coil_lag,
             online_tdot=opt.online_tdot,
             hac_lag=opt.hac_lag,

@@ -67,8 +67,9 @@ class TdotEstimate:
     """An estimate valid at ``stamp_s``: temperature (degC) and its rate (degC/min).
 
     ``tdot_std_degC_per_min`` is the estimator's posterior standard deviation of Tdot (NaN where
-    the estimator has none); ``tdot_lag_degC_per_min`` is Tdot through the ``tdot_lag_s`` lag
-    (NaN before :class:`TdotShaper`).
+    the estimator has none), ``ready`` whether that estimator had finished warming up;
+    ``tdot_lag_degC_per_min`` is Tdot through the ``tdot_lag_s`` lag (NaN before
+    :class:`TdotShaper`).
     """
 
     stamp_s: float
@@ -77,6 +78,7 @@ class TdotEstimate:
     raw_tdot_degC_per_min: float = math.nan
     tdot_std_degC_per_min: float = math.nan
     tdot_lag_degC_per_min: float = math.nan
+    ready: bool = True
 
 
 class TdotEstimator(Protocol):
@@ -371,7 +373,7 @@ class KalmanTdotEstimator:
             self._p00, self._p01 = self.r, 0.0
             self._p11 = (self.PRIOR_TDOT_DEGC_PER_MIN / S_PER_MIN) ** 2
             self._estimate = TdotEstimate(
-                stamp_s, z, 0.0, tdot_std_degC_per_min=self.PRIOR_TDOT_DEGC_PER_MIN
+                stamp_s, z, 0.0, tdot_std_degC_per_min=self.PRIOR_TDOT_DEGC_PER_MIN, ready=False
             )
             return True
         dt = stamp_s - self._stamp
@@ -399,8 +401,77 @@ class KalmanTdotEstimator:
             self._t,
             self._v * S_PER_MIN,
             tdot_std_degC_per_min=math.sqrt(max(self._p11, 0.0)) * S_PER_MIN,
+            ready=self._ready,
         )
         return True
+
+    def add_series(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> EstimateSeries:
+        """Feed samples shape (n,) in order; the estimates as arrays (one per used sample).
+
+        The same arithmetic as :meth:`add`, bit for bit, without an object per sample (what
+        calibration runs over a whole record).
+        """
+        t_in = np.asarray(stamps_s, dtype=np.float64).ravel().tolist()
+        z_in = np.asarray(temperature_degC, dtype=np.float64).ravel().tolist()
+        if len(t_in) != len(z_in):
+            raise ValueError('stamps and temperatures must have equal length')
+        out_t: list[float] = []
+        out_x: list[float] = []
+        out_v: list[float] = []
+        out_p: list[float] = []
+        out_ready: list[bool] = []
+        k = 0
+        if self._estimate is None and t_in:
+            self.add(t_in[0], z_in[0])
+            out_t.append(t_in[0])
+            out_x.append(z_in[0])
+            out_v.append(0.0)
+            out_p.append(self._p11)
+            out_ready.append(False)
+            k = 1
+        q, r = self.q, self.r
+        stamp, t, v = self._stamp, self._t, self._v
+        p00, p01, p11, ready = self._p00, self._p01, self._p11, self._ready
+        for ts, z in zip(t_in[k:], z_in[k:], strict=True):
+            dt = ts - stamp
+            if not dt > 0.0:
+                continue
+            tp = t + dt * v
+            a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
+            a01 = p01 + dt * p11 + q * dt * dt / 2.0
+            a11 = p11 + q * dt
+            sv = a00 + r
+            k0, k1 = a00 / sv, a01 / sv
+            innovation = z - tp
+            t = tp + k0 * innovation
+            v += k1 * innovation
+            previous = p11
+            p00, p01, p11 = a00 - k0 * a00, a01 - k0 * a01, a11 - k1 * a01
+            stamp = ts
+            if not ready and abs(p11 - previous) <= 1e-3 * p11:
+                ready = True
+            out_t.append(ts)
+            out_x.append(t)
+            out_v.append(v)
+            out_p.append(p11)
+            out_ready.append(ready)
+        self._stamp, self._t, self._v = stamp, t, v
+        self._p00, self._p01, self._p11, self._ready = p00, p01, p11, ready
+        if out_t:
+            self._estimate = TdotEstimate(
+                out_t[-1],
+                t,
+                v * S_PER_MIN,
+                tdot_std_degC_per_min=math.sqrt(max(p11, 0.0)) * S_PER_MIN,
+                ready=ready,
+            )
+        return EstimateSeries(
+            np.array(out_t),
+            np.array(out_x),
+            np.array(out_v) * S_PER_MIN,
+            np.sqrt(np.maximum(np.array(out_p), 0.0)) * S_PER_MIN,
+            ready=np.array(out_ready, dtype=bool),
+        )
 
     def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
         """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
@@ -447,6 +518,7 @@ class CoilLagEstimator:
             self._lag_r.update(e.stamp_s, e.tdot_degC_per_min),
             e.raw_tdot_degC_per_min,
             e.tdot_std_degC_per_min,
+            ready=e.ready,
         )
         return self._estimate
 
@@ -481,13 +553,18 @@ class CoilLagEstimator:
         self._estimate = None
 
 
-def shrink_tdot(tdot_degC_per_min: float, std_degC_per_min: float, sigmas: float) -> float:
+def shrink_tdot(
+    tdot_degC_per_min: float, std_degC_per_min: float, sigmas: float, ready: bool = True
+) -> float:
     """Non-negative garrote of Tdot: ``tdot * max(0, 1 - (sigmas * std / tdot)^2)``, degC/min.
 
-    Unchanged when ``sigmas`` is 0 or the standard deviation is unknown (NaN).
+    0 while the estimator warms up (``ready`` False); unchanged when ``sigmas`` is 0 or the
+    standard deviation is unknown (NaN: estimators without one).
     """
     if not sigmas > 0.0 or math.isnan(std_degC_per_min):
         return tdot_degC_per_min
+    if not ready:
+        return 0.0
     threshold = sigmas * std_degC_per_min
     if abs(tdot_degC_per_min) <= threshold:
         return 0.0
@@ -497,7 +574,8 @@ def shrink_tdot(tdot_degC_per_min: float, std_degC_per_min: float, sigmas: float
 class TdotShaper:
     """Any estimator followed by the Tdot shrinkage and the ``Tdot_lag`` lag.
 
-    Tdot is shrunk toward 0 by :func:`shrink_tdot` with ``settings.tdot_shrink_sigmas``, then
+    Tdot is shrunk toward 0 by :func:`shrink_tdot` with ``settings.tdot_shrink_sigmas`` (and
+    is 0 while an estimator with a posterior standard deviation warms up), then
     its lag of ``settings.tdot_lag_s`` (s) fills ``tdot_lag_degC_per_min`` (the shrunk Tdot
     itself when the time constant is 0).
 
@@ -517,7 +595,7 @@ class TdotShaper:
         self._estimate: TdotEstimate | None = None
 
     def _apply(self, e: TdotEstimate) -> TdotEstimate:
-        tdot = shrink_tdot(e.tdot_degC_per_min, e.tdot_std_degC_per_min, self._sigmas)
+        tdot = shrink_tdot(e.tdot_degC_per_min, e.tdot_std_degC_per_min, self._sigmas, e.ready)
         self._estimate = dataclasses.replace(
             e, tdot_degC_per_min=tdot, tdot_lag_degC_per_min=self._lag.update(e.stamp_s, tdot)
         )
@@ -580,8 +658,9 @@ def _lagged_estimator(settings: DenoiseSettings) -> TdotEstimator:
 class EstimateSeries:
     """A stream of estimates as arrays, each shape (n,): stamp s, degC, degC/min.
 
-    ``tdot_std_degC_per_min`` (posterior std, NaN where unknown) and ``tdot_lag_degC_per_min``
-    (Tdot through the ``tdot_lag_s`` lag; None until :meth:`shaped`) are optional.
+    ``tdot_std_degC_per_min`` (posterior std, NaN where unknown), ``ready`` (estimator warmed
+    up) and ``tdot_lag_degC_per_min`` (Tdot through the ``tdot_lag_s`` lag; None until
+    :meth:`shaped`) are optional.
     """
 
     stamp_s: FloatArray
@@ -589,6 +668,7 @@ class EstimateSeries:
     tdot_degC_per_min: FloatArray
     tdot_std_degC_per_min: FloatArray | None = None
     tdot_lag_degC_per_min: FloatArray | None = None
+    ready: NDArray[np.bool_] | None = None
 
     @staticmethod
     def from_estimates(estimates: list[TdotEstimate]) -> EstimateSeries:
@@ -599,6 +679,7 @@ class EstimateSeries:
             np.array([e.tdot_degC_per_min for e in estimates], dtype=np.float64),
             np.array([e.tdot_std_degC_per_min for e in estimates], dtype=np.float64),
             np.array([e.tdot_lag_degC_per_min for e in estimates], dtype=np.float64),
+            np.array([e.ready for e in estimates], dtype=bool),
         )
 
     def lagged(self, coil_lag_s: float) -> EstimateSeries:
@@ -610,6 +691,7 @@ class EstimateSeries:
             coil_lag(self.stamp_s, self.temperature_degC, coil_lag_s),
             coil_lag(self.stamp_s, self.tdot_degC_per_min, coil_lag_s),
             self.tdot_std_degC_per_min,
+            ready=self.ready,
         )
 
     def shaped(self, tdot_shrink_sigmas: float, tdot_lag_s: float) -> EstimateSeries:
@@ -617,10 +699,13 @@ class EstimateSeries:
         tdot = self.tdot_degC_per_min
         std = self.tdot_std_degC_per_min
         if tdot_shrink_sigmas > 0 and std is not None:
-            threshold = tdot_shrink_sigmas * np.where(np.isnan(std), 0.0, std)
+            known = ~np.isnan(std)
+            threshold = tdot_shrink_sigmas * np.where(known, std, 0.0)
             with np.errstate(divide='ignore', invalid='ignore'):
                 gain = np.where(np.abs(tdot) > threshold, 1.0 - (threshold / tdot) ** 2, 0.0)
-            tdot = tdot * gain
+            if self.ready is not None:
+                gain = np.where(known & ~self.ready, 0.0, gain)
+            tdot = np.where(known, tdot * gain, tdot)
         return dataclasses.replace(
             self,
             tdot_degC_per_min=tdot,
@@ -680,10 +765,13 @@ def offline_estimates(
         )
         series = EstimateSeries(stamp[1:], temp[1:], denoise_offline(tdot_raw[1:], settings))
     else:
-        unshaped = dataclasses.replace(
-            settings, coil_lag_s=0.0, tdot_lag_s=0.0, tdot_shrink_sigmas=0.0
-        )
-        series = run_estimator(unshaped, stamps_s, temperature_degC)
+        if settings.method == 'kalman':
+            series = KalmanTdotEstimator(settings).add_series(stamps_s, temperature_degC)
+        else:
+            unshaped = dataclasses.replace(
+                settings, coil_lag_s=0.0, tdot_lag_s=0.0, tdot_shrink_sigmas=0.0
+            )
+            series = run_estimator(unshaped, stamps_s, temperature_degC)
     if not coil_lag:
         return series
     return series.lagged(settings.coil_lag_s).shaped(

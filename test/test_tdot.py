@@ -208,7 +208,11 @@ def test_kalman_ignores_repeated_stamp() -> None:
     assert est.add(T0, 20.0)
     assert not est.add(T0, 25.0)
     assert est.estimate == TdotEstimate(
-        T0, 20.0, 0.0, tdot_std_degC_per_min=KalmanTdotEstimator.PRIOR_TDOT_DEGC_PER_MIN
+        T0,
+        20.0,
+        0.0,
+        tdot_std_degC_per_min=KalmanTdotEstimator.PRIOR_TDOT_DEGC_PER_MIN,
+        ready=False,
     )
 
 

@@ -1,0 +1,463 @@
+"""``calibrate``'s default: the pipeline chosen from the training data by blocked cross-validation.
+
+A user's gyro is not the simulator's: the temperature sensor may lead or lag the coil, read in
+steps of 1/32 or 0.1 degC, at 0.2 or 10 Hz, and the static drift may bend. So with no flags,
+``calibrate``
+
+1. measures the temperature sensor from the bags: its quantization step and white noise
+   (:func:`sensor_noise`), which set the Kalman filter's measurement variance;
+2. builds candidates (:func:`default_structures`): the paper's terms, plus ``T2``, plus the
+   lead-lag ``Tdot_lag`` at a few time constants, each with a few Kalman bandwidths and Tdot
+   shrinkage levels;
+3. scores every candidate by cross-validation that never scores a row with a fit that saw it
+   (:func:`cross_validate`): with one bag, contiguous time blocks are held out in turn; with
+   several, one bag at a time; with ``--heldout`` bags, on those;
+4. keeps the simplest structure whose score is within a tolerance of the best one
+   (:func:`choose`), fits it on all the training data, and records the candidates, their
+   scores and the choice in the YAML's ``provenance.selection``.
+
+The score is the geometric mean, over held-out parts, axes and averaging times (10 s, 100 s), of
+the bias stability of the corrected rate divided by that of the raw rate: in a chamber the true
+rate is constant, so what is left is noise plus the drift the model missed. The Tdot estimates
+are computed causally over each whole record, exactly as the node computes them, so a held-out
+block is judged on what the node would output there.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fog_temp_comp.calibration import (
+    CalibrationError,
+    CalibrationResult,
+    GridTable,
+    calibrate_detailed,
+    table_of,
+)
+from fog_temp_comp.denoise import DenoiseSettings
+from fog_temp_comp.model import PAPER_TERMS
+from fog_temp_comp.record import ChamberRecord
+from fog_temp_comp.tdot import EstimateSeries, offline_estimates
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    'BLOCKS_PER_RUN',
+    'SensorNoise',
+    'Structure',
+    'StructureScore',
+    'choose',
+    'choose_and_calibrate',
+    'cross_validate',
+    'default_structures',
+    'sensor_noise',
+]
+
+#: contiguous held-out blocks of a single training run
+BLOCKS_PER_RUN = 5
+#: Kalman Tdot random-walk intensities tried, degC/min per sqrt(s)
+KALMAN_WALKS = (0.001, 0.003, 0.01)
+#: Tdot shrinkage levels tried, posterior standard deviations
+SHRINK_SIGMAS = (1.0, 2.0, 3.0)
+#: lead-lag time constants tried for the ``Tdot_lag`` term, s
+TDOT_LAGS_S = (30.0, 60.0, 120.0, 240.0, 480.0, 960.0)
+#: averaging times of the score, s
+SCORE_TAUS_S = (10.0, 100.0)
+#: default tolerance: the simplest structure within this fraction of the best score wins
+TOLERANCE = 0.01
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """The temperature sensor as the bags show it: step and white noise, degC."""
+
+    quantum_degC: float
+    noise_degC: float
+
+    def apply(self, settings: DenoiseSettings) -> DenoiseSettings:
+        """``settings`` with this sensor's quantization and noise (Kalman measurement model)."""
+        return dataclasses.replace(
+            settings,
+            temperature_quantum_degC=self.quantum_degC,
+            temperature_noise_degC=self.noise_degC,
+        )
+
+
+def sensor_noise(records: Sequence[ChamberRecord]) -> SensorNoise:
+    """Quantization step and white noise of the temperature sensor, from the raw samples.
+
+    The step is the smallest difference between distinct readings when most differences are
+    whole multiples of it (else 0: not quantized). The noise is from the second differences,
+    whose variance is 6 times that of white noise (a smooth chamber temperature adds nothing
+    at that lag); the quantization's ``step^2 / 12`` is taken out of it.
+
+    Parameters
+    ----------
+    records : sequence of ChamberRecord
+        Training runs (temperature samples at their full rate).
+
+    Returns
+    -------
+    SensorNoise
+
+    """
+    values = np.concatenate([r.temperature_degC for r in records])
+    levels = np.unique(values)
+    diffs = np.diff(levels)
+    diffs = diffs[diffs > 1e-9]
+    quantum = 0.0
+    if diffs.size:
+        step = float(diffs.min())
+        multiples = diffs / step
+        if step >= 1e-4 and np.mean(np.abs(multiples - np.round(multiples)) < 0.01) > 0.9:
+            quantum = step
+    second = np.concatenate([np.diff(r.temperature_degC, 2) for r in records])
+    total = float(np.mean(second * second) / 6.0) if second.size else 0.0
+    noise = math.sqrt(max(total - quantum * quantum / 12.0, 0.0))
+    if quantum == 0.0:
+        noise = max(noise, 1e-4)  # a model needs some measurement noise
+    return SensorNoise(quantum, noise)
+
+
+@dataclass(frozen=True)
+class Structure:
+    """One candidate pipeline: model terms and the Tdot estimator's free settings.
+
+    Attributes
+    ----------
+    terms : tuple of str
+        Model terms.
+    walk : float
+        Kalman Tdot random walk, degC/min per sqrt(s).
+    shrink_sigmas : float
+        Tdot shrinkage, posterior standard deviations.
+    tdot_lag_s : float
+        Time constant of ``Tdot_lag`` (0 without that term), s.
+
+    """
+
+    terms: tuple[str, ...]
+    walk: float
+    shrink_sigmas: float
+    tdot_lag_s: float = 0.0
+
+    @property
+    def model(self) -> str:
+        """The structure without the estimator settings, e.g. ``'const,T,Tdot,Tdot_lag'``."""
+        return ','.join(self.terms)
+
+    @property
+    def complexity(self) -> int:
+        """Fitted parameters per axis, plus one for the lead-lag time constant."""
+        return len(self.terms) + int('Tdot_lag' in self.terms)
+
+    @property
+    def name(self) -> str:
+        """Label for reports."""
+        lag = f', tdot_lag_s {self.tdot_lag_s:g}' if 'Tdot_lag' in self.terms else ''
+        return f'{self.model} (walk {self.walk:g}, shrink {self.shrink_sigmas:g}{lag})'
+
+    def settings(self, base: DenoiseSettings) -> DenoiseSettings:
+        """``base`` (a Kalman setting) with this structure's estimator settings."""
+        return dataclasses.replace(
+            base,
+            method='kalman',
+            kalman_rate_walk_degC_per_min_per_sqrt_s=self.walk,
+            tdot_shrink_sigmas=self.shrink_sigmas,
+            tdot_lag_s=self.tdot_lag_s if 'Tdot_lag' in self.terms else 0.0,
+            coil_lag_s=0.0,
+        )
+
+
+def default_structures(
+    walks: Sequence[float] = KALMAN_WALKS,
+    shrinks: Sequence[float] = SHRINK_SIGMAS,
+    lags_s: Sequence[float] = TDOT_LAGS_S,
+) -> list[Structure]:
+    """Every candidate: paper terms, ``+T2``, ``+Tdot_lag``, ``+T2+Tdot_lag`` x settings."""
+    out = []
+    for walk in walks:
+        for shrink in shrinks:
+            for extra in ((), ('T2',)):
+                terms = (*PAPER_TERMS, *extra)
+                out.append(Structure(terms, walk, shrink))
+                out += [Structure((*terms, 'Tdot_lag'), walk, shrink, lag) for lag in lags_s]
+    return out
+
+
+@dataclass
+class StructureScore:
+    """Cross-validated score of one structure (lower is better; ``inf`` if it failed)."""
+
+    structure: Structure
+    criterion: float = math.inf
+    error: str = ''
+    parts: list[float] = field(default_factory=list)
+
+
+def _series(
+    records: Sequence[ChamberRecord], base: DenoiseSettings, walk: float
+) -> list[EstimateSeries]:
+    settings = dataclasses.replace(
+        base,
+        method='kalman',
+        kalman_rate_walk_degC_per_min_per_sqrt_s=walk,
+        tdot_shrink_sigmas=0.0,
+        tdot_lag_s=0.0,
+        coil_lag_s=0.0,
+    )
+    return [
+        offline_estimates(settings, r.temp_stamps_s, r.temperature_degC, coil_lag=False)
+        for r in records
+    ]
+
+
+def _parts(
+    tables: Sequence[GridTable], heldout: Sequence[GridTable] | None
+) -> list[tuple[GridTable, GridTable]]:
+    """(training rows, held-out rows) of each fold."""
+    if heldout:
+        return [(GridTable.concatenate(tables), GridTable.concatenate(heldout))]
+    if len(tables) > 1:
+        return [
+            (GridTable.concatenate([t for j, t in enumerate(tables) if j != i]), tables[i])
+            for i in range(len(tables))
+        ]
+    (table,) = tables
+    n = table.rate_deg_h.shape[0]
+    edges = np.linspace(0, n, BLOCKS_PER_RUN + 1).round().astype(int)
+    folds = []
+    for lo, hi in itertools.pairwise(edges.tolist()):
+        test = np.zeros(n, dtype=bool)
+        test[lo:hi] = True
+        folds.append((_rows(table, ~test), _rows(table, test)))
+    return folds
+
+
+def _rows(table: GridTable, mask: NDArray[np.bool_]) -> GridTable:
+    return GridTable(
+        table.temperature_degC[mask],
+        table.tdot_degC_per_min[mask],
+        table.rate_deg_h[mask],
+        table.tdot_lag[mask],
+    )
+
+
+def _log_ratios(before: FloatArray, after: FloatArray, period_s: float) -> list[float]:
+    """log(stability after / before) per axis at each score tau (rows on the grid)."""
+    out = []
+    for tau in SCORE_TAUS_S:
+        k = max(1, round(tau / period_s))
+        m = before.shape[0] // k
+        if m < 3:
+            continue
+        b = before[: m * k].reshape(m, k, -1).mean(axis=1)
+        a = after[: m * k].reshape(m, k, -1).mean(axis=1)
+        sb, sa = np.std(b, axis=0, ddof=1), np.std(a, axis=0, ddof=1)
+        out += [float(np.log(x / y)) for x, y in zip(sa, sb, strict=True) if x > 0 and y > 0]
+    return out
+
+
+def _score(
+    folds: Sequence[tuple[GridTable, GridTable]], terms: Sequence[str], period_s: float
+) -> tuple[float, list[float]]:
+    logs: list[float] = []
+    for train, test in folds:
+        a = train.design(terms)
+        if a.shape[0] <= a.shape[1] or np.linalg.matrix_rank(a) < a.shape[1]:
+            raise CalibrationError('too few rows or a rank-deficient fold')
+        coef = np.linalg.lstsq(a, train.rate_deg_h, rcond=None)[0]
+        after = test.rate_deg_h - test.design(terms) @ coef
+        logs += _log_ratios(test.rate_deg_h, after, period_s)
+    if not logs:
+        raise CalibrationError('held-out parts too short to score')
+    return float(np.exp(np.mean(logs))), logs
+
+
+def cross_validate(
+    records: Sequence[ChamberRecord],
+    base: DenoiseSettings,
+    structures: Sequence[Structure],
+    heldout: Sequence[ChamberRecord] = (),
+) -> list[StructureScore]:
+    """Held-out score of every structure (see the module docstring for the folds).
+
+    Parameters
+    ----------
+    records : sequence of ChamberRecord
+        Training runs (the gyro may be reduced to grid means).
+    base : DenoiseSettings
+        Kalman settings with the sensor's noise; each structure sets its own free settings.
+    structures : sequence of Structure
+        The candidates.
+    heldout : sequence of ChamberRecord
+        Runs to score on instead of folds of the training runs.
+
+    Returns
+    -------
+    list of StructureScore
+        In the order of ``structures``.
+
+    """
+    period = base.tdot_period_s
+    cache: dict[float, tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
+    scores = []
+    for structure in structures:
+        result = StructureScore(structure)
+        scores.append(result)
+        if structure.walk not in cache:
+            cache[structure.walk] = (
+                _series(records, base, structure.walk),
+                _series(heldout, base, structure.walk),
+            )
+        train_series, test_series = cache[structure.walk]
+        lag = structure.tdot_lag_s if 'Tdot_lag' in structure.terms else 0.0
+        try:
+            tables = [
+                table_of(r, s.shaped(structure.shrink_sigmas, lag), period)
+                for r, s in zip(records, train_series, strict=True)
+            ]
+            tests = [
+                table_of(r, s.shaped(structure.shrink_sigmas, lag), period)
+                for r, s in zip(heldout, test_series, strict=True)
+            ]
+            result.criterion, result.parts = _score(_parts(tables, tests), structure.terms, period)
+        except CalibrationError as err:
+            result.error = str(err)
+    return scores
+
+
+def choose(scores: Sequence[StructureScore], tolerance: float = TOLERANCE) -> StructureScore:
+    """The simplest structure within ``tolerance`` of the best score (best settings for it).
+
+    Raises
+    ------
+    CalibrationError
+        If no structure could be scored.
+
+    """
+    ok = [s for s in scores if math.isfinite(s.criterion)]
+    if not ok:
+        errors = sorted({s.error for s in scores if s.error})
+        raise CalibrationError('no candidate model could be cross-validated: ' + '; '.join(errors))
+    best = min(s.criterion for s in ok)
+    within = [s for s in ok if s.criterion <= best * (1.0 + tolerance)]
+    return min(within, key=lambda s: (s.structure.complexity, s.criterion))
+
+
+def choose_and_calibrate(
+    records: Sequence[ChamberRecord],
+    base: DenoiseSettings,
+    *,
+    heldout: Sequence[ChamberRecord] = (),
+    structures: Sequence[Structure] | None = None,
+    tolerance: float = TOLERANCE,
+    hac_lag: int | None = None,
+    provenance: dict[str, Any] | None = None,
+) -> tuple[CalibrationResult, list[StructureScore], StructureScore]:
+    """Measure the sensor, cross-validate the candidates, fit the chosen one on all records.
+
+    Parameters
+    ----------
+    records : sequence of ChamberRecord
+        Training runs.
+    base : DenoiseSettings
+        Starting settings (grid period); the method becomes ``'kalman'``.
+    heldout : sequence of ChamberRecord
+        Runs to choose by instead of folds of the training runs.
+    structures : sequence of Structure, optional
+        Candidates (default :func:`default_structures`).
+    tolerance : float
+        Keep the simplest structure within this fraction of the best score.
+    hac_lag : int, optional
+        Newey-West lag of the final fit's standard errors.
+    provenance : dict, optional
+        Extra provenance entries.
+
+    Returns
+    -------
+    result : CalibrationResult
+        The chosen pipeline fitted on ``records``; ``provenance['selection']`` records the
+        choice.
+    scores : list of StructureScore
+        Every candidate's score.
+    chosen : StructureScore
+
+    """
+    if not records:
+        raise CalibrationError('no records to calibrate on')
+    noise = sensor_noise(records)
+    base = noise.apply(dataclasses.replace(base, method='kalman', coil_lag_s=0.0))
+    candidates = list(structures) if structures is not None else default_structures()
+    scores = cross_validate(records, base, candidates, heldout)
+    chosen = choose(scores, tolerance)
+    mode = (
+        'held-out bags'
+        if heldout
+        else 'leave one bag out'
+        if len(records) > 1
+        else f'{BLOCKS_PER_RUN} contiguous time blocks of the run, each held out in turn'
+    )
+    best_per_model: dict[str, StructureScore] = {}
+    for s in scores:
+        key = s.structure.model
+        if key not in best_per_model or s.criterion < best_per_model[key].criterion:
+            best_per_model[key] = s
+    selection = {
+        'chosen': chosen.structure.name,
+        'mode': mode,
+        'tolerance': tolerance,
+        'criterion': 'geometric mean over held-out parts, axes and 10 s / 100 s of bias '
+        'stability after / before (lower is better)',
+        'sensor': {
+            'temperature_quantum_degC': noise.quantum_degC,
+            'temperature_noise_degC': noise.noise_degC,
+        },
+        'models': {
+            key: {
+                'best': s.structure.name,
+                'criterion': s.criterion if math.isfinite(s.criterion) else None,
+                'complexity': s.structure.complexity,
+                **({'error': s.error} if s.error else {}),
+            }
+            for key, s in best_per_model.items()
+        },
+        'candidates': len(scores),
+    }
+    result = calibrate_detailed(
+        records,
+        chosen.structure.settings(base),
+        terms=chosen.structure.terms,
+        hac_lag=hac_lag,
+        provenance={**(provenance or {}), 'selection': selection},
+    )
+    return result, scores, chosen
+
+
+def format_scores(scores: Sequence[StructureScore], chosen: StructureScore) -> str:
+    """Plain-text table: the best settings of each model structure and its score."""
+    best: dict[str, StructureScore] = {}
+    for s in scores:
+        if s.structure.model not in best or s.criterion < best[s.structure.model].criterion:
+            best[s.structure.model] = s
+    head = f'{"model":<28} {"k":>2} {"best settings":<44} {"score":>7}'
+    lines = [head, '-' * len(head)]
+    for key, s in best.items():
+        settings = s.structure.name[len(key) + 2 : -1]
+        mark = ' <- chosen' if s.structure.model == chosen.structure.model else ''
+        value = f'{s.criterion:>7.4f}' if math.isfinite(s.criterion) else f'ERROR: {s.error}'
+        lines.append(f'{key:<28} {s.structure.complexity:>2} {settings:<44} {value}{mark}')
+    lines.append(f'chosen: {chosen.structure.name}')
+    lines.append(
+        '(cross-validated score: geometric mean of held-out stability after/before at 10 s and '
+        '100 s; k = fitted parameters per axis; the simplest within the tolerance wins)'
+    )
+    return '\n'.join(lines)
