@@ -177,9 +177,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument(
         '--tolerance',
         type=float,
-        default=None,
-        help='keep the simplest candidate within this fraction of the best score '
-        '(default 0.01 when calibrate chooses the model, else 0.02)',
+        default=0.02,
+        help='keep the simplest candidate within this fraction of the best score (0.02)',
     )
     g.add_argument(
         '--validate',

@@ -130,9 +130,8 @@ class CalibrateOptions:
     no_constant: bool = False
     heldout: tuple[Path, ...] = ()
     leave_one_run_out: bool = False
-    #: keep the simplest candidate within this fraction of the best (None: 0.01 when calibrate
-    #: chooses the model, 0.02 for the held-out selection of a given estimator)
-    tolerance: float | None = None
+    #: keep the simplest candidate within this fraction of the best score
+    tolerance: float = 0.02
     validate: tuple[Path, ...] = ()
     report_dir: Path | None = None
     clamp_tdot: bool = False
@@ -192,7 +191,7 @@ def calibrate_command(
             records,
             opt.settings,
             heldout=heldout_records,
-            tolerance=model_choice.TOLERANCE if opt.tolerance is None else opt.tolerance,
+            tolerance=opt.tolerance,
             hac_lag=opt.hac_lag,
             provenance=provenance,
         )
@@ -205,7 +204,7 @@ def calibrate_command(
             records,
             heldout,
             guard=guard,
-            tolerance=0.02 if opt.tolerance is None else opt.tolerance,
+            tolerance=opt.tolerance,
         )
         print(format_results(results, chosen), file=stdout)
         candidate = chosen.candidate

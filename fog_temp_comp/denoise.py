@@ -363,9 +363,11 @@ class DenoiseSettings:
         return cls(**{str(k): v for k, v in d.items()})  # type: ignore[arg-type]
 
 
-#: the online pipeline chosen by the accuracy study (``benchmarks/accuracy.py``): a Kalman
-#: filter on temperature and Tdot that knows the sensor's noise (0.02 degC) and quantization
-#: (1/16 degC); calibrate it with ``fit_coil_lag=True`` and the terms chosen on held-out runs
+#: the online Tdot estimator: a Kalman filter on temperature and Tdot. ``calibrate`` with no
+#: flags (:mod:`fog_temp_comp.model_choice`) measures the sensor's noise and quantization,
+#: chooses the rate walk and the lead-lag, and turns on the Tdot shrinkage; these are the
+#: settings of a fit with given ``--terms`` (the shrinkage off, so the coefficients keep their
+#: physical meaning)
 RECOMMENDED_SETTINGS = DenoiseSettings(method='kalman')
 
 

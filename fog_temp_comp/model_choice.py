@@ -40,6 +40,7 @@ from fog_temp_comp.calibration import (
     CalibrationResult,
     GridTable,
     calibrate_detailed,
+    check_identifiable,
     table_of,
 )
 from fog_temp_comp.denoise import DenoiseSettings
@@ -74,8 +75,9 @@ SHRINK_SIGMAS = (3.0,)
 TDOT_LAGS_S = (30.0, 60.0, 120.0, 240.0, 480.0, 960.0)
 #: averaging times of the score, s
 SCORE_TAUS_S = (10.0, 100.0)
-#: default tolerance: the simplest structure within this fraction of the best score wins
-TOLERANCE = 0.01
+#: default tolerance: the simplest structure within this fraction of the best score wins (a
+#: lead-lag that only makes up for the Kalman filter's own delay gains about 1 %)
+TOLERANCE = 0.02
 
 
 @dataclass(frozen=True)
@@ -400,6 +402,18 @@ def choose_and_calibrate(
     noise = sensor_noise(records)
     base = noise.apply(dataclasses.replace(base, method='kalman', coil_lag_s=0.0))
     candidates = list(structures) if structures is not None else default_structures()
+    # data that cannot identify even the paper's model is refused with the reason (a soak has
+    # no temperature swing, a constant temperature no Tdot spread), before any candidate
+    paper = [s for s in candidates if s.terms == PAPER_TERMS] or candidates[:1]
+    check_identifiable(
+        GridTable.concatenate(
+            [
+                table_of(r, s, base.tdot_period_s)
+                for r, s in zip(records, _series(records, base, paper[0].walk), strict=True)
+            ]
+        ),
+        PAPER_TERMS,
+    )
     scores = cross_validate(records, base, candidates, heldout)
     chosen = choose(scores, tolerance)
     mode = (

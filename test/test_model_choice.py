@@ -1,0 +1,140 @@
+"""calibrate's default model choice: sensor measurement, blocked cross-validation, lead or lag."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fog_temp_comp.calibration import CalibrationError, GridTable
+from fog_temp_comp.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.model import PAPER_TERMS
+from fog_temp_comp.model_choice import (
+    BLOCKS_PER_RUN,
+    Structure,
+    _parts,
+    choose,
+    choose_and_calibrate,
+    cross_validate,
+    sensor_noise,
+)
+from fog_temp_comp.simulate import SimulatedRun, SimulationConfig, simulate_run
+
+#: a 0.2 degC/min cycle over 0..40 degC with 30 min holds (about 8 h), gyro 0.5 Hz
+CHAMBER = SimulationConfig(
+    imu_hz=0.5,
+    temp_hz=1.0,
+    low_degC=0.0,
+    high_degC=40.0,
+    start_degC=20.0,
+    cycle_soak_s=1800.0,
+    lag_s=400.0,
+    arw_10s_deg_h=0.01,
+)
+
+
+def cycle(cfg: SimulationConfig, seed: int = 3) -> SimulatedRun:
+    """The training cycle of ``cfg``."""
+    return simulate_run('cycle', 0.2, cfg, seed=seed)
+
+
+@pytest.mark.parametrize(('quantum', 'noise'), [(0.05, 0.01), (1 / 16, 0.002), (0.0, 0.02)])
+def test_sensor_noise_is_measured_from_the_samples(quantum: float, noise: float) -> None:
+    cfg = dataclasses.replace(CHAMBER, temp_quantum_degC=quantum, temp_noise_degC=noise)
+    found = sensor_noise([cycle(cfg).as_record()])
+    assert found.quantum_degC == pytest.approx(quantum, abs=1e-9)
+    # quantization error (step^2/12) is taken out; what is left is the white noise
+    assert found.noise_degC == pytest.approx(noise, rel=0.25, abs=0.003)
+
+
+def test_folds_of_one_run_are_disjoint_contiguous_blocks() -> None:
+    """No row is ever scored by a fit that saw it: each fold holds one block out."""
+    n = 103
+    rows = np.arange(n, dtype=float)
+    table = GridTable(rows, rows, np.stack([rows] * 3, axis=1), rows)
+    folds = _parts([table], None)
+    assert len(folds) == BLOCKS_PER_RUN
+    seen = []
+    for train, test in folds:
+        held = test.temperature_degC
+        assert np.all(np.diff(held) == 1.0)  # contiguous
+        assert not set(held) & set(train.temperature_degC)
+        assert train.temperature_degC.size + held.size == n
+        seen += held.tolist()
+    assert sorted(seen) == rows.tolist()
+
+
+def test_folds_of_several_runs_leave_one_run_out() -> None:
+    tables = [GridTable(np.full(20, k), np.zeros(20), np.zeros((20, 3))) for k in range(3)]
+    folds = _parts(tables, None)
+    assert [set(test.temperature_degC) for _, test in folds] == [{0.0}, {1.0}, {2.0}]
+    assert all(k not in train.temperature_degC for k, (train, _) in enumerate(folds))
+
+
+def test_the_paper_plant_gets_the_paper_model() -> None:
+    """Nothing gained by T^2 or a lead-lag: the simplest model is kept."""
+    result, scores, chosen = choose_and_calibrate(
+        [cycle(CHAMBER).as_record()], RECOMMENDED_SETTINGS
+    )
+    assert chosen.structure.terms == PAPER_TERMS
+    assert result.coefficients.model.terms == PAPER_TERMS
+    assert all(np.isfinite(s.criterion) for s in scores)
+
+
+def effective_lead_s(terms: tuple[str, ...], coefficients: np.ndarray, tau_s: float) -> np.ndarray:
+    """Low-frequency lead (s, > 0) or lag (< 0) of ``b0 Tdot + b1 lag(Tdot)``, per axis."""
+    b0 = coefficients[terms.index('Tdot')]
+    b1 = coefficients[terms.index('Tdot_lag')]
+    return tau_s * -b1 / (b0 + b1)
+
+
+@pytest.mark.parametrize('position', ['behind', 'ahead'])
+def test_the_lead_lag_takes_the_sign_of_the_plant(position: str) -> None:
+    """Sensor behind the coil: a lead is fitted; ahead of it: a lag (per axis, by least squares)."""
+    lag = {'sensor_lag_s': 300.0} if position == 'behind' else {'coil_lag_s': 300.0}
+    cfg = dataclasses.replace(CHAMBER, **lag)
+    result, _, chosen = choose_and_calibrate([cycle(cfg).as_record()], RECOMMENDED_SETTINGS)
+    model = result.coefficients.model
+    assert 'Tdot_lag' in chosen.structure.terms
+    lead = effective_lead_s(
+        model.terms, model.coefficients, result.coefficients.denoise.tdot_lag_s
+    )
+    if position == 'behind':
+        assert np.all(lead > 100.0), lead
+    else:
+        assert np.all(lead < -100.0), lead
+    selection = result.coefficients.provenance['selection']
+    assert selection['chosen'] == chosen.structure.name
+    assert selection['sensor']['temperature_quantum_degC'] == pytest.approx(1 / 16)
+
+
+def test_choose_keeps_the_simplest_within_the_tolerance() -> None:
+    from fog_temp_comp.model_choice import StructureScore
+
+    simple = StructureScore(Structure(PAPER_TERMS, 0.01, 3.0), criterion=0.300)
+    rich = StructureScore(Structure((*PAPER_TERMS, 'T2'), 0.01, 3.0), criterion=0.298)
+    richer = StructureScore(
+        Structure((*PAPER_TERMS, 'T2', 'Tdot_lag'), 0.01, 3.0, 60.0), criterion=0.250
+    )
+    assert choose([simple, rich], tolerance=0.01) is simple
+    assert choose([simple, rich, richer], tolerance=0.01) is richer
+    failed = StructureScore(Structure(PAPER_TERMS, 0.01, 3.0), error='boom')
+    with pytest.raises(CalibrationError, match='boom'):
+        choose([failed])
+
+
+def test_held_out_runs_score_the_candidates() -> None:
+    train = cycle(CHAMBER).as_record()
+    held = simulate_run('cycle', 0.5, CHAMBER, seed=4).as_record()
+    structures = [Structure(PAPER_TERMS, 0.003, 3.0), Structure((*PAPER_TERMS, 'T2'), 0.003, 3.0)]
+    scores = cross_validate([train], RECOMMENDED_SETTINGS, structures, [held])
+    assert all(0.0 < s.criterion < 1.0 for s in scores)
+    # one fold: the held-out run, 3 axes x 2 averaging times
+    assert all(len(s.parts) == 6 for s in scores)
+
+
+def test_a_soak_is_refused_with_the_reason() -> None:
+    soak = simulate_run('soak', 20.0, CHAMBER, seed=5).as_record()
+    with pytest.raises(CalibrationError, match='swing'):
+        choose_and_calibrate([soak], RECOMMENDED_SETTINGS)
