@@ -91,7 +91,7 @@ def effective_lead_s(terms: tuple[str, ...], coefficients: np.ndarray, tau_s: fl
 
 @pytest.mark.parametrize('position', ['behind', 'ahead'])
 def test_the_lead_lag_takes_the_sign_of_the_plant(position: str) -> None:
-    """Sensor behind the coil: a lead is fitted; ahead of it: a lag (per axis, by least squares)."""
+    """Sensor behind the coil: a lead is fitted; ahead of it: a lag (per axis, least squares)."""
     lag = {'sensor_lag_s': 300.0} if position == 'behind' else {'coil_lag_s': 300.0}
     cfg = dataclasses.replace(CHAMBER, **lag)
     result, _, chosen = choose_and_calibrate([cycle(cfg).as_record()], RECOMMENDED_SETTINGS)
