@@ -124,9 +124,9 @@ def test_soak_gets_no_estimator_noise_on_the_node(
     """At constant temperature the Tdot estimate's noise is not injected.
 
     The corrected 10 s range is within 3 % (of raw) of the larger of the raw and the oracle's
-    range. (The oracle also removes the drift of the chamber's wobble, which the sensor behind the coil
-    sees late and attenuated; the study in benchmarks/accuracy.py reports how often the default
-    reaches the oracle's range.) The previous default estimator fails this bound.
+    range. (The oracle also removes the drift of the chamber's wobble, which the sensor behind
+    the coil sees late and attenuated; the study in benchmarks/accuracy.py reports how often
+    the default reaches the oracle's range.) The previous default estimator fails this bound.
     """
     path = tmp_path / 'coeffs.yaml'
     save(default_coefficients, path)
