@@ -66,17 +66,18 @@ __all__ = [
 BLOCKS_PER_RUN = 5
 #: Kalman Tdot random-walk intensities tried, degC/min per sqrt(s)
 KALMAN_WALKS = (0.001, 0.003, 0.01)
-#: Tdot shrinkage levels tried, posterior standard deviations. One level: the training cycle
-#: cannot judge soak noise (its holds are a small part of it), and on the tuning plants 3
-#: kept every soak range within the oracle's while 1 and 2 did not, at a cost on the cycles of
-#: about +0.002 in the 10 s ratio (benchmarks/accuracy.py)
-SHRINK_SIGMAS = (3.0,)
+#: Tdot shrinkage levels tried, posterior standard deviations (each also keeps Tdot out of the
+#: model while the Kalman filter warms up)
+SHRINK_SIGMAS = (0.5, 1.0, 2.0, 3.0)
+#: the shrinkage threshold may reach at most this fraction of the training run's typical
+#: |Tdot| (90th percentile): the garrote must be nearly linear over the calibrated range, or a
+#: fit on a slow ramp, whose Tdot it shrinks, would not extrapolate to a fast one
+MAX_SHRINK_FRACTION = 0.1
 #: lead-lag time constants tried for the ``Tdot_lag`` term, s
 TDOT_LAGS_S = (30.0, 60.0, 120.0, 240.0, 480.0, 960.0)
 #: averaging times of the score, s
 SCORE_TAUS_S = (10.0, 100.0)
-#: default tolerance: the simplest structure within this fraction of the best score wins (a
-#: lead-lag that only makes up for the Kalman filter's own delay gains about 1 %)
+#: default tolerance: the simplest structure within this fraction of the best score wins
 TOLERANCE = 0.02
 
 
@@ -146,6 +147,8 @@ class Structure:
         Tdot shrinkage, posterior standard deviations.
     tdot_lag_s : float
         Time constant of ``Tdot_lag`` (0 without that term), s.
+    coil_lag_s : float
+        Sensor-to-coil lag applied to the estimated temperature and Tdot (0: none), s.
 
     """
 
@@ -153,22 +156,24 @@ class Structure:
     walk: float
     shrink_sigmas: float
     tdot_lag_s: float = 0.0
+    coil_lag_s: float = 0.0
 
     @property
     def model(self) -> str:
         """The structure without the estimator settings, e.g. ``'const,T,Tdot,Tdot_lag'``."""
-        return ','.join(self.terms)
+        return ','.join(self.terms) + (' + coil lag' if self.coil_lag_s else '')
 
     @property
     def complexity(self) -> int:
-        """Fitted parameters per axis, plus one for the lead-lag time constant."""
-        return len(self.terms) + int('Tdot_lag' in self.terms)
+        """Fitted parameters per axis, plus one for a time constant (lead-lag or coil lag)."""
+        return len(self.terms) + int('Tdot_lag' in self.terms) + int(self.coil_lag_s > 0)
 
     @property
     def name(self) -> str:
         """Label for reports."""
         lag = f', tdot_lag_s {self.tdot_lag_s:g}' if 'Tdot_lag' in self.terms else ''
-        return f'{self.model} (walk {self.walk:g}, shrink {self.shrink_sigmas:g}{lag})'
+        coil = f', coil_lag_s {self.coil_lag_s:g}' if self.coil_lag_s else ''
+        return f'{self.model} (walk {self.walk:g}, shrink {self.shrink_sigmas:g}{lag}{coil})'
 
     def settings(self, base: DenoiseSettings) -> DenoiseSettings:
         """``base`` (a Kalman setting) with this structure's estimator settings."""
@@ -178,7 +183,7 @@ class Structure:
             kalman_rate_walk_degC_per_min_per_sqrt_s=self.walk,
             tdot_shrink_sigmas=self.shrink_sigmas,
             tdot_lag_s=self.tdot_lag_s if 'Tdot_lag' in self.terms else 0.0,
-            coil_lag_s=0.0,
+            coil_lag_s=self.coil_lag_s,
         )
 
 
@@ -187,7 +192,12 @@ def default_structures(
     shrinks: Sequence[float] = SHRINK_SIGMAS,
     lags_s: Sequence[float] = TDOT_LAGS_S,
 ) -> list[Structure]:
-    """Every candidate: paper terms, ``+T2``, ``+Tdot_lag``, ``+T2+Tdot_lag`` x settings."""
+    """Every candidate: the paper's terms or ``+T2``; plain, with a lead-lag, or a coil lag.
+
+    The lead-lag ``Tdot_lag`` fits a sensor ahead of or behind the coil; the coil lag lags the
+    estimated temperature and Tdot (a coil behind the sensor); each at every time constant of
+    ``lags_s`` and with every estimator setting.
+    """
     out = []
     for walk in walks:
         for shrink in shrinks:
@@ -195,6 +205,7 @@ def default_structures(
                 terms = (*PAPER_TERMS, *extra)
                 out.append(Structure(terms, walk, shrink))
                 out += [Structure((*terms, 'Tdot_lag'), walk, shrink, lag) for lag in lags_s]
+                out += [Structure(terms, walk, shrink, coil_lag_s=lag) for lag in lags_s]
     return out
 
 
@@ -223,6 +234,19 @@ def _series(
         offline_estimates(settings, r.temp_stamps_s, r.temperature_degC, coil_lag=False)
         for r in records
     ]
+
+
+def _shrink_threshold(series: Sequence[EstimateSeries], sigmas: float) -> tuple[float, float]:
+    """Steady-state shrinkage threshold and the 90th percentile of |Tdot|, degC/min."""
+    std = np.concatenate(
+        [s.tdot_std_degC_per_min for s in series if s.tdot_std_degC_per_min is not None]
+    )
+    ready = np.concatenate([s.ready for s in series if s.ready is not None])
+    tdot = np.concatenate([s.tdot_degC_per_min for s in series])
+    steady = std[ready] if ready.size == std.size and np.any(ready) else std
+    threshold = sigmas * float(np.median(steady)) if steady.size else 0.0
+    typical = float(np.percentile(np.abs(tdot), 90)) if tdot.size else 0.0
+    return threshold, typical
 
 
 def _parts(
@@ -325,13 +349,21 @@ def cross_validate(
             )
         train_series, test_series = cache[structure.walk]
         lag = structure.tdot_lag_s if 'Tdot_lag' in structure.terms else 0.0
+        threshold, typical = _shrink_threshold(train_series, structure.shrink_sigmas)
+        if threshold > MAX_SHRINK_FRACTION * typical:
+            result.error = (
+                f'shrinkage threshold {threshold:.3g} degC/min exceeds '
+                f'{MAX_SHRINK_FRACTION:g} of the typical |Tdot| {typical:.3g} degC/min'
+            )
+            continue
         try:
+            coil, shrink = structure.coil_lag_s, structure.shrink_sigmas
             tables = [
-                table_of(r, s.shaped(structure.shrink_sigmas, lag), period)
+                table_of(r, s.lagged(coil).shaped(shrink, lag), period)
                 for r, s in zip(records, train_series, strict=True)
             ]
             tests = [
-                table_of(r, s.shaped(structure.shrink_sigmas, lag), period)
+                table_of(r, s.lagged(coil).shaped(shrink, lag), period)
                 for r, s in zip(heldout, test_series, strict=True)
             ]
             result.criterion, result.parts = _score(_parts(tables, tests), structure.terms, period)
