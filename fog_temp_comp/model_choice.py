@@ -13,8 +13,9 @@ steps of 1/32 or 0.1 degC, at 0.2 or 10 Hz, and the static drift may bend. So wi
    (:func:`cross_validate`): with one bag, contiguous time blocks are held out in turn; with
    several, one bag at a time; with ``--heldout`` bags, on those;
 4. keeps the simplest structure whose score is within a tolerance of the best one
-   (:func:`choose`), fits it on all the training data, and records the candidates, their
-   scores and the choice in the YAML's ``provenance.selection``.
+   (:func:`choose`), refines its time constant (:func:`refine_time_constant`), fits it on all
+   the training data, and records the candidates, their scores and the choice in the YAML's
+   ``provenance.selection``.
 
 The score is the geometric mean, over held-out parts, axes and averaging times (10 s, 100 s), of
 the bias stability of the corrected rate divided by that of the raw rate: in a chamber the true
@@ -34,6 +35,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import optimize
 
 from fog_temp_comp.calibration import (
     CalibrationError,
@@ -390,6 +392,52 @@ def choose(scores: Sequence[StructureScore], tolerance: float = TOLERANCE) -> St
     return min(within, key=lambda s: (s.structure.complexity, s.criterion))
 
 
+def refine_time_constant(
+    chosen: StructureScore,
+    records: Sequence[ChamberRecord],
+    base: DenoiseSettings,
+    heldout: Sequence[ChamberRecord] = (),
+) -> StructureScore:
+    """The chosen structure with its time constant (lead-lag or coil lag) refined.
+
+    A bounded Brent search on log(tau) between the grid's neighbours of the chosen value
+    (:data:`TDOT_LAGS_S`), on the same cross-validated score; the grid value is kept unless the
+    search beats it.
+    """
+    structure = chosen.structure
+    field_name = (
+        'tdot_lag_s'
+        if 'Tdot_lag' in structure.terms
+        else 'coil_lag_s'
+        if structure.coil_lag_s
+        else ''
+    )
+    if not field_name or not math.isfinite(chosen.criterion):
+        return chosen
+    tau = getattr(structure, field_name)
+    grid = sorted({*TDOT_LAGS_S, tau})
+    k = grid.index(tau)
+    low = grid[k - 1] if k > 0 else tau / 2.0
+    high = grid[k + 1] if k + 1 < len(grid) else tau * 2.0
+    best = chosen
+
+    def objective(log_tau: float) -> float:
+        nonlocal best
+        candidate = dataclasses.replace(structure, **{field_name: float(math.exp(log_tau))})
+        (score,) = cross_validate(records, base, [candidate], heldout)
+        if score.criterion < best.criterion:
+            best = score
+        return score.criterion
+
+    optimize.minimize_scalar(
+        objective,
+        bounds=(math.log(low), math.log(high)),
+        method='bounded',
+        options={'xatol': 0.02, 'maxiter': 12},
+    )
+    return best
+
+
 def choose_and_calibrate(
     records: Sequence[ChamberRecord],
     base: DenoiseSettings,
@@ -447,7 +495,7 @@ def choose_and_calibrate(
         PAPER_TERMS,
     )
     scores = cross_validate(records, base, candidates, heldout)
-    chosen = choose(scores, tolerance)
+    chosen = refine_time_constant(choose(scores, tolerance), records, base, heldout)
     mode = (
         'held-out bags'
         if heldout
