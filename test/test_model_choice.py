@@ -87,7 +87,9 @@ def test_the_paper_plant_gets_no_sensor_dynamics_and_no_t2() -> None:
     if 'Tdot_lag' in model.terms:
         lead = effective_lead_s(model.terms, model.coefficients, chosen.structure.tdot_lag_s)
         assert np.all(np.abs(lead) < 60.0), lead
-    assert chosen.criterion == min(s.criterion for s in scores if s.structure == chosen.structure)
+    # the chosen one (its time constant refined) scores at least as well as its grid versions
+    same = [s.criterion for s in scores if s.structure.model == chosen.structure.model]
+    assert chosen.criterion <= min(same)
 
 
 def effective_lead_s(terms: tuple[str, ...], coefficients: np.ndarray, tau_s: float) -> np.ndarray:
