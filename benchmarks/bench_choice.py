@@ -1,0 +1,92 @@
+"""Default ``calibrate`` (model chosen by cross-validation) on an 18 h chamber run: wall time.
+
+Run by hand (not in CI)::
+
+    .venv/bin/python benchmarks/bench_choice.py [--temp-hz 1 10] [--rounds 3]
+
+The run is the 0.2 degC/min cycle of a randomly drawn plant (:mod:`fog_temp_comp.plants`,
+seed 100) between -40 and 60 degC with 1 h holds (about 18 h), gyro 2 Hz, written as an MCAP
+bag. Side by side, in fresh processes, each round times:
+
+- ``rosbags read``: ``AnyReader.messages()`` + ``deserialize`` of every message (the floor a
+  user's own script would pay);
+- ``calibrate``: ``fog-temp-comp calibrate BAG -o C.yaml --quiet`` as a user runs it (start-up,
+  reading, the sensor measurement, 312 candidates cross-validated, the refinement, the fit).
+
+The fastest round of each is shown.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from fog_temp_comp.bagio import write_chamber_bag
+from fog_temp_comp.plants import draw_plant
+from fog_temp_comp.simulate import simulate_run
+
+READ = """
+import sys
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+store = get_typestore(Stores.ROS2_JAZZY)
+with AnyReader([__import__('pathlib').Path(sys.argv[1])], default_typestore=store) as r:
+    for c, t, raw in r.messages():
+        r.deserialize(raw, c.msgtype)
+"""
+
+
+def make_bag(directory: Path, temp_hz: float) -> tuple[Path, float]:
+    """Write the run; return the bag and its length in hours."""
+    cfg = dataclasses.replace(draw_plant(100), temp_hz=temp_hz, cycle_soak_s=3600.0)
+    run = simulate_run('cycle', 0.2, cfg, seed=0)
+    path = directory / f'cycle_{temp_hz:g}hz'
+    write_chamber_bag(
+        path,
+        'mcap',
+        imu_stamps_s=run.imu_stamps_s,
+        rates_rad_s=run.rates_rad_s,
+        temp_stamps_s=run.temp_stamps_s,
+        temperature_degC=run.temperature_degC,
+    )
+    hours = (run.imu_stamps_s[-1] - run.imu_stamps_s[0]) / 3600.0
+    return path, hours
+
+
+def timed(argv: list[str]) -> float:
+    """Wall time of a subprocess, s."""
+    t0 = time.perf_counter()
+    subprocess.run(argv, check=True, stdout=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print the table."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--temp-hz', type=float, nargs='+', default=[1.0, 10.0])
+    parser.add_argument('--rounds', type=int, default=3)
+    args = parser.parse_args(argv)
+    tool = str(Path(sys.executable).with_name('fog-temp-comp'))
+    print('| temperature | run | rosbags read s | calibrate s | ratio |')
+    print('|---|---|---|---|---|')
+    with tempfile.TemporaryDirectory() as tmp:
+        for hz in args.temp_hz:
+            bag, hours = make_bag(Path(tmp), hz)
+            out = Path(tmp) / 'c.yaml'
+            read, cal = [], []
+            for _ in range(args.rounds):
+                read.append(timed([sys.executable, '-c', READ, str(bag)]))
+                cal.append(timed([tool, 'calibrate', str(bag), '-o', str(out), '--quiet']))
+            r, c = min(read), min(cal)
+            print(f'| {hz:g} Hz | {hours:.1f} h, gyro 2 Hz | {r:.1f} | {c:.1f} | {c / r:.2f} |')
+    print('\n(fastest of the rounds; 2-core VM, shared: read the ratio)')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
