@@ -423,7 +423,12 @@ def refine_time_constant(
 
     def objective(log_tau: float) -> float:
         nonlocal best
-        candidate = dataclasses.replace(structure, **{field_name: float(math.exp(log_tau))})
+        value = float(math.exp(log_tau))
+        candidate = (
+            dataclasses.replace(structure, tdot_lag_s=value)
+            if field_name == 'tdot_lag_s'
+            else dataclasses.replace(structure, coil_lag_s=value)
+        )
         (score,) = cross_validate(records, base, [candidate], heldout)
         if score.criterion < best.criterion:
             best = score
