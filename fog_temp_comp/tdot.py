@@ -596,8 +596,14 @@ class TdotShaper:
 
     def _apply(self, e: TdotEstimate) -> TdotEstimate:
         tdot = shrink_tdot(e.tdot_degC_per_min, e.tdot_std_degC_per_min, self._sigmas, e.ready)
-        self._estimate = dataclasses.replace(
-            e, tdot_degC_per_min=tdot, tdot_lag_degC_per_min=self._lag.update(e.stamp_s, tdot)
+        self._estimate = TdotEstimate(  # not dataclasses.replace: this runs per sample
+            e.stamp_s,
+            e.temperature_degC,
+            tdot,
+            e.raw_tdot_degC_per_min,
+            e.tdot_std_degC_per_min,
+            self._lag.update(e.stamp_s, tdot),
+            e.ready,
         )
         return self._estimate
 
