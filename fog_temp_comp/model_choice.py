@@ -251,25 +251,79 @@ def _shrink_threshold(series: Sequence[EstimateSeries], sigmas: float) -> tuple[
     return threshold, typical
 
 
-def _parts(
-    tables: Sequence[GridTable], heldout: Sequence[GridTable] | None
-) -> list[tuple[GridTable, GridTable]]:
-    """(training rows, held-out rows) of each fold."""
+def _spread(table: GridTable) -> float:
+    """5-95 % range of Tdot, degC/min (estimator noise on a soak hardly counts)."""
+    low, high = np.percentile(table.tdot_degC_per_min, [5.0, 95.0])
+    return float(high - low)
+
+
+def _covers(train: GridTable, test: GridTable) -> bool:
+    """Whether a fit on ``train`` can be judged on ``test``.
+
+    It needs a T swing, and a Tdot spread of at least half the held-out one (else the fold
+    would score extrapolation, not the model).
+    """
+    from fog_temp_comp.calibration import MIN_TDOT_SPREAD_DEGC_PER_MIN, MIN_TEMPERATURE_SWING_DEGC
+
+    if train.temperature_degC.size <= len(PAPER_TERMS):
+        return False
+    spread = _spread(train)
+    return bool(
+        np.ptp(train.temperature_degC) >= MIN_TEMPERATURE_SWING_DEGC
+        and spread >= MIN_TDOT_SPREAD_DEGC_PER_MIN
+        and spread >= 0.5 * _spread(test)
+    )
+
+
+def fold_mode(tables: Sequence[GridTable], heldout: Sequence[GridTable] | None) -> str:
+    """How :func:`_parts` folds these tables (for the report)."""
     if heldout:
-        return [(GridTable.concatenate(tables), GridTable.concatenate(heldout))]
+        return 'held-out bags'
     if len(tables) > 1:
-        return [
-            (GridTable.concatenate([t for j, t in enumerate(tables) if j != i]), tables[i])
+        if all(
+            _covers(GridTable.concatenate([t for j, t in enumerate(tables) if j != i]), tables[i])
             for i in range(len(tables))
-        ]
-    (table,) = tables
+        ):
+            return 'leave one bag out'
+        return (
+            f'{BLOCKS_PER_RUN} contiguous time blocks of every bag, block k of each held out '
+            'together (leaving a bag out would leave the others without the Tdot or T range '
+            'to judge it on)'
+        )
+    return f'{BLOCKS_PER_RUN} contiguous time blocks of the run, each held out in turn'
+
+
+def _blocks(table: GridTable) -> list[NDArray[np.bool_]]:
     n = table.rate_deg_h.shape[0]
     edges = np.linspace(0, n, BLOCKS_PER_RUN + 1).round().astype(int)
-    folds = []
+    masks = []
     for lo, hi in itertools.pairwise(edges.tolist()):
-        test = np.zeros(n, dtype=bool)
-        test[lo:hi] = True
-        folds.append((_rows(table, ~test), _rows(table, test)))
+        mask = np.zeros(n, dtype=bool)
+        mask[lo:hi] = True
+        masks.append(mask)
+    return masks
+
+
+def _parts(
+    tables: Sequence[GridTable], heldout: Sequence[GridTable] | None
+) -> list[tuple[GridTable, list[GridTable]]]:
+    """(training rows, held-out parts) of each fold; see :func:`fold_mode`."""
+    mode = fold_mode(tables, heldout)
+    if heldout:
+        return [(GridTable.concatenate(tables), list(heldout))]
+    if mode == 'leave one bag out':
+        return [
+            (GridTable.concatenate([t for j, t in enumerate(tables) if j != i]), [tables[i]])
+            for i in range(len(tables))
+        ]
+    masks = [_blocks(t) for t in tables]
+    folds = []
+    for k in range(BLOCKS_PER_RUN):
+        train = GridTable.concatenate(
+            [_rows(t, ~m[k]) for t, m in zip(tables, masks, strict=True)]
+        )
+        tests = [_rows(t, m[k]) for t, m in zip(tables, masks, strict=True)]
+        folds.append((train, tests))
     return folds
 
 
@@ -298,16 +352,17 @@ def _log_ratios(before: FloatArray, after: FloatArray, period_s: float) -> list[
 
 
 def _score(
-    folds: Sequence[tuple[GridTable, GridTable]], terms: Sequence[str], period_s: float
+    folds: Sequence[tuple[GridTable, list[GridTable]]], terms: Sequence[str], period_s: float
 ) -> tuple[float, list[float]]:
     logs: list[float] = []
-    for train, test in folds:
+    for train, tests in folds:
         a = train.design(terms)
         if a.shape[0] <= a.shape[1] or np.linalg.matrix_rank(a) < a.shape[1]:
             raise CalibrationError('too few rows or a rank-deficient fold')
         coef = np.linalg.lstsq(a, train.rate_deg_h, rcond=None)[0]
-        after = test.rate_deg_h - test.design(terms) @ coef
-        logs += _log_ratios(test.rate_deg_h, after, period_s)
+        for test in tests:
+            after = test.rate_deg_h - test.design(terms) @ coef
+            logs += _log_ratios(test.rate_deg_h, after, period_s)
     if not logs:
         raise CalibrationError('held-out parts too short to score')
     return float(np.exp(np.mean(logs))), logs
@@ -501,12 +556,17 @@ def choose_and_calibrate(
     )
     scores = cross_validate(records, base, candidates, heldout)
     chosen = refine_time_constant(choose(scores, tolerance), records, base, heldout)
-    mode = (
-        'held-out bags'
-        if heldout
-        else 'leave one bag out'
-        if len(records) > 1
-        else f'{BLOCKS_PER_RUN} contiguous time blocks of the run, each held out in turn'
+    period = base.tdot_period_s
+    walk = chosen.structure.walk
+    mode = fold_mode(
+        [
+            table_of(r, s, period)
+            for r, s in zip(records, _series(records, base, walk), strict=True)
+        ],
+        [
+            table_of(r, s, period)
+            for r, s in zip(heldout, _series(heldout, base, walk), strict=True)
+        ],
     )
     best_per_model: dict[str, StructureScore] = {}
     for s in scores:

@@ -17,6 +17,7 @@ from fog_temp_comp.model_choice import (
     choose,
     choose_and_calibrate,
     cross_validate,
+    fold_mode,
     sensor_noise,
 )
 from fog_temp_comp.simulate import SimulatedRun, SimulationConfig, simulate_run
@@ -56,7 +57,7 @@ def test_folds_of_one_run_are_disjoint_contiguous_blocks() -> None:
     folds = _parts([table], None)
     assert len(folds) == BLOCKS_PER_RUN
     seen = []
-    for train, test in folds:
+    for train, (test,) in folds:
         held = test.temperature_degC
         assert np.all(np.diff(held) == 1.0)  # contiguous
         assert not set(held) & set(train.temperature_degC)
@@ -65,11 +66,36 @@ def test_folds_of_one_run_are_disjoint_contiguous_blocks() -> None:
     assert sorted(seen) == rows.tolist()
 
 
+def ramp_table(offset: float, n: int = 40) -> GridTable:
+    """Rows of a ramp: T from ``offset`` over 20 degC, Tdot spread 1 degC/min."""
+    t = offset + np.linspace(0.0, 20.0, n)
+    return GridTable(t, np.linspace(-0.5, 0.5, n), np.zeros((n, 3)))
+
+
 def test_folds_of_several_runs_leave_one_run_out() -> None:
-    tables = [GridTable(np.full(20, k), np.zeros(20), np.zeros((20, 3))) for k in range(3)]
+    tables = [ramp_table(100.0 * k) for k in range(3)]
+    assert fold_mode(tables, None) == 'leave one bag out'
     folds = _parts(tables, None)
-    assert [set(test.temperature_degC) for _, test in folds] == [{0.0}, {1.0}, {2.0}]
-    assert all(k not in train.temperature_degC for k, (train, _) in enumerate(folds))
+    for k, (train, (test,)) in enumerate(folds):
+        assert test.temperature_degC.min() == 100.0 * k
+        assert not np.any(
+            (train.temperature_degC >= 100.0 * k) & (train.temperature_degC <= 100.0 * k + 20)
+        )
+
+
+def test_folds_fall_back_to_blocks_when_a_bag_left_out_leaves_too_little() -> None:
+    """A cycle and two soaks: every bag is cut into blocks, block k of each held out together.
+
+    Leaving the cycle out would leave no Tdot spread to judge it on.
+    """
+    soak = GridTable(np.full(40, 10.0), np.zeros(40), np.zeros((40, 3)))
+    tables = [ramp_table(0.0), soak, soak]
+    assert 'blocks of every bag' in fold_mode(tables, None)
+    folds = _parts(tables, None)
+    assert len(folds) == BLOCKS_PER_RUN
+    for train, tests in folds:
+        assert len(tests) == 3
+        assert train.temperature_degC.size + sum(t.temperature_degC.size for t in tests) == 120
 
 
 def test_the_paper_plant_gets_no_sensor_dynamics_and_no_t2() -> None:
@@ -154,6 +180,18 @@ def test_held_out_runs_score_the_candidates() -> None:
     assert all(0.0 < s.criterion < 1.0 for s in scores), [s.error for s in scores]
     # one fold: the held-out run, 3 axes x 2 averaging times
     assert all(len(s.parts) == 6 for s in scores)
+
+
+def test_a_cycle_with_soaks_is_calibrated_by_blocks() -> None:
+    records = [
+        cycle(CHAMBER).as_record(),
+        simulate_run('soak', 10.0, CHAMBER, seed=6).as_record(),
+        simulate_run('soak', 30.0, CHAMBER, seed=7).as_record(),
+    ]
+    result, _, chosen = choose_and_calibrate(records, RECOMMENDED_SETTINGS)
+    selection = result.coefficients.provenance['selection']
+    assert 'blocks of every bag' in selection['mode']
+    assert np.isfinite(chosen.criterion)
 
 
 def test_a_soak_is_refused_with_the_reason() -> None:
