@@ -724,6 +724,31 @@ def test_evaluate_cli(
     assert capsys.readouterr().err == ''
 
 
+def test_evaluate_extrapolates_tdot_by_default_and_clamps_when_asked(
+    capsys: pytest.CaptureFixture[str], fast_bag: Path, coeffs_yaml: Path
+) -> None:
+    """Fit at 0.5 degC/min, judged at 1 degC/min: the Tdot terms apply beyond the range.
+
+    A note says so; --clamp-tdot clamps, and the deprecated --extrapolate-tdot is a no-op.
+    """
+    argv = ['evaluate', str(fast_bag), '--coeffs', str(coeffs_yaml)]
+    assert cli.main(argv) == 0
+    default = capsys.readouterr().out
+    assert 'linear Tdot terms were applied beyond it' in default
+    assert 'clamped' not in default
+    assert cli.main([*argv, '--clamp-tdot']) == 0
+    clamped = capsys.readouterr().out
+    assert 'Tdot was clamped' in clamped
+    after = {k: v[1] for k, v in parse_table(default).items()}
+    after_clamped = {k: v[1] for k, v in parse_table(clamped).items()}
+    # extrapolating removes more of the 1 degC/min drift than clamping at 0.5 degC/min
+    assert all(after[k] < after_clamped[k] for k in after if k[2] == 10.0)
+    assert cli.main([*argv, '--extrapolate-tdot']) == 0
+    out = capsys.readouterr()
+    assert 'default' in out.err
+    assert parse_table(out.out) == parse_table(default)
+
+
 def test_evaluate_missing_bag(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], coeffs_yaml: Path
 ) -> None:
