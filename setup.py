@@ -36,8 +36,8 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'compensator = fog_temp_comp.node:main',
-            'fog-temp-comp = fog_temp_comp.cli:main',
+            'compensator = fog_temp_comp.ros.node:main',
+            'fog-temp-comp = fog_temp_comp.tools.cli:main',
         ],
     },
 )

@@ -6,13 +6,13 @@ Run by hand (not in CI)::
     .venv/bin/python benchmarks/accuracy.py --set tuning    # only the plants tuned on
     .venv/bin/python benchmarks/accuracy.py --plants 900 901 --seeds 0
 
-Each plant (:func:`fog_temp_comp.plants.draw_plant`) is a gyro and chamber drawn at random:
+Each plant (:func:`fog_temp_comp.tools.plants.draw_plant`) is a gyro and chamber drawn at random:
 temperature sensor ahead of or behind the coil (lags 0-600 s), T^2 of either sign,
 quantization 1/32-0.1 degC, temperature at 0.2-10 Hz, controller overshoot and wobble, gyro
 noise and a wandering bias. The paper's protocol runs on it with default settings only, the
 plant's parameters hidden: ``calibrate`` (what the command does with no flags:
-:func:`fog_temp_comp.model_choice.choose_and_calibrate`) on the 0.2 degC/min cycle, then the
-node's :class:`~fog_temp_comp.compensator.Compensator` (default guards) replays the 0.3-1.0
+:func:`fog_temp_comp.core.model_choice.choose_and_calibrate`) on the 0.2 degC/min cycle, then the
+node's :class:`~fog_temp_comp.core.compensator.Compensator` (default guards) replays the 0.3-1.0
 degC/min cycles and the -40/-20/10/30 degC soaks, 3 axes, Imu 2 Hz.
 
 Rows per plant and seed:
@@ -30,8 +30,8 @@ median 100 s stability after (deg/h), worst 10 s range ratio on cycles and on so
 acceptance lines compare ``default`` with ``oracle``: 10 s ratio <= oracle + 0.005, 100 s
 <= 1.05 x oracle, ranges <= oracle + 0.03.
 
-The tuning plants (:data:`fog_temp_comp.plants.TUNING_PLANTS`) were looked at while the
-pipeline was developed; the held-back plants (:data:`fog_temp_comp.plants.HELDBACK_PLANTS`)
+The tuning plants (:data:`fog_temp_comp.tools.plants.TUNING_PLANTS`) were looked at while the
+pipeline was developed; the held-back plants (:data:`fog_temp_comp.tools.plants.HELDBACK_PLANTS`)
 were not, and are reported separately.
 """
 
@@ -44,16 +44,16 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from fog_temp_comp.calibration import calibrate
-from fog_temp_comp.compensator import GuardSettings
-from fog_temp_comp.denoise import RECOMMENDED_SETTINGS
-from fog_temp_comp.evaluate import compensate_record, score_record
-from fog_temp_comp.grid import bin_means
-from fog_temp_comp.model import PAPER_TERMS, design_matrix
-from fog_temp_comp.model_choice import choose_and_calibrate
-from fog_temp_comp.plants import HELDBACK_PLANTS, TUNING_PLANTS, describe, draw_plant
-from fog_temp_comp.simulate import SimulatedRun, simulate_plan
-from fog_temp_comp.units import DEG_H_PER_RAD_S, RAD_S_PER_DEG_H
+from fog_temp_comp.core.calibration import calibrate
+from fog_temp_comp.core.compensator import GuardSettings
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.evaluate import compensate_record, score_record
+from fog_temp_comp.core.grid import bin_means
+from fog_temp_comp.core.model import PAPER_TERMS, design_matrix
+from fog_temp_comp.core.model_choice import choose_and_calibrate
+from fog_temp_comp.core.units import DEG_H_PER_RAD_S, RAD_S_PER_DEG_H
+from fog_temp_comp.tools.plants import HELDBACK_PLANTS, TUNING_PLANTS, describe, draw_plant
+from fog_temp_comp.tools.simulate import SimulatedRun, simulate_plan
 
 TRAINING_RUN = 'cycle_0p2'
 PIPELINES = ('oracle', 'ideal fit', 'default', 'previous default')

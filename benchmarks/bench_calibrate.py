@@ -1,9 +1,9 @@
 """End to end: calibrate a long 100 Hz chamber run; wall time and peak memory per read path.
 
-The bag is a 0.2 degC/min chamber cycle from ``fog_temp_comp.simulate`` between -40 and 60 degC
-with 2.4 h soaks (24 h; ``--quick``: a 1 degC/min cycle between 10 and 30 degC, 1 h), gyro at
-100 Hz (8.64M Imu in 24 h) and temperature at 1 Hz. It is written once, with the
-``fog_temp_comp.cdr`` encoders (the same bytes ``bagio.write_chamber_bag`` writes, ~4x faster),
+The bag is a 0.2 degC/min chamber cycle from ``fog_temp_comp.tools.simulate`` between -40 and
+60 degC with 2.4 h soaks (24 h; ``--quick``: a 1 degC/min cycle between 10 and 30 degC, 1 h),
+gyro at 100 Hz (8.64M Imu in 24 h) and temperature at 1 Hz. It is written once, with the
+``fog_temp_comp.bag.cdr`` encoders (the same bytes ``bagio.write_chamber_bag`` writes, ~4x faster),
 into ``--cache DIR`` and reused by later runs.
 
 Each path runs in a fresh Python process, whose peak resident set size is reset after the
@@ -14,13 +14,13 @@ size after imports. Paths:
 - ``floor``: ``AnyReader.messages()`` only;
 - ``rosbags``: ``AnyReader.messages()`` + ``deserialize`` per message, nothing kept (the plain
   rosbags read the others are compared with);
-- ``per_message``: :func:`read_record_per_message` below, ``bagio.read_record`` as it was
+- ``per_message``: :func:`read_record_per_message` below, ``stream.read_record`` as it was
   before the cdr decoders (``deserialize`` per message, Python lists), then
   ``calibration.calibrate``;
-- ``read_record``: ``fog_temp_comp.bagio.read_record`` as it is now (it may already use the
+- ``read_record``: ``fog_temp_comp.bag.stream.read_record`` as it is now (it may already use the
   cdr decoders), then ``calibrate``;
 - ``cdr``: :func:`read_record_cdr` below (raw messages from ``AnyReader``, decoded 10k at a time
-  by ``fog_temp_comp.cdr``, only stamps and rates kept) then ``calibrate``;
+  by ``fog_temp_comp.bag.cdr``, only stamps and rates kept) then ``calibrate``;
 - ``command``: ``fog-temp-comp calibrate BAG -o COEFFS.yaml --quiet`` as a user runs it
   (``cli.main`` in the worker): streams the bag through ``reduce.reduce_bag`` (10 s gyro means,
   never the whole record in memory), default estimator (kalman) and model.
@@ -45,12 +45,12 @@ from typing import Any
 import numpy as np
 from benchutil import CHUNK, machine, peak_rss_mb, reset_peak_rss, table, write_chamber_bag_fast
 
-from fog_temp_comp import bagio, cdr
-from fog_temp_comp.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagError
-from fog_temp_comp.calibration import calibrate
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.simulate import SimulationConfig, simulate_run
+from fog_temp_comp.bag import bagio, cdr, stream
+from fog_temp_comp.bag.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagError
+from fog_temp_comp.core.calibration import calibrate
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
 
 PATHS = ('floor', 'rosbags', 'per_message', 'read_record', 'cdr', 'command')
 
@@ -141,7 +141,7 @@ class Growing:
 def read_record_cdr(
     path: Path, *, gyro_topic: str | None = None, temp_topic: str | None = None
 ) -> ChamberRecord:
-    """``bagio.read_record`` with the cdr decoders: same result, bit for bit.
+    """``stream.read_record`` with the cdr decoders: same result, bit for bit.
 
     Raw messages are read ``CHUNK`` at a time, keeping only the raw bytes and connection ids
     (no tuples: few objects for the garbage collector to track); per chunk, each topic's
@@ -222,7 +222,7 @@ def sort_stable(stamps: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.
 def read_record_per_message(
     path: Path, *, gyro_topic: str | None = None, temp_topic: str | None = None
 ) -> ChamberRecord:
-    """``bagio.read_record`` before the cdr decoders: ``deserialize`` per message."""
+    """``stream.read_record`` before the cdr decoders: ``deserialize`` per message."""
     with bagio.open_bag(path) as reader:
         imu_name = bagio.resolve_topic(reader, gyro_topic, IMU_TYPE, '--gyro-topic')
         temp_name = bagio.resolve_topic(reader, temp_topic, TEMPERATURE_TYPE, '--temp-topic')
@@ -295,7 +295,7 @@ def worker(kind: str, bag: Path) -> dict[str, Any]:
     start = time.perf_counter()
     out: dict[str, Any] = {'path': kind}
     if kind == 'command':
-        from fog_temp_comp.cli import main as cli_main
+        from fog_temp_comp.tools.cli import main as cli_main
 
         with tempfile.TemporaryDirectory() as tmp:
             code = cli_main(['calibrate', str(bag), '-o', f'{tmp}/coeffs.yaml', '--quiet'])
@@ -319,7 +319,7 @@ def worker(kind: str, bag: Path) -> dict[str, Any]:
     else:
         read = {
             'per_message': read_record_per_message,
-            'read_record': bagio.read_record,
+            'read_record': stream.read_record,
             'cdr': read_record_cdr,
         }[kind]
         record = read(bag)

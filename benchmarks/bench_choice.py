@@ -4,7 +4,7 @@ Run by hand (not in CI)::
 
     .venv/bin/python benchmarks/bench_choice.py [--temp-hz 1 10] [--rounds 3]
 
-The run is the 0.2 degC/min cycle of a randomly drawn plant (:mod:`fog_temp_comp.plants`,
+The run is the 0.2 degC/min cycle of a randomly drawn plant (:mod:`fog_temp_comp.tools.plants`,
 seed 100) between -40 and 60 degC with 1 h holds (about 18 h), gyro 2 Hz, written as an MCAP
 bag. Side by side, in fresh processes, each round times:
 
@@ -26,9 +26,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from fog_temp_comp.bagio import write_chamber_bag
-from fog_temp_comp.plants import draw_plant
-from fog_temp_comp.simulate import simulate_run
+from fog_temp_comp.bag.bagio import write_chamber_bag
+from fog_temp_comp.tools.plants import draw_plant
+from fog_temp_comp.tools.simulate import simulate_run
 
 READ = """
 import sys

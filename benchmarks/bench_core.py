@@ -1,7 +1,7 @@
 """Cost of the compensator core per gyro message: ``Compensator.correct`` and ``replay``.
 
 A 100 Hz gyro stream with a 1 Hz temperature interleaved (temperature first on equal stamps, as
-in a replay) goes through a :class:`fog_temp_comp.compensator.Compensator` built from
+in a replay) goes through a :class:`fog_temp_comp.core.compensator.Compensator` built from
 ``config/example_coefficients.yaml``, once per Tdot denoising method:
 
 - ``loop us/msg``: a Python loop calling ``add_temperature`` and ``correct`` per message, as the
@@ -11,7 +11,7 @@ in a replay) goes through a :class:`fog_temp_comp.compensator.Compensator` built
   timer overhead is included);
 - ``add_temperature mean/max``: each temperature call (the wavelet denoises a 512-sample window
   when a 10 s bin completes, i.e. every 10th call);
-- ``replay us/msg``: :func:`fog_temp_comp.compensator.replay` on the whole arrays.
+- ``replay us/msg``: :func:`fog_temp_comp.core.compensator.replay` on the whole arrays.
 
 Before timing, 90 min of temperature (1 Hz) fill the estimator's window, so the numbers are
 the steady state. Each number is the best of ``--repeat`` rounds (the percentiles: of the
@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 from benchutil import machine, table
 
-from fog_temp_comp.coefficients import load
-from fog_temp_comp.compensator import Compensator, replay
+from fog_temp_comp.core.coefficients import load
+from fog_temp_comp.core.compensator import Compensator, replay
 
 ROOT = Path(__file__).resolve().parents[1]
 COEFFICIENTS = ROOT / 'config' / 'example_coefficients.yaml'

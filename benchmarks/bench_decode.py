@@ -1,4 +1,4 @@
-"""Bag decoding throughput: fog_temp_comp.cdr decoders against plain rosbags, per bag format.
+"""Bag decoding throughput: fog_temp_comp.bag.cdr decoders against plain rosbags, per bag format.
 
 Writes one bag per format (Imu at 100 Hz, Temperature at 10 Hz) with
 ``bagio.write_chamber_bag`` in a temporary directory, then measures Imu + Temperature messages
@@ -6,7 +6,7 @@ per second for:
 
 - ``floor``: ``AnyReader.messages()`` only (no decoding: the best any decoder can do with it);
 - ``rosbags``: ``AnyReader.messages()`` + ``reader.deserialize`` per message (the baseline);
-- ``cdr``: ``AnyReader.messages()`` + ``fog_temp_comp.cdr`` decoders, 10k raw messages at a
+- ``cdr``: ``AnyReader.messages()`` + ``fog_temp_comp.bag.cdr`` decoders, 10k raw messages at a
   time (``itertools.islice``), split by topic while reading; all fields out as arrays;
 - ``decode only``: the same decoders and ``deserialize`` on raw messages already in memory;
 - ``fog_temp_comp: BagStream``: the project's reader, what ``calibrate``, ``evaluate`` and
@@ -33,9 +33,9 @@ import numpy as np
 from benchutil import CHUNK, best_of, machine, table
 from rosbags.highlevel import AnyReader
 
-from fog_temp_comp import bagio, cdr
-from fog_temp_comp.bagio import IMU_TYPE, typestore
-from fog_temp_comp.stream import BagStream, Chunk
+from fog_temp_comp.bag import bagio, cdr
+from fog_temp_comp.bag.bagio import IMU_TYPE, typestore
+from fog_temp_comp.bag.stream import BagStream, Chunk
 
 IMU_TOPIC = '/imu/data_raw'
 TEMP_TOPIC = '/imu/temperature'

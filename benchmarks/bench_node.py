@@ -3,7 +3,7 @@
 Both nodes under test (DUT) subscribe ``imu/data_raw`` and publish ``imu/data``
 (``sensor_msgs/Imu``, best effort; the input keeps the last 100 (``node.IMU_INPUT_QOS``), the
 output the last 5 (``qos_profile_sensor_data``)). The compensator
-is :class:`fog_temp_comp.node.CompensatorNode` with ``config/example_coefficients.yaml``; the
+is :class:`fog_temp_comp.ros.node.CompensatorNode` with ``config/example_coefficients.yaml``; the
 relay republishes the message it received. Per case a fresh rclpy context holds three nodes:
 
 - ``source`` publishes Imu (header stamp = wall clock at publish, ``time.time_ns``, a new stamp
@@ -25,7 +25,7 @@ interval), which a keep-last-5 queue can turn into drops even below the max thro
 ``--executor events`` runs the same cases on ``rclpy.experimental.EventsExecutor`` (C++).
 
 ``--dut-process`` runs the DUT in a process of its own, as on a robot (driver and compensator
-are separate processes): the compensator is ``fog_temp_comp.node.main``, what ``ros2 run
+are separate processes): the compensator is ``fog_temp_comp.ros.node.main``, what ``ros2 run
 fog_temp_comp compensator`` starts, with ``-p executor:=<--executor>``; the relay spins the
 same way. Source and sink stay in this process (sink in a ``SingleThreadedExecutor``). The
 compensator's correction is checked on the received rates instead of its counters.
@@ -62,7 +62,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, Temperature
 
-from fog_temp_comp.node import IMU_INPUT_QOS, CompensatorNode
+from fog_temp_comp.ros.node import IMU_INPUT_QOS, CompensatorNode
 
 ROOT = Path(__file__).resolve().parents[1]
 COEFFICIENTS = ROOT / 'config' / 'example_coefficients.yaml'
@@ -158,7 +158,7 @@ class Sink(Node):
 def serve(kind: str, executor_name: str, namespace: str) -> None:
     """Child process of ``--dut-process``: spin the relay, or run the compensator's main()."""
     if kind == 'compensator':
-        from fog_temp_comp.node import main as compensator_main
+        from fog_temp_comp.ros.node import main as compensator_main
 
         raise SystemExit(
             compensator_main(

@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fog_temp_comp import cdr
-from fog_temp_comp.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagWriter
+from fog_temp_comp.bag import cdr
+from fog_temp_comp.bag.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagWriter
 
 #: raw messages decoded per call: 10k keep the buffers in cache (~1.5x faster per message
 #: than 50k on the machine of benchmarks/README.md)
@@ -106,7 +106,7 @@ def write_chamber_bag_fast(
     imu_topic: str = '/imu/data_raw',
     temp_topic: str = '/imu/temperature',
 ) -> None:
-    """What ``bagio.write_chamber_bag`` writes, serialized in chunks by :mod:`fog_temp_comp.cdr`.
+    """What ``bagio.write_chamber_bag`` writes, serialized in chunks by ``bag.cdr``.
 
     Same topics, connection order, log times (= header stamps), merge order (temperature
     first on equal stamps) and message bytes; about 4x faster.

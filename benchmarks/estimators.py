@@ -5,15 +5,15 @@ Run by hand (not in CI)::
     .venv/bin/python benchmarks/estimators.py            # full study, about 10 min on 2 cores
     .venv/bin/python benchmarks/estimators.py --quick    # fewer runs and rows, about 2 min
 
-The paper's plan on the realistic simulator (:data:`fog_temp_comp.simulate.REALISTIC`: housing
-sensor 3 min ahead of the coil, 1/16 degC quantization, chamber overshoot and oscillation, a
-small T^2 drift, a wandering bias): every candidate is calibrated on the 0.2 degC/min cycle
+The paper's plan on the realistic simulator (:data:`fog_temp_comp.tools.simulate.REALISTIC`:
+housing sensor 3 min ahead of the coil, 1/16 degC quantization, chamber overshoot and oscillation,
+a small T^2 drift, a wandering bias): every candidate is calibrated on the 0.2 degC/min cycle
 and judged on the 0.3 to 1.0 degC/min cycles and the four soaks, 3 axes, with Tdot not clamped
 (``GuardSettings(clamp_tdot=False)``, the paper's protocol). The online rows come from
-:func:`fog_temp_comp.selection.evaluate_candidates`, i.e. from
-:func:`fog_temp_comp.evaluate.compensate_record` and the node's :class:`Compensator`; the
+:func:`fog_temp_comp.core.selection.evaluate_candidates`, i.e. from
+:func:`fog_temp_comp.core.evaluate.compensate_record` and the node's :class:`Compensator`; the
 reference rows use the paper's offline, whole-record wavelet Tdot
-(:func:`fog_temp_comp.selection.offline_compensate`).
+(:func:`fog_temp_comp.core.selection.offline_compensate`).
 
 Columns: median over held-out runs and axes of bias stability after/before at 10 s and 100 s;
 worst 10 s range after/before on the cycle runs and on the soak runs; the selection score
@@ -31,20 +31,20 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from fog_temp_comp.compensator import Compensator, GuardSettings, replay
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.evaluate import score_record
-from fog_temp_comp.model import PAPER_TERMS
-from fog_temp_comp.selection import (
+from fog_temp_comp.core.compensator import Compensator, GuardSettings, replay
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.evaluate import score_record
+from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.selection import (
     SELECTION_TAUS_S,
     Candidate,
     CandidateResult,
     evaluate_candidates,
     select,
 )
-from fog_temp_comp.simulate import REALISTIC, SimulationConfig, simulate_plan, true_model
-from fog_temp_comp.tdot import make_estimator
-from fog_temp_comp.units import RAD_S_PER_DEG_H
+from fog_temp_comp.core.tdot import make_estimator
+from fog_temp_comp.core.units import RAD_S_PER_DEG_H
+from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, simulate_plan, true_model
 
 #: the paper's protocol: a model fitted at 0.2 degC/min is judged on faster ramps
 GUARD = GuardSettings(clamp_tdot=False)

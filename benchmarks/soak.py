@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT / 'test'))
 
 from rosharness import make_imu, make_temperature  # noqa: E402
 
-from fog_temp_comp.node import CompensatorNode  # noqa: E402
+from fog_temp_comp.ros.node import CompensatorNode  # noqa: E402
 
 CHUNK = 1000  # below Fast DDS's default history limit of 5000 samples
 

@@ -2,6 +2,6 @@
 
 import sys
 
-from fog_temp_comp.cli import main
+from fog_temp_comp.tools.cli import main
 
 sys.exit(main())

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from fog_temp_comp.simulate import SimulatedRun, simulate_run
+from fog_temp_comp.tools.simulate import SimulatedRun, simulate_run
 
 from simdata import SHORT_CHAMBER
 

@@ -12,7 +12,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, Temperature
 
-from fog_temp_comp.node import CompensatorNode
+from fog_temp_comp.ros.node import CompensatorNode
 
 
 def split_stamp(stamp_s: float) -> tuple[int, int]:

@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from fog_temp_comp.bagio import IMU_TYPE, BagWriter, make_imu, write_chamber_bag
-from fog_temp_comp.simulate import SimulatedRun, SimulationConfig
+from fog_temp_comp.bag.bagio import IMU_TYPE, BagWriter, make_imu, write_chamber_bag
+from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig
 
 #: a short chamber: 10..30 degC cycles with 10 min soaks, 1 Hz gyro and temperature
 SHORT_CHAMBER = SimulationConfig(

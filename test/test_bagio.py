@@ -1,4 +1,4 @@
-"""Bag input/output (fog_temp_comp.bagio) against rosbags' own reader, on real bags in tmp_path."""
+"""Bag input/output (``bag.bagio``) against rosbags' own reader, on real bags in tmp_path."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ from numpy.testing import assert_array_equal
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from fog_temp_comp import bagio
-from fog_temp_comp.bagio import (
+from fog_temp_comp.bag import bagio
+from fog_temp_comp.bag.bagio import (
     FORMATS,
     IMU_TYPE,
     TEMPERATURE_TYPE,
@@ -25,12 +25,12 @@ from fog_temp_comp.bagio import (
     make_imu,
     make_temperature,
     open_bag,
-    read_record,
     resolve_topic,
     write_chamber_bag,
 )
-from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.simulate import SimulatedRun, SimulationConfig, simulate_run
+from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig, simulate_run
 
 from simdata import bag_path, write_run
 

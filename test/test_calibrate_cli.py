@@ -15,8 +15,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from fog_temp_comp import cli
-from fog_temp_comp.bagio import (
+from fog_temp_comp.bag.bagio import (
     IMU_TYPE,
     TEMPERATURE_TYPE,
     BagWriter,
@@ -25,15 +24,21 @@ from fog_temp_comp.bagio import (
     s_to_stamp_ns_array,
     write_chamber_bag,
 )
-from fog_temp_comp.coefficients import load
-from fog_temp_comp.denoise import RECOMMENDED_SETTINGS
-from fog_temp_comp.earth import earth_rate_body_deg_h, earth_rate_body_rad_s
-from fog_temp_comp.evaluate import TAUS_S
-from fog_temp_comp.model import coefficient_key
-from fog_temp_comp.report import format_coefficient, format_se
-from fog_temp_comp.selection import default_candidates
-from fog_temp_comp.simulate import TRUE_COEFFICIENTS, SimulatedRun, SimulationConfig, simulate_run
-from fog_temp_comp.units import AXES, DEG_H_PER_RAD_S
+from fog_temp_comp.core.coefficients import load
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.earth import earth_rate_body_deg_h, earth_rate_body_rad_s
+from fog_temp_comp.core.evaluate import TAUS_S
+from fog_temp_comp.core.model import coefficient_key
+from fog_temp_comp.core.selection import default_candidates
+from fog_temp_comp.core.units import AXES, DEG_H_PER_RAD_S
+from fog_temp_comp.tools import cli
+from fog_temp_comp.tools.report import format_coefficient, format_se
+from fog_temp_comp.tools.simulate import (
+    TRUE_COEFFICIENTS,
+    SimulatedRun,
+    SimulationConfig,
+    simulate_run,
+)
 
 # 1 degC/min cycles between 15 and 25 degC with 5 min soaks at 1 Hz: 2100 s, ~210 grid rows a
 # run, enough to identify const, T and Tdot and fast enough for the held-out selection

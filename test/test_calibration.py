@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from fog_temp_comp.calibration import CalibrationError, calibrate, fit_table, grid_table
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.model import PAPER_TERMS
-from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.simulate import TRUE_COEFFICIENTS, SimulatedRun, simulate_run
+from fog_temp_comp.core.calibration import CalibrationError, calibrate, fit_table, grid_table
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.tools.simulate import TRUE_COEFFICIENTS, SimulatedRun, simulate_run
 
 from simdata import SHORT_CHAMBER
 
 
 def test_exact_fit_on_noise_free_table() -> None:
-    from fog_temp_comp.calibration import GridTable
+    from fog_temp_comp.core.calibration import GridTable
 
     rng = np.random.default_rng(3)
     t = rng.uniform(-40, 60, 300)

@@ -1,4 +1,4 @@
-"""Vectorised CDR / ROS 1 codecs (fog_temp_comp.cdr) against rosbags, bit for bit, on real bags."""
+"""Vectorised CDR / ROS 1 codecs (``bag.cdr``) against rosbags, bit for bit, on real bags."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ from rosbags.rosbag1 import Writer as Writer1
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
-from fog_temp_comp import bagio, cdr
-from fog_temp_comp.bagio import FORMATS, IMU_TYPE, TEMPERATURE_TYPE, BagWriter
+from fog_temp_comp.bag import bagio, cdr
+from fog_temp_comp.bag.bagio import FORMATS, IMU_TYPE, TEMPERATURE_TYPE, BagWriter
 
 ROS2 = get_typestore(Stores.ROS2_JAZZY)
 ROS1 = get_typestore(Stores.ROS1_NOETIC)  # std_msgs/Header with seq

@@ -20,8 +20,7 @@ from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.rosbag2.enums import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
 
-from fog_temp_comp import cli, commands
-from fog_temp_comp.bagio import (
+from fog_temp_comp.bag.bagio import (
     FORMATS,
     IMU_TYPE,
     TEMPERATURE_TYPE,
@@ -29,13 +28,15 @@ from fog_temp_comp.bagio import (
     bag_format,
     make_imu,
     make_temperature,
-    read_record,
 )
-from fog_temp_comp.coefficients import load
-from fog_temp_comp.denoise import METHODS
-from fog_temp_comp.evaluate import compensate_record
-from fog_temp_comp.model import PAPER_TERMS, coefficient_key
-from fog_temp_comp.simulate import (
+from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.core.coefficients import load
+from fog_temp_comp.core.denoise import METHODS
+from fog_temp_comp.core.evaluate import compensate_record
+from fog_temp_comp.core.model import PAPER_TERMS, coefficient_key
+from fog_temp_comp.core.units import AXES, DEG_H_PER_RAD_S
+from fog_temp_comp.tools import cli, commands
+from fog_temp_comp.tools.simulate import (
     TRUE_COEFFICIENTS,
     SimulatedRun,
     SimulationConfig,
@@ -43,7 +44,6 @@ from fog_temp_comp.simulate import (
     simulate_run,
     true_model,
 )
-from fog_temp_comp.units import AXES, DEG_H_PER_RAD_S
 
 from simdata import SHORT_CHAMBER, bag_path, write_run
 

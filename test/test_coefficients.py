@@ -10,9 +10,9 @@ import pytest
 import yaml
 from numpy.testing import assert_array_equal
 
-from fog_temp_comp.coefficients import Coefficients, CoefficientsError, load, save, to_dict
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range
+from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load, save, to_dict
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
 
 
 @pytest.fixture()

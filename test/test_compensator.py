@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from fog_temp_comp.compensator import Compensator, replay
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range
-from fog_temp_comp.simulate import SimulatedRun, true_model
-from fog_temp_comp.units import RAD_S_PER_DEG_H
+from fog_temp_comp.core.compensator import Compensator, replay
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
+from fog_temp_comp.core.units import RAD_S_PER_DEG_H
+from fog_temp_comp.tools.simulate import SimulatedRun, true_model
 
 
 @pytest.fixture()

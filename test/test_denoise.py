@@ -1,4 +1,4 @@
-"""Tests for fog_temp_comp.denoise (Tdot denoising)."""
+"""Tests for fog_temp_comp.core.denoise (Tdot denoising)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pywt
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy import signal
 
-from fog_temp_comp.denoise import (
+from fog_temp_comp.core.denoise import (
     GRID_METHODS,
     METHODS,
     ButterworthDenoiser,

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from fog_temp_comp.calibration import calibrate
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.earth import (
+from fog_temp_comp.core.calibration import calibrate
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.earth import (
     EARTH_RATE_DEG_H,
     EARTH_RATE_RAD_S,
     earth_rate_body_deg_h,
@@ -22,8 +22,8 @@ from fog_temp_comp.earth import (
     rotation_enu_from_sensor,
     subtract_earth_rate,
 )
-from fog_temp_comp.simulate import TRUE_COEFFICIENTS, SimulatedRun, simulate_run
-from fog_temp_comp.units import RAD_S_PER_DEG_H
+from fog_temp_comp.core.units import RAD_S_PER_DEG_H
+from fog_temp_comp.tools.simulate import TRUE_COEFFICIENTS, SimulatedRun, simulate_run
 
 from simdata import SHORT_CHAMBER
 

@@ -9,9 +9,9 @@ import pytest
 import yaml
 from numpy.testing import assert_allclose
 
-from fog_temp_comp.calibration import grid_table
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.fitstats import (
+from fog_temp_comp.core.calibration import grid_table
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.fitstats import (
     IdentifiabilityError,
     automatic_lag,
     check_identifiability,
@@ -24,8 +24,8 @@ from fog_temp_comp.fitstats import (
     identifiability,
     newey_west_lag,
 )
-from fog_temp_comp.model import PAPER_TERMS
-from fog_temp_comp.simulate import TRUE_COEFFICIENTS, SimulatedRun
+from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.tools.simulate import TRUE_COEFFICIENTS, SimulatedRun
 
 
 def hac_reference(x: np.ndarray, e: np.ndarray, lag: int) -> np.ndarray:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from fog_temp_comp.grid import GridAccumulator, TemperatureGrid, bin_means, temperature_grid
+from fog_temp_comp.core.grid import GridAccumulator, TemperatureGrid, bin_means, temperature_grid
 
 
 def online(stamps: np.ndarray, temps: np.ndarray, period: float) -> list:

@@ -1,4 +1,4 @@
-"""Raw MCAP scanner (fog_temp_comp.mcapscan) against rosbags' own reader, on real bags."""
+"""Raw MCAP scanner (fog_temp_comp.bag.mcapscan) against rosbags' own reader, on real bags."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from fog_temp_comp.bagio import write_chamber_bag
-from fog_temp_comp.mcapscan import MAGIC, ScanStats, scan_mcap
+from fog_temp_comp.bag.bagio import write_chamber_bag
+from fog_temp_comp.bag.mcapscan import MAGIC, ScanStats, scan_mcap
 
 from simdata import UNSORTED_STAMPS_NS, write_unsorted_imu_bag
 

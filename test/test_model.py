@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from fog_temp_comp.model import (
+from fog_temp_comp.core.model import (
     CANDIDATE_TERMS,
     PAPER_TERMS,
     TERMS,
@@ -15,7 +15,7 @@ from fog_temp_comp.model import (
     coefficient_key,
     design_matrix,
 )
-from fog_temp_comp.units import DEG_H_PER_RAD_S, RAD_S_PER_DEG_H
+from fog_temp_comp.core.units import DEG_H_PER_RAD_S, RAD_S_PER_DEG_H
 
 
 def test_design_matrix_of_paper_model() -> None:
@@ -72,8 +72,8 @@ def test_nonlinear_terms_have_unit_keys_and_values() -> None:
 
 def test_compensator_evaluates_any_model_like_drift_deg_h() -> None:
     """The compensator's scalar hot path gives the model's drift for the nonlinear terms too."""
-    from fog_temp_comp.compensator import Compensator, GuardSettings
-    from fog_temp_comp.denoise import DenoiseSettings
+    from fog_temp_comp.core.compensator import Compensator, GuardSettings
+    from fog_temp_comp.core.denoise import DenoiseSettings
 
     terms = (*PAPER_TERMS, 'T2', 'T_Tdot')
     rng = np.random.default_rng(3)
@@ -92,7 +92,7 @@ def test_compensator_evaluates_any_model_like_drift_deg_h() -> None:
 
 def test_scalar_terms_equal_the_vectorised_ones() -> None:
     """The hot path's float functions give what the array functions give, term by term."""
-    from fog_temp_comp.model import SCALAR_TERMS
+    from fog_temp_comp.core.model import SCALAR_TERMS
 
     assert set(SCALAR_TERMS) == set(TERMS)
     t = np.array([-40.0, 0.0, 12.5, 60.0])

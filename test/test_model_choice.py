@@ -7,10 +7,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from fog_temp_comp.calibration import CalibrationError, GridTable
-from fog_temp_comp.denoise import RECOMMENDED_SETTINGS
-from fog_temp_comp.model import PAPER_TERMS
-from fog_temp_comp.model_choice import (
+from fog_temp_comp.core.calibration import CalibrationError, GridTable
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.model_choice import (
     BLOCKS_PER_RUN,
     Structure,
     _parts,
@@ -20,7 +20,7 @@ from fog_temp_comp.model_choice import (
     fold_mode,
     sensor_noise,
 )
-from fog_temp_comp.simulate import SimulatedRun, SimulationConfig, simulate_run
+from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig, simulate_run
 
 #: a 0.2 degC/min cycle over 0..40 degC with 30 min holds (about 8 h), gyro 0.5 Hz
 CHAMBER = SimulationConfig(
@@ -147,7 +147,7 @@ def test_the_lead_lag_takes_the_sign_of_the_plant(position: str) -> None:
 
 
 def test_choose_keeps_the_simplest_within_the_tolerance() -> None:
-    from fog_temp_comp.model_choice import StructureScore
+    from fog_temp_comp.core.model_choice import StructureScore
 
     simple = StructureScore(Structure(PAPER_TERMS, 0.01, 3.0), criterion=0.300)
     rich = StructureScore(Structure((*PAPER_TERMS, 'T2'), 0.01, 3.0), criterion=0.298)

@@ -11,14 +11,14 @@ from rclpy.parameter import Parameter
 from rosharness import Harness, stamp_of
 from sensor_msgs.msg import Imu
 
-from fog_temp_comp.calibration import calibrate
-from fog_temp_comp.coefficients import CoefficientsError, save
-from fog_temp_comp.compensator import Compensator, replay
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.metrics import bias_stability, window_means
-from fog_temp_comp.node import CompensatorNode
-from fog_temp_comp.simulate import SimulatedRun
-from fog_temp_comp.units import DEG_H_PER_RAD_S
+from fog_temp_comp.core.calibration import calibrate
+from fog_temp_comp.core.coefficients import CoefficientsError, save
+from fog_temp_comp.core.compensator import Compensator, replay
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.metrics import bias_stability, window_means
+from fog_temp_comp.core.units import DEG_H_PER_RAD_S
+from fog_temp_comp.ros.node import CompensatorNode
+from fog_temp_comp.tools.simulate import SimulatedRun
 
 from simdata import SHORT_CHAMBER
 
@@ -65,7 +65,7 @@ def test_node_output_matches_core_and_removes_drift(
         [[m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z] for m in out]
     )
     # same core object offline: identical numbers
-    from fog_temp_comp.coefficients import load
+    from fog_temp_comp.core.coefficients import load
 
     coeffs = load(coeffs_file)
     offline = replay(
@@ -130,7 +130,7 @@ def test_executor_parameter(ros_context: object, coeffs_file: Path, name: str) -
     """``executor`` picks what ``main()`` spins with; an unknown name is refused."""
     from rclpy.executors import SingleThreadedExecutor
 
-    from fog_temp_comp.node import make_executor
+    from fog_temp_comp.ros.node import make_executor
 
     node = CompensatorNode(
         context=ros_context,
@@ -160,7 +160,7 @@ def test_gyro_input_queue_is_deep_and_overridable(ros_context: object, coeffs_fi
     """Best effort like sensor data, but 100 deep (a lost gyro sample is lost to the INS)."""
     from rclpy.qos import ReliabilityPolicy
 
-    from fog_temp_comp.node import IMU_INPUT_DEPTH
+    from fog_temp_comp.ros.node import IMU_INPUT_DEPTH
 
     overrides = [Parameter('coefficients_file', value=str(coeffs_file))]
     node = CompensatorNode(context=ros_context, parameter_overrides=overrides)
@@ -190,7 +190,7 @@ def test_diagnostics_timer_runs_on_sim_time_under_each_executor(
     from diagnostic_msgs.msg import DiagnosticArray
     from rosgraph_msgs.msg import Clock
 
-    from fog_temp_comp.node import make_executor
+    from fog_temp_comp.ros.node import make_executor
 
     node = CompensatorNode(
         context=ros_context,

@@ -16,11 +16,11 @@ from numpy.testing import assert_allclose, assert_array_equal
 from rclpy.parameter import Parameter
 from rosharness import Harness, make_imu, rate_of, stamp_of
 
-from fog_temp_comp.coefficients import Coefficients, CoefficientsError, load, save, to_dict
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range
-from fog_temp_comp.node import CompensatorNode
-from fog_temp_comp.units import RAD_S_PER_DEG_H
+from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load, save, to_dict
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
+from fog_temp_comp.core.units import RAD_S_PER_DEG_H
+from fog_temp_comp.ros.node import CompensatorNode
 
 T0 = 1_700_000_000.0
 RATE = np.array([1e-4, -2e-4, 3e-4])  # rad/s

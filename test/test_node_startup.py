@@ -10,14 +10,14 @@ import pytest
 from rclpy.parameter import Parameter
 from rosharness import Harness, rate_of
 
-from fog_temp_comp.coefficients import Coefficients, save
-from fog_temp_comp.compensator import Compensator, replay
-from fog_temp_comp.denoise import RECOMMENDED_SETTINGS
-from fog_temp_comp.metrics import window_means
-from fog_temp_comp.model_choice import choose_and_calibrate
-from fog_temp_comp.node import CompensatorNode
-from fog_temp_comp.simulate import SimulatedRun, SimulationConfig, simulate_run
-from fog_temp_comp.units import DEG_H_PER_RAD_S
+from fog_temp_comp.core.coefficients import Coefficients, save
+from fog_temp_comp.core.compensator import Compensator, replay
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.metrics import window_means
+from fog_temp_comp.core.model_choice import choose_and_calibrate
+from fog_temp_comp.core.units import DEG_H_PER_RAD_S
+from fog_temp_comp.ros.node import CompensatorNode
+from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig, simulate_run
 
 #: a sensor (1/16 degC, 0.02 degC noise) behind the coil, a wobbling chamber; gyro 0.5 Hz,
 #: temperature 1 Hz

@@ -25,8 +25,8 @@ import numpy as np
 import pytest
 
 import fog_temp_comp
-from fog_temp_comp.coefficients import load
-from fog_temp_comp.units import RAD_S_PER_DEG_H
+from fog_temp_comp.core.coefficients import load
+from fog_temp_comp.core.units import RAD_S_PER_DEG_H
 
 pytestmark = pytest.mark.slow
 
@@ -461,9 +461,11 @@ def test_wheel_contents(source_copy: Path, tmp_path: Path) -> None:
         (entry_points_name,) = (n for n in names if n.endswith('.dist-info/entry_points.txt'))
         entry_points = configparser.ConfigParser(interpolation=None)
         entry_points.read_string(archive.read(entry_points_name).decode())
-    assert f'{PACKAGE}/node.py' in names
+    for layer in ('core', 'bag', 'ros', 'tools'):  # every subpackage is installed
+        assert f'{PACKAGE}/{layer}/__init__.py' in names
+    assert f'{PACKAGE}/ros/node.py' in names
     scripts = dict(entry_points.items('console_scripts'))
-    assert scripts['compensator'] == 'fog_temp_comp.node:main'
-    assert scripts['fog-temp-comp'] == 'fog_temp_comp.cli:main'
+    assert scripts['compensator'] == 'fog_temp_comp.ros.node:main'
+    assert scripts['fog-temp-comp'] == 'fog_temp_comp.tools.cli:main'
     leaked = [n for n in names if n.split('/')[0] in ('test', 'benchmarks')]
     assert not leaked, f'test code in the wheel: {leaked}'

@@ -9,19 +9,19 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from fog_temp_comp.calibration import GridTable, calibrate, grid_table
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.evaluate import Score, compensate_record, score_record
-from fog_temp_comp.fitstats import AxisFitStats, fit_drift
-from fog_temp_comp.model import DriftModel
-from fog_temp_comp.report import (
+from fog_temp_comp.core.calibration import GridTable, calibrate, grid_table
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.evaluate import Score, compensate_record, score_record
+from fog_temp_comp.core.fitstats import AxisFitStats, fit_drift
+from fog_temp_comp.core.model import DriftModel
+from fog_temp_comp.tools.report import (
     ReportRun,
     allan_deviation,
     format_coefficient,
     format_se,
     write_report,
 )
-from fog_temp_comp.simulate import simulate_run
+from fog_temp_comp.tools.simulate import simulate_run
 
 from simdata import SHORT_CHAMBER
 

@@ -10,13 +10,13 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Writer
 from rosbags.typesys import Stores, get_typestore
 
-from fog_temp_comp import cli
-from fog_temp_comp.bagio import read_record
-from fog_temp_comp.calibration import calibrate
-from fog_temp_comp.coefficients import load, save
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.evaluate import compensate_record
-from fog_temp_comp.simulate import SimulatedRun
+from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.core.calibration import calibrate
+from fog_temp_comp.core.coefficients import load, save
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.evaluate import compensate_record
+from fog_temp_comp.tools import cli
+from fog_temp_comp.tools.simulate import SimulatedRun
 
 
 def write_noetic_bag(path: Path, run: SimulatedRun) -> None:

@@ -1,4 +1,4 @@
-"""Raw ROS 1 reader (fog_temp_comp.ros1scan) against rosbags' own reader, on real bags."""
+"""Raw ROS 1 reader (fog_temp_comp.bag.ros1scan) against rosbags' own reader, on real bags."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Writer
 from rosbags.typesys import Stores, get_typestore
 
-from fog_temp_comp import bagio
-from fog_temp_comp.bagio import IMU_TYPE, TEMPERATURE_TYPE, write_chamber_bag
-from fog_temp_comp.ros1scan import Ros1Bag, Ros1FormatError
-from fog_temp_comp.stream import BagStream
+from fog_temp_comp.bag import bagio, stream
+from fog_temp_comp.bag.bagio import IMU_TYPE, TEMPERATURE_TYPE, write_chamber_bag
+from fog_temp_comp.bag.ros1scan import Ros1Bag, Ros1FormatError
+from fog_temp_comp.bag.stream import BagStream
 
 IMU = '/imu/data_raw'
 TEMP = '/imu/temperature'
@@ -166,8 +166,8 @@ def test_index_entry_not_matching_its_record_is_a_bag_error(tmp_path: Path) -> N
     broken = tmp_path / 'broken.bag'
     broken.write_bytes(bytes(data))
     with pytest.raises(bagio.BagError, match=r'broken\.bag: cannot read messages'):
-        bagio.read_record(broken)
-    record = bagio.read_record(path)
+        stream.read_record(broken)
+    record = stream.read_record(path)
     assert record.imu_stamps_s.size == 500 and record.temp_stamps_s.size == 50
 
 
@@ -181,4 +181,4 @@ def test_truncated_inside_the_chunks_is_a_bag_error(tmp_path: Path) -> None:
     broken = tmp_path / 'broken.bag'
     broken.write_bytes(bytes(data))
     with pytest.raises(bagio.BagError, match=r'broken\.bag'):
-        bagio.read_record(broken)
+        stream.read_record(broken)

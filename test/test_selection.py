@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from fog_temp_comp.calibration import calibrate
-from fog_temp_comp.coefficients import load, save
-from fog_temp_comp.compensator import GuardSettings
-from fog_temp_comp.denoise import DenoiseSettings, wavelet_denoise
-from fog_temp_comp.evaluate import Score, compensate_record
-from fog_temp_comp.grid import temperature_grid
-from fog_temp_comp.model import PAPER_TERMS
-from fog_temp_comp.selection import (
+from fog_temp_comp.core.calibration import calibrate
+from fog_temp_comp.core.coefficients import load, save
+from fog_temp_comp.core.compensator import GuardSettings
+from fog_temp_comp.core.denoise import DenoiseSettings, wavelet_denoise
+from fog_temp_comp.core.evaluate import Score, compensate_record
+from fog_temp_comp.core.grid import temperature_grid
+from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.selection import (
     Candidate,
     CandidateResult,
     default_candidates,
@@ -27,8 +27,8 @@ from fog_temp_comp.selection import (
     select,
     select_and_calibrate,
 )
-from fog_temp_comp.simulate import SimulatedRun, simulate_run
-from fog_temp_comp.units import RAD_S_PER_DEG_H
+from fog_temp_comp.core.units import RAD_S_PER_DEG_H
+from fog_temp_comp.tools.simulate import SimulatedRun, simulate_run
 
 from simdata import SHORT_CHAMBER
 

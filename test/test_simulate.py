@@ -9,8 +9,9 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy import signal
 
-from fog_temp_comp.model import PAPER_TERMS
-from fog_temp_comp.simulate import (
+from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.units import RAD_S_PER_DEG_H
+from fog_temp_comp.tools.simulate import (
     REALISTIC,
     TRUE_COEFFICIENTS,
     SimulationConfig,
@@ -21,7 +22,6 @@ from fog_temp_comp.simulate import (
     simulate_run,
     true_model,
 )
-from fog_temp_comp.units import RAD_S_PER_DEG_H
 
 from simdata import SHORT_CHAMBER
 

@@ -1,4 +1,4 @@
-"""Raw sqlite3 reader (fog_temp_comp.sqlitescan) against rosbags' own reader, on real bags."""
+"""Raw sqlite3 reader (fog_temp_comp.bag.sqlitescan) against rosbags' own reader, on real bags."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
 
-from fog_temp_comp import bagio
-from fog_temp_comp.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagError
-from fog_temp_comp.sqlitescan import plain_sqlite_files, scan_sqlite
-from fog_temp_comp.stream import BagStream
+from fog_temp_comp.bag import bagio, stream
+from fog_temp_comp.bag.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagError
+from fog_temp_comp.bag.sqlitescan import plain_sqlite_files, scan_sqlite
+from fog_temp_comp.bag.stream import BagStream
 
 from simdata import UNSORTED_STAMPS_NS, write_unsorted_imu_bag
 
@@ -120,7 +120,7 @@ def test_message_compressed_bag_is_read_through_rosbags(tmp_path: Path) -> None:
         for conn, t, data in reader.messages():
             writer.write(conns[conn.id], t, data)
     assert plain_sqlite_files(packed) is None
-    expected, got = bagio.read_record(plain), bagio.read_record(packed)
+    expected, got = stream.read_record(plain), stream.read_record(packed)
     assert_array_equal(got.imu_stamps_s, expected.imu_stamps_s)
     assert_array_equal(got.rates_rad_s, expected.rates_rad_s)
     assert_array_equal(got.temperature_degC, expected.temperature_degC)
@@ -155,7 +155,7 @@ def test_damaged_database_gives_bag_error(tmp_path: Path) -> None:
     data[len(data) // 2 :] = b'\xa5' * (len(data) - len(data) // 2)  # garbage second half
     db.write_bytes(bytes(data))
     with pytest.raises(BagError, match='cannot'):
-        bagio.read_record(bag)
+        stream.read_record(bag)
 
 
 def test_not_a_database_gives_bag_error(tmp_path: Path) -> None:
@@ -163,14 +163,14 @@ def test_not_a_database_gives_bag_error(tmp_path: Path) -> None:
     bad = tmp_path / 'bad.db3'
     bad.write_bytes(b'this is not a database' * 100)
     with pytest.raises(BagError, match=r'bad\.db3: cannot open bag'):
-        bagio.read_record(bad)
+        stream.read_record(bad)
 
 
 def test_topics_come_from_the_database_without_rosbags(tmp_path: Path) -> None:
     """Topic resolution on a plain sqlite3 bag: errors name the bag's topics and types."""
     bag = write_bag(tmp_path / 'bag', n_imu=100)
     with pytest.raises(BagError, match=r'--gyro-topic /nope: not in bag; topics: .*/imu/data_raw'):
-        bagio.read_record(bag, gyro_topic='/nope')
+        stream.read_record(bag, gyro_topic='/nope')
     wrong_type = '--gyro-topic imu/temperature: has type sensor_msgs/msg/Temperature'
     with pytest.raises(BagError, match=wrong_type):
-        bagio.read_record(bag, gyro_topic='imu/temperature')
+        stream.read_record(bag, gyro_topic='imu/temperature')

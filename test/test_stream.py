@@ -11,10 +11,10 @@ from rosbags.rosbag2 import Writer
 from rosbags.rosbag2.enums import StoragePlugin
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from fog_temp_comp.bagio import BagError, make_header, make_imu, read_record, write_chamber_bag
-from fog_temp_comp.reduce import bin_record, reduce_bag
-from fog_temp_comp.simulate import SimulatedRun
-from fog_temp_comp.stream import BagStream, Progress
+from fog_temp_comp.bag.bagio import BagError, make_header, make_imu, write_chamber_bag
+from fog_temp_comp.bag.reduce import bin_record, reduce_bag
+from fog_temp_comp.bag.stream import BagStream, Progress, read_record
+from fog_temp_comp.tools.simulate import SimulatedRun
 
 STATUS_MSG = """
 std_msgs/Header header
@@ -49,7 +49,7 @@ def write_custom_bag(path: Path, run: SimulatedRun, lag_ns: int = 0) -> None:
 
 @pytest.fixture(scope='module')
 def short_run() -> SimulatedRun:
-    from fog_temp_comp.simulate import SimulationConfig, simulate_run
+    from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
 
     cfg = SimulationConfig(imu_hz=0.5, temp_hz=0.5, low_degC=15.0, high_degC=25.0,
                            start_degC=20.0, cycle_soak_s=300.0)  # fmt: skip

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from fog_temp_comp.coil import CoilLag, coil_lag, foh_lag_coefficients, search_time_constant
-from fog_temp_comp.denoise import DenoiseSettings, SlidingWaveletDenoiser, denoise_offline
-from fog_temp_comp.grid import temperature_grid
-from fog_temp_comp.tdot import (
+from fog_temp_comp.core.coil import CoilLag, coil_lag, foh_lag_coefficients, search_time_constant
+from fog_temp_comp.core.denoise import DenoiseSettings, SlidingWaveletDenoiser, denoise_offline
+from fog_temp_comp.core.grid import temperature_grid
+from fog_temp_comp.core.tdot import (
     CoilLagEstimator,
     GridTdotEstimator,
     KalmanTdotEstimator,

@@ -23,7 +23,7 @@ ROS 2 (CDR, what rosbag2 stores in MCAP and sqlite3)
 ROS 1
     Little endian, no alignment: uint32 seq, int32 sec, uint32 nsec, uint32 frame_id length (no
     NUL), the characters, then the float64 fields. Bags written with ROS 2 message types (what
-    :class:`fog_temp_comp.bagio.BagWriter` writes) have no ``seq``; see ``header_seq``.
+    :class:`fog_temp_comp.bag.bagio.BagWriter` writes) have no ``seq``; see ``header_seq``.
 
 Bit-exactness: every value is copied as raw 64-bit words, so NaN payloads and signed zeros
 survive decoding, patching and encoding unchanged.
@@ -105,7 +105,7 @@ class HeaderBatch:
     def stamps_s(self) -> FloatArray:
         """Header stamps in float seconds, shape (N,): ``sec + nanosec * 1e-9``.
 
-        Bit-identical to :func:`fog_temp_comp.bagio.stamp_to_s` applied per message.
+        Bit-identical to :func:`fog_temp_comp.bag.bagio.stamp_to_s` applied per message.
         """
         return self.stamp_sec.astype(np.float64) + self.stamp_nanosec.astype(np.float64) * 1e-9
 
@@ -378,7 +378,7 @@ def make_imu_batch(
     linear_acceleration: ArrayLike | None = None,
     linear_acceleration_covariance: ArrayLike | None = None,
 ) -> ImuBatch:
-    """Build an :class:`ImuBatch`; unset fields as :func:`fog_temp_comp.bagio.make_imu` sets them.
+    """Build an :class:`ImuBatch`; unset fields as :func:`~fog_temp_comp.bag.bagio.make_imu` does.
 
     Parameters
     ----------
@@ -484,7 +484,7 @@ class Spans:
     """N serialized messages inside one buffer: message k is ``buffer[starts[k]:][:lengths[k]]``.
 
     What a bag reader that does not copy messages out yields (e.g.
-    :func:`fog_temp_comp.mcapscan.scan_mcap`: the spans of an MCAP chunk's message records).
+    :func:`fog_temp_comp.bag.mcapscan.scan_mcap`: the spans of an MCAP chunk's message records).
     """
 
     buffer: RawMessage
@@ -995,7 +995,7 @@ def decode_imu_ros1(
         Serialized messages (ROS 1 bag record data).
     header_seq : bool, optional
         Whether the Header has ``uint32 seq`` (ROS 1 ``std_msgs/Header``: True; bags written
-        with ROS 2 types, e.g. by ``fog_temp_comp.bagio``: False). Take it from the
+        with ROS 2 types, e.g. by ``fog_temp_comp.bag.bagio``: False). Take it from the
         connection's message definition with :func:`ros1_header_has_seq`. None: infer from the
         message lengths, and raise if both layouts fit.
 
@@ -1055,7 +1055,7 @@ def ros1_header_has_seq(msgdef: str) -> bool:
     bool
         True for a standard ROS 1 Header (or when the definition has no Header section), False
         for a Header of ``time stamp`` and ``string frame_id`` only (ROS 2 types in a ROS 1
-        bag, as ``fog_temp_comp.bagio`` writes them).
+        bag, as ``fog_temp_comp.bag.bagio`` writes them).
 
     """
     match = re.search(r'^MSG:\s*std_msgs/(?:msg/)?Header\s*$', msgdef, re.MULTILINE)
@@ -1274,7 +1274,7 @@ def encode_imu_ros1(batch: ImuBatch, *, header_seq: bool = False) -> list[bytes]
     header_seq : bool
         Write ``Header.seq`` (``batch.seq``, or 0 without it), as a ROS 1 type store does.
         False (default) matches rosbags' ``serialize_ros1`` of ROS 2 types, which is what
-        :class:`fog_temp_comp.bagio.BagWriter` writes to ROS 1 bags.
+        :class:`fog_temp_comp.bag.bagio.BagWriter` writes to ROS 1 bags.
 
     Returns
     -------

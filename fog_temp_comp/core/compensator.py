@@ -14,10 +14,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.model import SCALAR_TERMS, DriftModel
-from fog_temp_comp.tdot import TdotEstimate, TdotEstimator, make_estimator
-from fog_temp_comp.units import RAD_S_PER_DEG_H, S_PER_MIN
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.model import SCALAR_TERMS, DriftModel
+from fog_temp_comp.core.tdot import TdotEstimate, TdotEstimator, make_estimator
+from fog_temp_comp.core.units import RAD_S_PER_DEG_H, S_PER_MIN
 
 FloatArray = NDArray[np.float64]
 STALE_POLICIES = ('hold', 'none')

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fog_temp_comp.units import AXES
+from fog_temp_comp.core.units import AXES
 
 FloatArray = NDArray[np.float64]
 
@@ -50,7 +50,7 @@ SCALAR_TERMS: dict[str, Callable[[float, float, float], float]] = {
 TDOT_TERMS = ('Tdot', 'T_Tdot', 'Tdot_lag')
 #: the paper's model, in order
 PAPER_TERMS = ('const', 'T', 'Tdot')
-#: candidate models beyond the paper's, simplest first (see :mod:`fog_temp_comp.selection`)
+#: candidate models beyond the paper's, simplest first (see :mod:`fog_temp_comp.core.selection`)
 CANDIDATE_TERMS: tuple[tuple[str, ...], ...] = (
     PAPER_TERMS,
     (*PAPER_TERMS, 'T2'),

@@ -1,6 +1,6 @@
 """Synthetic thermal-chamber runs of a 3-axis FOG, following the paper's test plan.
 
-Pure numpy: :func:`simulate_run` returns arrays; :mod:`fog_temp_comp.bagio` writes them as bags.
+Pure numpy: :func:`simulate_run` returns arrays; :mod:`~fog_temp_comp.bag.bagio` writes them.
 
 Physics (all documented units):
 
@@ -32,9 +32,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
-from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range
-from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.units import RAD_S_PER_DEG_H, S_PER_H, S_PER_MIN
+from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.units import RAD_S_PER_DEG_H, S_PER_H, S_PER_MIN
 
 FloatArray = NDArray[np.float64]
 

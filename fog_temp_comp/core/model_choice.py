@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from fog_temp_comp.calibration import (
+from fog_temp_comp.core.calibration import (
     CalibrationError,
     CalibrationResult,
     GridTable,
@@ -45,10 +45,10 @@ from fog_temp_comp.calibration import (
     check_identifiable,
     table_of,
 )
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.model import PAPER_TERMS
-from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.tdot import EstimateSeries, offline_estimates
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.tdot import EstimateSeries, offline_estimates
 
 FloatArray = NDArray[np.float64]
 
@@ -263,7 +263,10 @@ def _covers(train: GridTable, test: GridTable) -> bool:
     It needs a T swing, and a Tdot spread of at least half the held-out one (else the fold
     would score extrapolation, not the model).
     """
-    from fog_temp_comp.calibration import MIN_TDOT_SPREAD_DEGC_PER_MIN, MIN_TEMPERATURE_SWING_DEGC
+    from fog_temp_comp.core.calibration import (
+        MIN_TDOT_SPREAD_DEGC_PER_MIN,
+        MIN_TEMPERATURE_SWING_DEGC,
+    )
 
     if train.temperature_degC.size <= len(PAPER_TERMS):
         return False

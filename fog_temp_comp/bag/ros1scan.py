@@ -5,7 +5,7 @@ another per message when it reads. :class:`Ros1Bag` reads the connections and ch
 the bag's index section, and :meth:`Ros1Bag.scan` reads a chunk at a time: the ``IDXDATA``
 records after each chunk give every message's time and offset (``np.frombuffer``), and the
 message records are checked and located with numpy. The payloads go to the decoders of
-:mod:`fog_temp_comp.cdr` as :class:`~fog_temp_comp.cdr.Spans`.
+:mod:`fog_temp_comp.bag.cdr` as :class:`~fog_temp_comp.bag.cdr.Spans`.
 
 A chunk whose message records do not all share the first one's header layout (legal, but not
 what ``rosbag`` or rosbags write) is read record by record instead. A bag this module cannot
@@ -27,7 +27,7 @@ from typing import BinaryIO
 import numpy as np
 from numpy.typing import NDArray
 
-from fog_temp_comp.cdr import Spans
+from fog_temp_comp.bag.cdr import Spans
 
 try:
     from lz4.frame import decompress as _lz4_decompress

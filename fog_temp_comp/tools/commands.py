@@ -13,21 +13,22 @@ from typing import Any, TextIO
 import numpy as np
 import yaml
 
-from fog_temp_comp import bagio, cdr
-from fog_temp_comp.bagio import BagError, BagWriter, read_record
-from fog_temp_comp.calibration import CalibrationError, calibrate_detailed
-from fog_temp_comp.coefficients import Coefficients, CoefficientsError, load, save
-from fog_temp_comp.compensator import Compensator, CompensatorCounters, GuardSettings
-from fog_temp_comp.denoise import RECOMMENDED_SETTINGS, DenoiseSettings
-from fog_temp_comp.earth import earth_rate_body_deg_h, parse_orientation, remove_earth_rate
-from fog_temp_comp.evaluate import format_scores, replay_record, score_record
-from fog_temp_comp.fitstats import format_fits
-from fog_temp_comp.model import PAPER_TERMS, DriftModel, coefficient_key
-from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.reduce import reduce_record
-from fog_temp_comp.selection import default_candidates, format_results, select_and_calibrate
-from fog_temp_comp.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
-from fog_temp_comp.units import AXES
+from fog_temp_comp.bag import bagio, cdr
+from fog_temp_comp.bag.bagio import BagError, BagWriter
+from fog_temp_comp.bag.reduce import reduce_record
+from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.core.calibration import CalibrationError, calibrate_detailed
+from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load, save
+from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS, DenoiseSettings
+from fog_temp_comp.core.earth import earth_rate_body_deg_h, parse_orientation, remove_earth_rate
+from fog_temp_comp.core.evaluate import format_scores, replay_record, score_record
+from fog_temp_comp.core.fitstats import format_fits
+from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, coefficient_key
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
+from fog_temp_comp.core.units import AXES
+from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
 
 #: errors that end a command with one ``ERROR:`` line and exit code 1
 USER_ERRORS = (BagError, CalibrationError, CoefficientsError, FileExistsError, ValueError)
@@ -184,7 +185,7 @@ def calibrate_command(
         and opt.settings.method == 'kalman'
     )
     if automatic:
-        from fog_temp_comp import model_choice
+        from fog_temp_comp.core import model_choice
 
         heldout_records = [earth(read_record(b, **read)) for b in opt.heldout]  # type: ignore[arg-type]
         result, cv_scores, cv_chosen = model_choice.choose_and_calibrate(
@@ -264,7 +265,10 @@ def calibrate_command(
         for note in notes:
             print(note, file=stdout)
     if opt.report_dir is not None:
-        from fog_temp_comp.report import ReportRun, write_report  # matplotlib only when asked
+        from fog_temp_comp.tools.report import (  # matplotlib only when asked
+            ReportRun,
+            write_report,
+        )
 
         if not runs:  # no validation bags: show the training runs
             for record in records:
@@ -431,9 +435,10 @@ def chunked(items: Iterable[Any], size: int) -> Iterator[list[Any]]:
 class ChunkReplayer:
     """Feed bag messages through a compensator a chunk at a time, in their original order.
 
-    Imu and Temperature messages of a chunk are decoded in one batch (:mod:`fog_temp_comp.cdr`),
-    the compensator sees every message in bag order exactly as one at a time, and the corrected
-    Imu are written by patching the raw bytes, so every other field stays bit-identical.
+    Imu and Temperature messages of a chunk are decoded in one batch
+    (:mod:`~fog_temp_comp.bag.cdr`), the compensator sees every message in bag order exactly as
+    one at a time, and the corrected Imu are written by patching the raw bytes, so every other
+    field stays bit-identical.
     """
 
     def __init__(self, compensator: Compensator, reader: Any, imu_topic: str, temp_topic: str):

@@ -1,7 +1,7 @@
 """Randomly drawn gyros and chambers ("plants") for accuracy studies that no single plant can tune.
 
-:func:`draw_plant` draws a :class:`~fog_temp_comp.simulate.SimulationConfig` from wide ranges of
-what real units and chambers do: the temperature sensor ahead of the coil (the coil lags the
+:func:`draw_plant` draws a :class:`~fog_temp_comp.tools.simulate.SimulationConfig` from wide ranges
+of what real units and chambers do: the temperature sensor ahead of the coil (the coil lags the
 housing sensor) or behind it (the sensor reads the coil through its own lag), lags of 0-600 s,
 a T^2 drift of either sign, sensor quantization 1/32-0.1 degC and rate 0.2-10 Hz, a chamber
 controller with its own period, damping (overshoot) and wobble, and gyro noise of several
@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from fog_temp_comp.simulate import SimulationConfig
+from fog_temp_comp.tools.simulate import SimulationConfig
 
 #: plant seeds the pipeline may be developed on
 TUNING_PLANTS = tuple(range(100, 108))

@@ -15,7 +15,7 @@ Offline, whole-record denoising follows MATLAB ``wden`` / ``thselect`` exactly
 
 The methods ``'llr'`` (causal local linear regression) and ``'kalman'`` (Kalman filter on
 temperature and its rate) work on the temperature samples rather than on grid Tdot; they live
-in :mod:`fog_temp_comp.tdot`, and :class:`DenoiseSettings` carries their settings too, so one
+in :mod:`fog_temp_comp.core.tdot`, and :class:`DenoiseSettings` carries their settings too, so one
 settings object (the YAML's ``denoise`` block) describes any Tdot estimator.
 
 All values are in degC/min, all periods in seconds and all frequencies in Hz.
@@ -183,7 +183,7 @@ class DenoiseSettings:
     Attributes
     ----------
     method : str
-        Tdot estimator (:func:`fog_temp_comp.tdot.make_estimator`): ``'wavelet'``
+        Tdot estimator (:func:`fog_temp_comp.core.tdot.make_estimator`): ``'wavelet'``
         (sliding-window ``wden`` of grid Tdot), ``'iir'`` (Butterworth low-pass of grid Tdot),
         ``'none'`` (raw grid Tdot), ``'llr'`` (causal local linear regression on the
         temperature samples) or ``'kalman'`` (Kalman filter on temperature and Tdot).
@@ -226,11 +226,11 @@ class DenoiseSettings:
     coil_lag_s : float
         Time constant of the first-order lag from the temperature sensor to the fibre coil, s
         (0: the sensor reads the coil). Any method: its temperature and Tdot output pass
-        through the lag (:mod:`fog_temp_comp.coil`); ``calibrate`` can fit it.
+        through the lag (:mod:`fog_temp_comp.core.coil`); ``calibrate`` can fit it.
     tdot_lag_s : float
         Time constant of the first-order lag that makes the model term ``Tdot_lag`` from Tdot,
         s (0: ``Tdot_lag`` is Tdot itself). With the ``Tdot`` term it forms a lead-lag from
-        sensor to coil of either sign (:mod:`fog_temp_comp.model`); ``calibrate`` chooses it.
+        sensor to coil of either sign (:mod:`fog_temp_comp.core.model`); ``calibrate`` chooses it.
     tdot_shrink_sigmas : float
         Shrink Tdot toward 0 where it is not significant: Tdot is multiplied by
         ``max(0, 1 - (k * sigma / Tdot)^2)`` (a non-negative garrote) with ``k`` this value and
@@ -364,7 +364,7 @@ class DenoiseSettings:
 
 
 #: the online Tdot estimator: a Kalman filter on temperature and Tdot. ``calibrate`` with no
-#: flags (:mod:`fog_temp_comp.model_choice`) measures the sensor's noise and quantization,
+#: flags (:mod:`fog_temp_comp.core.model_choice`) measures the sensor's noise and quantization,
 #: chooses the rate walk and the lead-lag, and turns on the Tdot shrinkage; these are the
 #: settings of a fit with given ``--terms`` (the shrinkage off, so the coefficients keep their
 #: physical meaning)
@@ -841,7 +841,8 @@ def make_denoiser(settings: DenoiseSettings) -> TdotDenoiser:
         return PassThroughDenoiser()
     raise ValueError(
         f'method {settings.method!r} has no grid-Tdot denoiser (it estimates Tdot from the '
-        f'temperature samples: fog_temp_comp.tdot.make_estimator); grid methods: {GRID_METHODS}'
+        f'temperature samples: fog_temp_comp.core.tdot.make_estimator); grid methods: '
+        f'{GRID_METHODS}'
     )
 
 
@@ -884,6 +885,6 @@ def denoise_offline(x: ArrayLike, settings: DenoiseSettings) -> NDArray[np.float
         return _as_finite_1d(x)
     raise ValueError(
         f'method {settings.method!r} does not denoise grid Tdot (it estimates Tdot from the '
-        f'temperature samples: fog_temp_comp.tdot.offline_estimates); grid methods: '
+        f'temperature samples: fog_temp_comp.core.tdot.offline_estimates); grid methods: '
         f'{GRID_METHODS}'
     )

@@ -1,6 +1,6 @@
 """ROS 2 node ``compensator``: raw gyro Imu + Temperature in, corrected Imu out.
 
-Thin glue around :class:`fog_temp_comp.compensator.Compensator`: messages are converted to
+Thin glue around :class:`fog_temp_comp.core.compensator.Compensator`: messages are converted to
 floats (stamps in s, rates in rad/s, temperature in degC), the core does the rest, and its status
 is published on ``/diagnostics``.
 
@@ -37,17 +37,17 @@ from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, Temperature
 
-from fog_temp_comp.coefficients import Coefficients, CoefficientsError, load
-from fog_temp_comp.compensator import STALE_POLICIES, Compensator, GuardSettings
-from fog_temp_comp.denoise import (
+from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load
+from fog_temp_comp.core.compensator import STALE_POLICIES, Compensator, GuardSettings
+from fog_temp_comp.core.denoise import (
     BOUNDARY_MODES,
     METHODS,
     THRESHOLD_MODES,
     THRESHOLD_RULES,
     DenoiseSettings,
 )
-from fog_temp_comp.diagnostics import build_report
-from fog_temp_comp.units import AXES, RAD_S_PER_DEG_H
+from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
+from fog_temp_comp.ros.diagnostics import build_report
 
 _T = Parameter.Type
 #: Tdot filter parameters, unset = as in the coefficients file: name -> (field, type, text)

@@ -31,8 +31,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fog_temp_comp.model import coefficient_key, design_matrix
-from fog_temp_comp.units import AXES
+from fog_temp_comp.core.model import coefficient_key, design_matrix
+from fog_temp_comp.core.units import AXES
 
 FloatArray = NDArray[np.float64]
 
@@ -221,7 +221,7 @@ def fit_ols(
     Parameters
     ----------
     design : array_like, shape (N, p)
-        Regressors, e.g. :func:`fog_temp_comp.model.design_matrix`.
+        Regressors, e.g. :func:`fog_temp_comp.core.model.design_matrix`.
     y : array_like, shape (N,) or (N, M)
         Responses (deg/h), one fit per column.
     names : sequence of str, length p
@@ -433,7 +433,7 @@ def fit_summary(fits: Sequence[AxisFitStats]) -> dict[str, dict[str, Any]]:
 
     ``standard_errors`` are the Newey-West ones (:data:`SE_METHOD`); the classical ones are
     under ``standard_errors_classical``. Keys carry units (see
-    :func:`fog_temp_comp.model.coefficient_key`).
+    :func:`fog_temp_comp.core.model.coefficient_key`).
     """
     return {
         f.axis: {

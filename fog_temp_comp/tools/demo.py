@@ -14,14 +14,14 @@ from typing import TextIO
 
 import yaml
 
-from fog_temp_comp.bagio import read_record
-from fog_temp_comp.coefficients import load
-from fog_temp_comp.commands import CalibrateOptions, calibrate_command, simulate_command
-from fog_temp_comp.compensator import GuardSettings
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.evaluate import compensate_record, score_record
-from fog_temp_comp.model import PAPER_TERMS
-from fog_temp_comp.simulate import TRAINING_RUN
+from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.core.coefficients import load
+from fog_temp_comp.core.compensator import GuardSettings
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.evaluate import compensate_record, score_record
+from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.tools.commands import CalibrateOptions, calibrate_command, simulate_command
+from fog_temp_comp.tools.simulate import TRAINING_RUN
 
 #: pipelines compared: the paper's three (raw, IIR, wavelet Tdot) with the paper's model, then
 #: this package's default (``calibrate`` with no flags: the model chosen by cross-validation)

@@ -3,13 +3,13 @@
 A :class:`BagStream` yields :class:`Chunk` arrays of at most ``chunk_size`` messages, so long
 chamber runs (24 h at 100 Hz is 8.6 M Imu messages) can be reduced on the fly.
 
-Read paths: MCAP through :mod:`fog_temp_comp.mcapscan` (Message Index, decoding in place;
+Read paths: MCAP through :mod:`fog_temp_comp.bag.mcapscan` (Message Index, decoding in place;
 rosbags' reader only resolves the topics, from the file's summary), indexed ROS 1 through
-:mod:`fog_temp_comp.ros1scan` (``IDXDATA``) and plain rosbag2 sqlite3 through
-:mod:`fog_temp_comp.sqlitescan` (apsw), both without rosbags, whose open reads every index
+:mod:`fog_temp_comp.bag.ros1scan` (``IDXDATA``) and plain rosbag2 sqlite3 through
+:mod:`fog_temp_comp.bag.sqlitescan` (apsw), both without rosbags, whose open reads every index
 entry (ROS 1) or counts every row (sqlite3); anything else (compressed sqlite3,
 ``--temp-field`` of another type, unusual bags) through rosbags' ``AnyReader``. All decode
-with :mod:`fog_temp_comp.cdr`.
+with :mod:`fog_temp_comp.bag.cdr`.
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ import numpy as np
 from numpy.typing import NDArray
 from rosbags.highlevel import AnyReader
 
-from fog_temp_comp import cdr
-from fog_temp_comp.bagio import (
+from fog_temp_comp.bag import cdr
+from fog_temp_comp.bag.bagio import (
     IMU_TYPE,
     TEMPERATURE_TYPE,
     BagError,
@@ -38,10 +38,11 @@ from fog_temp_comp.bagio import (
     resolve_topic_in,
     stamp_to_s,
 )
-from fog_temp_comp.mcapscan import scan_mcap
-from fog_temp_comp.ros1scan import Ros1Bag, Ros1FormatError
-from fog_temp_comp.sqlitescan import plain_sqlite_files, scan_sqlite, topic_types
-from fog_temp_comp.units import NS_PER_S
+from fog_temp_comp.bag.mcapscan import scan_mcap
+from fog_temp_comp.bag.ros1scan import Ros1Bag, Ros1FormatError
+from fog_temp_comp.bag.sqlitescan import plain_sqlite_files, scan_sqlite, topic_types
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
 TIME_SOURCES = ('header', 'receive')
@@ -236,7 +237,7 @@ class BagStream:
 
         Within a stream, chunks follow the bag's log-time order (MCAP: chunk by chunk; the
         streams may interleave differently than in the bag). Standard ``sensor_msgs`` messages
-        are decoded in batches with :mod:`fog_temp_comp.cdr` (no Python object per message); a
+        are decoded in batches with :mod:`fog_temp_comp.bag.cdr` (no Python object per message); a
         ``temp_field`` of another type is deserialized per message with rosbags.
         """
         if not self._open:
@@ -293,7 +294,7 @@ class BagStream:
     def _scan_mcap(
         self, files: list[Path], decoders: dict[int, Any], conns: list[Any]
     ) -> Iterator[Chunk]:
-        """Read MCAP chunks with :func:`fog_temp_comp.mcapscan.scan_mcap`, decoded in place."""
+        """Read MCAP chunks with :func:`fog_temp_comp.bag.mcapscan.scan_mcap`, decoded in place."""
         by_topic = {c.topic: decoders[c.id] for c in conns}
         try:
             for file in files:
@@ -319,7 +320,7 @@ class BagStream:
                 yield self._flush(kind_of[topic], batch, decoders)
 
     def _scan_ros1(self, bag: Ros1Bag) -> Iterator[Chunk]:
-        """Read an indexed ROS 1 bag with :class:`fog_temp_comp.ros1scan.Ros1Bag`."""
+        """Read an indexed ROS 1 bag with :class:`fog_temp_comp.bag.ros1scan.Ros1Bag`."""
         seq = {c.topic: cdr.ros1_header_has_seq(c.msgdef) for c in bag.connections}
         imu_seq, temp_seq = seq[self.imu_topic], seq[self.temp_topic]
         decoders: dict[str, Any] = {
@@ -332,7 +333,7 @@ class BagStream:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def _scan_sqlite(self, files: list[Path]) -> Iterator[Chunk]:
-        """Read sqlite3 databases with :func:`fog_temp_comp.sqlitescan.scan_sqlite`."""
+        """Read sqlite3 databases with :func:`fog_temp_comp.bag.sqlitescan.scan_sqlite`."""
         kind_of = self._kinds()
         topics = {self.imu_topic: IMU_TYPE, self.temp_topic: TEMPERATURE_TYPE}
         decoders = {
@@ -404,3 +405,51 @@ def resolve_any_topic(reader: AnyReader, topic: str, flag: str) -> str:
             return name
     listing = ', '.join(f'{n} ({i.msgtype})' for n, i in sorted(reader.topics.items()))
     raise BagError(f'{flag} {topic}: not in bag; topics: {listing or "none"}')
+
+
+def read_record(
+    path: str | Path,
+    *,
+    gyro_topic: str | None = None,
+    temp_topic: str | None = None,
+    temp_field: str | None = None,
+    time_source: str = 'header',
+    quiet: bool = True,
+) -> ChamberRecord:
+    """Read the gyro and temperature streams of a bag into arrays (sorted by stamp).
+
+    See :class:`fog_temp_comp.bag.stream.BagStream` for the options.
+    """
+    path = Path(path)
+    progress = Progress(path.name, quiet=quiet)
+    parts: dict[str, list[Any]] = {'imu': [], 'temperature': []}
+    with BagStream(
+        path,
+        gyro_topic=gyro_topic,
+        temp_topic=temp_topic,
+        temp_field=temp_field,
+        time_source=time_source,
+        progress=progress,
+    ) as stream:
+        for chunk in stream.chunks():
+            parts[chunk.kind].append(chunk)
+        progress.close()
+        for kind, topic in (('imu', stream.imu_topic), ('temperature', stream.temp_topic)):
+            if not parts[kind]:
+                raise BagError(f'{path}: topic {topic} has no messages')
+        imu_t = np.concatenate([c.stamps_s for c in parts['imu']])
+        rates = np.concatenate([c.values for c in parts['imu']])
+        temp_t = np.concatenate([c.stamps_s for c in parts['temperature']])
+        temps = np.concatenate([c.values for c in parts['temperature']])
+        imu_order = np.argsort(imu_t, kind='stable')
+        temp_order = np.argsort(temp_t, kind='stable')
+        return ChamberRecord(
+            path=path,
+            imu_topic=stream.imu_topic,
+            temp_topic=stream.temp_topic,
+            frame_id=stream.frame_id,
+            imu_stamps_s=imu_t[imu_order],
+            rates_rad_s=rates[imu_order].reshape(-1, 3),
+            temp_stamps_s=temp_t[temp_order],
+            temperature_degC=temps[temp_order],
+        )

@@ -2,7 +2,7 @@
 
 Every estimator is a small stateful object with the :class:`TdotEstimator` interface, so the
 compensator (and with it the node and the offline commands) can run any of them. They are
-selected by :attr:`DenoiseSettings.method <fog_temp_comp.denoise.DenoiseSettings.method>`:
+selected by :attr:`DenoiseSettings.method <fog_temp_comp.core.denoise.DenoiseSettings.method>`:
 
 ========== =============================================================================
 method     estimator
@@ -20,7 +20,7 @@ kalman     :class:`KalmanTdotEstimator`: Kalman filter on (T, Tdot) with a rando
 ========== =============================================================================
 
 With ``coil_lag_s > 0`` the estimate (temperature and Tdot) passes through the sensor-to-coil
-lag (:class:`CoilLagEstimator`, :mod:`fog_temp_comp.coil`). Last, :class:`TdotShaper` shrinks
+lag (:class:`CoilLagEstimator`, :mod:`fog_temp_comp.core.coil`). Last, :class:`TdotShaper` shrinks
 an insignificant Tdot toward 0 (``tdot_shrink_sigmas``) and makes the lagged Tdot of the model
 term ``Tdot_lag`` (``tdot_lag_s``).
 
@@ -39,10 +39,15 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fog_temp_comp.coil import CoilLag, coil_lag
-from fog_temp_comp.denoise import GRID_METHODS, DenoiseSettings, denoise_offline, make_denoiser
-from fog_temp_comp.grid import TemperatureGrid, bin_index, temperature_grid
-from fog_temp_comp.units import S_PER_MIN
+from fog_temp_comp.core.coil import CoilLag, coil_lag
+from fog_temp_comp.core.denoise import (
+    GRID_METHODS,
+    DenoiseSettings,
+    denoise_offline,
+    make_denoiser,
+)
+from fog_temp_comp.core.grid import TemperatureGrid, bin_index, temperature_grid
+from fog_temp_comp.core.units import S_PER_MIN
 
 FloatArray = NDArray[np.float64]
 
@@ -689,7 +694,7 @@ class EstimateSeries:
         )
 
     def lagged(self, coil_lag_s: float) -> EstimateSeries:
-        """Temperature and Tdot through the coil lag (:func:`fog_temp_comp.coil.coil_lag`)."""
+        """Temperature and Tdot through the coil lag (:func:`fog_temp_comp.core.coil.coil_lag`)."""
         if coil_lag_s == 0:
             return self
         return EstimateSeries(
@@ -739,7 +744,7 @@ def offline_estimates(
     """Temperature and Tdot over a whole record, as calibration uses them.
 
     Grid methods return one row per grid bin after the first (bin mean stamp and temperature,
-    Tdot denoised by :func:`~fog_temp_comp.denoise.denoise_offline`: the whole-record,
+    Tdot denoised by :func:`~fog_temp_comp.core.denoise.denoise_offline`: the whole-record,
     non-causal ``wden`` for ``'wavelet'``, as in the paper; the causal Butterworth for
     ``'iir'``). ``'llr'`` and ``'kalman'`` have no offline version that would match what runs
     online, so the online estimator runs causally over the record and every estimate is

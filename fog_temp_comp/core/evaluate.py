@@ -8,12 +8,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from fog_temp_comp.coefficients import Coefficients
-from fog_temp_comp.compensator import Compensator, CompensatorStatus, GuardSettings, replay
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.metrics import bias_range, bias_stability, window_means
-from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.units import AXES, DEG_H_PER_RAD_S
+from fog_temp_comp.core.coefficients import Coefficients
+from fog_temp_comp.core.compensator import Compensator, CompensatorStatus, GuardSettings, replay
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.metrics import bias_range, bias_stability, window_means
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.units import AXES, DEG_H_PER_RAD_S
 
 FloatArray = NDArray[np.float64]
 #: averaging times of the table (s): the paper's 10 s, and 100 s

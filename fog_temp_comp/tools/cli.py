@@ -1,4 +1,4 @@
-"""``fog-temp-comp`` command line: parses arguments and calls :mod:`fog_temp_comp.commands`."""
+"""``fog-temp-comp`` command line: parses arguments, calls :mod:`~fog_temp_comp.tools.commands`."""
 
 from __future__ import annotations
 
@@ -8,12 +8,13 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from fog_temp_comp import __version__, commands
-from fog_temp_comp.bagio import FORMATS
-from fog_temp_comp.compensator import GuardSettings
-from fog_temp_comp.denoise import METHODS, RECOMMENDED_SETTINGS
-from fog_temp_comp.model import TERMS
-from fog_temp_comp.stream import TIME_SOURCES
+from fog_temp_comp import __version__
+from fog_temp_comp.bag.bagio import FORMATS
+from fog_temp_comp.bag.stream import TIME_SOURCES
+from fog_temp_comp.core.compensator import GuardSettings
+from fog_temp_comp.core.denoise import METHODS, RECOMMENDED_SETTINGS
+from fog_temp_comp.core.model import TERMS
+from fog_temp_comp.tools import commands
 
 
 def _add_topics(parser: argparse.ArgumentParser) -> None:
@@ -283,7 +284,7 @@ def run(args: argparse.Namespace) -> int:
             denoise_method=args.denoise,
             guard=_guard(args),
         )
-    from fog_temp_comp.demo import demo_command
+    from fog_temp_comp.tools.demo import demo_command
 
     return demo_command(bags_dir=args.bags, out_dir=args.out)
 

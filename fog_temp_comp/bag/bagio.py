@@ -23,8 +23,7 @@ from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlu
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
-from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.units import NS_PER_S
+from fog_temp_comp.core.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
 IMU_TYPE = 'sensor_msgs/msg/Imu'
@@ -143,56 +142,6 @@ def temperature_first(
             group = []
         group.append(item)
     yield from sorted(group, key=lambda m: m[0].topic != temp_topic)
-
-
-def read_record(
-    path: str | Path,
-    *,
-    gyro_topic: str | None = None,
-    temp_topic: str | None = None,
-    temp_field: str | None = None,
-    time_source: str = 'header',
-    quiet: bool = True,
-) -> ChamberRecord:
-    """Read the gyro and temperature streams of a bag into arrays (sorted by stamp).
-
-    See :class:`fog_temp_comp.stream.BagStream` for the options.
-    """
-    from fog_temp_comp.stream import BagStream, Progress  # stream builds on this module
-
-    path = Path(path)
-    progress = Progress(path.name, quiet=quiet)
-    parts: dict[str, list[Any]] = {'imu': [], 'temperature': []}
-    with BagStream(
-        path,
-        gyro_topic=gyro_topic,
-        temp_topic=temp_topic,
-        temp_field=temp_field,
-        time_source=time_source,
-        progress=progress,
-    ) as stream:
-        for chunk in stream.chunks():
-            parts[chunk.kind].append(chunk)
-        progress.close()
-        for kind, topic in (('imu', stream.imu_topic), ('temperature', stream.temp_topic)):
-            if not parts[kind]:
-                raise BagError(f'{path}: topic {topic} has no messages')
-        imu_t = np.concatenate([c.stamps_s for c in parts['imu']])
-        rates = np.concatenate([c.values for c in parts['imu']])
-        temp_t = np.concatenate([c.stamps_s for c in parts['temperature']])
-        temps = np.concatenate([c.values for c in parts['temperature']])
-        imu_order = np.argsort(imu_t, kind='stable')
-        temp_order = np.argsort(temp_t, kind='stable')
-        return ChamberRecord(
-            path=path,
-            imu_topic=stream.imu_topic,
-            temp_topic=stream.temp_topic,
-            frame_id=stream.frame_id,
-            imu_stamps_s=imu_t[imu_order],
-            rates_rad_s=rates[imu_order].reshape(-1, 3),
-            temp_stamps_s=temp_t[temp_order],
-            temperature_degC=temps[temp_order],
-        )
 
 
 class BagWriter:

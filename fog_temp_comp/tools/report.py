@@ -30,12 +30,12 @@ from matplotlib.ticker import FuncFormatter
 from numpy.typing import NDArray
 
 from fog_temp_comp import __version__
-from fog_temp_comp.coefficients import model_equation
-from fog_temp_comp.evaluate import Score
-from fog_temp_comp.fitstats import AxisFitStats
-from fog_temp_comp.metrics import window_means
-from fog_temp_comp.model import DriftModel, coefficient_key
-from fog_temp_comp.units import AXES, DEG_H_PER_RAD_S, S_PER_H
+from fog_temp_comp.core.coefficients import model_equation
+from fog_temp_comp.core.evaluate import Score
+from fog_temp_comp.core.fitstats import AxisFitStats
+from fog_temp_comp.core.metrics import window_means
+from fog_temp_comp.core.model import DriftModel, coefficient_key
+from fog_temp_comp.core.units import AXES, DEG_H_PER_RAD_S, S_PER_H
 
 FloatArray = NDArray[np.float64]
 
@@ -141,7 +141,7 @@ def write_report(
     ----------
     out_dir : str or Path
         Output directory; existing files of the same names are overwritten.
-    table : fog_temp_comp.calibration.GridTable
+    table : fog_temp_comp.core.calibration.GridTable
         Calibration rows: ``temperature_degC`` (K,), ``tdot_degC_per_min`` (K,), ``rate_deg_h``
         (K, 3), as fitted (Earth rate already removed if it was).
     model : DriftModel

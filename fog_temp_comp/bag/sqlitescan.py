@@ -3,7 +3,7 @@
 ``AnyReader.messages()`` joins every row with the topics table and yields a tuple per message
 through several generators. :func:`scan_sqlite` asks the database for one topic at a time,
 in rosbags' order (by log time, through the bag's timestamp index), and returns the raw CDR
-payloads in batches for the vectorised decoders of :mod:`fog_temp_comp.cdr`. It uses
+payloads in batches for the vectorised decoders of :mod:`fog_temp_comp.bag.cdr`. It uses
 ``apsw``, the SQLite binding rosbags itself reads with (it fetches rows about 1.5x faster than
 the standard library's ``sqlite3``), opens the file read-only and immutable, and pauses the
 cyclic garbage collector while a batch's row tuples exist (they are freed by reference

@@ -17,20 +17,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fog_temp_comp import __version__
-from fog_temp_comp.coefficients import Coefficients
-from fog_temp_comp.denoise import DenoiseSettings, denoise_offline
-from fog_temp_comp.fitstats import (
+from fog_temp_comp.core.coefficients import Coefficients
+from fog_temp_comp.core.denoise import DenoiseSettings, denoise_offline
+from fog_temp_comp.core.fitstats import (
     AxisFitStats,
     IdentifiabilityError,
     check_identifiability,
     fit_ols,
     fit_summary,
 )
-from fog_temp_comp.grid import bin_means, temperature_grid
-from fog_temp_comp.model import PAPER_TERMS, DriftModel, Range, design_matrix
-from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.tdot import EstimateSeries, offline_estimates
-from fog_temp_comp.units import DEG_H_PER_RAD_S
+from fog_temp_comp.core.grid import bin_means, temperature_grid
+from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range, design_matrix
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.tdot import EstimateSeries, offline_estimates
+from fog_temp_comp.core.units import DEG_H_PER_RAD_S
 
 FloatArray = NDArray[np.float64]
 
@@ -96,7 +96,7 @@ def grid_table(
         Tdot estimation. Grid methods (``'wavelet'``, ``'iir'``, ``'none'``) use the bin-mean
         temperature and the offline-denoised slope between bins (whole-record ``wden`` for the
         wavelet, as in the paper); ``'llr'`` and ``'kalman'`` run the online estimator causally
-        over the record (:func:`fog_temp_comp.tdot.offline_estimates`). A ``coil_lag_s`` lags
+        over the record (:func:`fog_temp_comp.core.tdot.offline_estimates`). A ``coil_lag_s`` lags
         both temperature and Tdot, and the shaping (``tdot_shrink_sigmas``, ``tdot_lag_s``)
         follows, as in the node.
     series : EstimateSeries, optional
@@ -114,7 +114,7 @@ def grid_table(
         it, and the gyro rate mean (deg/h).
 
     """
-    from fog_temp_comp.denoise import GRID_METHODS
+    from fog_temp_comp.core.denoise import GRID_METHODS
 
     period = settings.tdot_period_s
     if series is None:
@@ -223,10 +223,10 @@ def calibrate_detailed(
     settings : DenoiseSettings
         Tdot estimation (see :func:`grid_table`), written to the coefficients' ``denoise``.
     terms : sequence of str
-        Model terms (:data:`fog_temp_comp.model.TERMS`), e.g. ``('const', 'T', 'Tdot', 'T2')``.
+        Model terms (:data:`~fog_temp_comp.core.model.TERMS`), e.g. ``('const', 'T', 'T2')``.
     fit_coil_lag : bool
         Fit the sensor-to-coil lag ``coil_lag_s`` (s) by a 1-D search
-        (:func:`fog_temp_comp.coil.search_time_constant`); the result replaces
+        (:func:`fog_temp_comp.core.coil.search_time_constant`); the result replaces
         ``settings.coil_lag_s`` and the search is recorded in ``provenance['coil_lag_fit']``.
         Otherwise ``settings.coil_lag_s`` is used as given. The objective is the sum over
         axes and records of the squared least-squares residual after a high-pass (the
@@ -257,7 +257,7 @@ def calibrate_detailed(
 
     from scipy import ndimage
 
-    from fog_temp_comp.coil import search_time_constant
+    from fog_temp_comp.core.coil import search_time_constant
 
     if not records:
         raise CalibrationError('no records to calibrate on')

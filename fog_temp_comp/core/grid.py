@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fog_temp_comp.units import S_PER_MIN
+from fog_temp_comp.core.units import S_PER_MIN
 
 FloatArray = NDArray[np.float64]
 

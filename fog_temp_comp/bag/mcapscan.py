@@ -1,9 +1,9 @@
 """Fast raw scanner for MCAP files (rosbag2's default storage), without per-message objects.
 
 ``rosbags``' ``AnyReader.messages()`` parses every MCAP record in Python and builds a tuple per
-message; for the vectorised CDR decoders in :mod:`fog_temp_comp.cdr` that is the bottleneck.
+message; for the vectorised CDR decoders in :mod:`fog_temp_comp.bag.cdr` that is the bottleneck.
 :func:`scan_mcap` yields, per chunk and topic, a log-time array and the messages' positions in
-the (decompressed) chunk as :class:`fog_temp_comp.cdr.Spans`, which the decoders read in place:
+the (decompressed) chunk as :class:`fog_temp_comp.bag.cdr.Spans`, which the decoders read in place:
 
 - **Indexed** (what rosbag2 and rosbags write): the Message Index records that follow each
   chunk give every message's log time and offset, read with ``np.frombuffer``; the records at
@@ -31,7 +31,7 @@ from typing import BinaryIO
 import numpy as np
 from numpy.typing import NDArray
 
-from fog_temp_comp.cdr import Spans
+from fog_temp_comp.bag.cdr import Spans
 
 if sys.version_info >= (3, 14):
     from compression import zstd
@@ -329,7 +329,7 @@ def scan_mcap(
         A wanted topic with messages in this batch.
     log_times_ns : ndarray of int64, shape (N,)
         Log times of these messages in ns.
-    spans : fog_temp_comp.cdr.Spans
+    spans : fog_temp_comp.bag.cdr.Spans
         Where the N messages' raw data (CDR for ROS 2, as ``AnyReader.messages()`` yields it)
         lie in the file's or the chunk's decompressed buffer; ``spans.payloads()`` gives them
         as memoryviews.
@@ -488,5 +488,5 @@ def _benchmark(path: str, topics: set[str]) -> None:  # pragma: no cover
 
 if __name__ == '__main__':  # pragma: no cover
     if len(sys.argv) < 3:
-        sys.exit('usage: python -m fog_temp_comp.mcapscan FILE.mcap TOPIC [TOPIC ...]')
+        sys.exit('usage: python -m fog_temp_comp.bag.mcapscan FILE.mcap TOPIC [TOPIC ...]')
     _benchmark(sys.argv[1], set(sys.argv[2:]))

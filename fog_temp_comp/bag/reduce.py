@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from fog_temp_comp.bagio import BagError
-from fog_temp_comp.grid import GridAccumulator, bin_means
-from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.stream import BagStream, Progress
+from fog_temp_comp.bag.bagio import BagError
+from fog_temp_comp.bag.stream import BagStream, Progress
+from fog_temp_comp.core.grid import GridAccumulator, bin_means
+from fog_temp_comp.core.record import ChamberRecord
 
 FloatArray = NDArray[np.float64]
 

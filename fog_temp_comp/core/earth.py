@@ -25,8 +25,8 @@ from typing import TypeAlias
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.units import DEG_H_PER_RAD_S
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.units import DEG_H_PER_RAD_S
 
 FloatArray = NDArray[np.float64]
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from fog_temp_comp.coefficients import Coefficients
-from fog_temp_comp.compensator import CompensatorCounters, CompensatorStatus
-from fog_temp_comp.units import AXES
+from fog_temp_comp.core.coefficients import Coefficients
+from fog_temp_comp.core.compensator import CompensatorCounters, CompensatorStatus
+from fog_temp_comp.core.units import AXES
 
 OK, WARN, ERROR = 0, 1, 2
 

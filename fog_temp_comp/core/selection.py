@@ -1,12 +1,13 @@
 """Choose the drift model and Tdot estimator by held-out runs, never by their own training data.
 
-A :class:`Candidate` is a Tdot estimator (:class:`~fog_temp_comp.denoise.DenoiseSettings`), a set
-of model terms, and whether the sensor-to-coil lag is fitted. :func:`evaluate_candidates`
+A :class:`Candidate` is a Tdot estimator (:class:`~fog_temp_comp.core.denoise.DenoiseSettings`),
+a set of model terms, and whether the sensor-to-coil lag is fitted. :func:`evaluate_candidates`
 calibrates each candidate on training runs and replays held-out runs through the online
-:class:`~fog_temp_comp.compensator.Compensator` (:func:`fog_temp_comp.evaluate.compensate_record`,
-the code path of the node and of ``compensate``), either on a given set of held-out runs or
-leaving one run out at a time. :func:`select` keeps the simplest candidate whose held-out score is
-within a tolerance of the best one.
+:class:`~fog_temp_comp.core.compensator.Compensator`
+(:func:`~fog_temp_comp.core.evaluate.compensate_record`, the code path of the node and of
+``compensate``), either on a given set of held-out runs or leaving one run out at a time.
+:func:`select` keeps the simplest candidate whose held-out score is within a tolerance of the
+best one.
 
 The held-out score of a candidate is the geometric mean, over held-out runs, axes and averaging
 times (10 s and 100 s), of the bias stability after compensation divided by the stability
@@ -27,15 +28,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from fog_temp_comp.calibration import CalibrationError, calibrate
-from fog_temp_comp.coefficients import Coefficients
-from fog_temp_comp.compensator import GuardSettings
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.evaluate import Score, compensate_record, score_record
-from fog_temp_comp.model import PAPER_TERMS, coefficient_key
-from fog_temp_comp.record import ChamberRecord
-from fog_temp_comp.tdot import offline_estimates
-from fog_temp_comp.units import RAD_S_PER_DEG_H
+from fog_temp_comp.core.calibration import CalibrationError, calibrate
+from fog_temp_comp.core.coefficients import Coefficients
+from fog_temp_comp.core.compensator import GuardSettings
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.evaluate import Score, compensate_record, score_record
+from fog_temp_comp.core.model import PAPER_TERMS, coefficient_key
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.tdot import offline_estimates
+from fog_temp_comp.core.units import RAD_S_PER_DEG_H
 
 FloatArray = NDArray[np.float64]
 
@@ -71,7 +72,7 @@ class Candidate:
         Fit the sensor-to-coil lag in calibration.
     online_tdot : bool
         Calibrate grid methods with the online estimator's Tdot (see
-        :func:`fog_temp_comp.calibration.calibrate`).
+        :func:`fog_temp_comp.core.calibration.calibrate`).
     offline_reference : bool
         Compensate held-out runs with :func:`offline_compensate` (non-causal, whole-record
         Tdot) instead of the online compensator: the paper's reference, never selected.
@@ -161,7 +162,7 @@ class CandidateResult:
 def offline_compensate(record: ChamberRecord, coeffs: Coefficients) -> FloatArray:
     """The paper's non-causal compensation: whole-record Tdot, model applied per grid bin.
 
-    Temperature and Tdot come from :func:`fog_temp_comp.tdot.offline_estimates` (for
+    Temperature and Tdot come from :func:`fog_temp_comp.core.tdot.offline_estimates` (for
     ``'wavelet'``: whole-record ``wden``), lagged by ``coil_lag_s``; every gyro sample gets the
     drift of the grid bin it falls in (nearest bin with an estimate if its own has none). Tdot
     is not clamped.

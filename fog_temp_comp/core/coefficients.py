@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from fog_temp_comp.denoise import DenoiseSettings
-from fog_temp_comp.model import DriftModel, Range, coefficient_key
-from fog_temp_comp.units import AXES
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.model import DriftModel, Range, coefficient_key
+from fog_temp_comp.core.units import AXES
 
 SCHEMA_VERSION = 1
 
