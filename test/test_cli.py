@@ -762,6 +762,25 @@ def test_evaluate_missing_bag(
 # --------------------------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize('argv', [['--help'], ['calibrate', '--help'], ['calibrate', 'x']])
+def test_help_and_argument_errors_import_nothing_heavy(argv: list[str]) -> None:
+    """--help and a bad argument never import numpy, scipy, rosbags or matplotlib."""
+    code = (
+        'import sys\n'
+        'from fog_temp_comp.tools import cli\n'
+        'try:\n'
+        f'    cli.main({argv!r})\n'
+        'except SystemExit:\n'
+        '    pass\n'
+        "heavy = ('numpy', 'scipy', 'rosbags', 'matplotlib', 'pywt', 'yaml')\n"
+        "print('IMPORTED', sorted(m for m in heavy if m in sys.modules))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, '-c', code], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert 'IMPORTED []' in proc.stdout, proc.stdout + proc.stderr
+
+
 def test_python_dash_m_help() -> None:
     proc = subprocess.run(
         [sys.executable, '-m', 'fog_temp_comp', '--help'],

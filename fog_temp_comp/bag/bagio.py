@@ -23,12 +23,12 @@ from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlu
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
+from fog_temp_comp.bag.names import FORMATS
 from fog_temp_comp.core.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
 IMU_TYPE = 'sensor_msgs/msg/Imu'
 TEMPERATURE_TYPE = 'sensor_msgs/msg/Temperature'
-FORMATS = ('mcap', 'sqlite3', 'ros1')
 
 
 class BagError(Exception):

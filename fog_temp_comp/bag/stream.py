@@ -39,13 +39,13 @@ from fog_temp_comp.bag.bagio import (
     stamp_to_s,
 )
 from fog_temp_comp.bag.mcapscan import scan_mcap
+from fog_temp_comp.bag.names import TIME_SOURCES
 from fog_temp_comp.bag.ros1scan import Ros1Bag, Ros1FormatError
 from fog_temp_comp.bag.sqlitescan import plain_sqlite_files, scan_sqlite, topic_types
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
-TIME_SOURCES = ('header', 'receive')
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.model import SCALAR_TERMS, DriftModel
+from fog_temp_comp.core.names import TDOT_LIMIT_DEGC_PER_MIN
 from fog_temp_comp.core.tdot import TdotEstimate, TdotEstimator, make_estimator
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H, S_PER_MIN
 
@@ -60,7 +61,7 @@ class GuardSettings:
     stale_policy: str = 'hold'
     clamp_temperature: bool = True
     clamp_tdot: bool = False
-    tdot_limit_degC_per_min: float = 5.0
+    tdot_limit_degC_per_min: float = TDOT_LIMIT_DEGC_PER_MIN
     time_jump_threshold_s: float = 1.0
     max_temperature_step_degC: float = 2.0
     max_temperature_rate_degC_per_min: float = 20.0

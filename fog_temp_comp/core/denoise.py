@@ -35,6 +35,8 @@ import pywt
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
+from fog_temp_comp.core.names import GRID_METHODS, METHODS
+
 __all__ = [
     'BOUNDARY_MODES',
     'GRID_METHODS',
@@ -56,9 +58,6 @@ __all__ = [
     'wavelet_denoise',
 ]
 
-METHODS: tuple[str, ...] = ('wavelet', 'iir', 'none', 'llr', 'kalman')
-#: methods that denoise the raw Tdot of the grid (the others work on temperature samples)
-GRID_METHODS: tuple[str, ...] = ('wavelet', 'iir', 'none')
 THRESHOLD_RULES: tuple[str, ...] = ('heursure', 'rigrsure', 'sqtwolog', 'minimaxi')
 THRESHOLD_MODES: tuple[str, ...] = ('soft', 'hard')
 NOISE_SCALINGS: tuple[str, ...] = ('sln', 'mln', 'one')

@@ -1,4 +1,9 @@
-"""``fog-temp-comp`` command line: parses arguments, calls :mod:`~fog_temp_comp.tools.commands`."""
+"""``fog-temp-comp`` command line: parses arguments, calls :mod:`~fog_temp_comp.tools.commands`.
+
+Start-up: only argparse and the plain name lists are imported at module level, so ``--help``
+and argument errors cost no numpy, scipy, rosbags or matplotlib; a command imports what it
+needs when it runs (``benchmarks/bench_startup.py``).
+"""
 
 from __future__ import annotations
 
@@ -7,14 +12,14 @@ import dataclasses
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from fog_temp_comp import __version__
-from fog_temp_comp.bag.bagio import FORMATS
-from fog_temp_comp.bag.stream import TIME_SOURCES
-from fog_temp_comp.core.compensator import GuardSettings
-from fog_temp_comp.core.denoise import METHODS, RECOMMENDED_SETTINGS
-from fog_temp_comp.core.model import TERMS
-from fog_temp_comp.tools import commands
+from fog_temp_comp.bag.names import FORMATS, TIME_SOURCES
+from fog_temp_comp.core.names import METHODS, TDOT_LIMIT_DEGC_PER_MIN, TERM_NAMES
+
+if TYPE_CHECKING:
+    from fog_temp_comp.core.compensator import GuardSettings
 
 
 def _add_topics(parser: argparse.ArgumentParser) -> None:
@@ -35,7 +40,7 @@ def _add_guard(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> Non
         '--clamp-tdot',
         action='store_true',
         help='clamp Tdot to the calibrated range (default: the linear Tdot terms are applied '
-        f'beyond it, up to +-{GuardSettings().tdot_limit_degC_per_min:g} degC/min, as in the '
+        f'beyond it, up to +-{TDOT_LIMIT_DEGC_PER_MIN:g} degC/min, as in the '
         "paper's protocol: fit on one cycle rate, judge on faster ones)",
     )
     parser.add_argument(
@@ -55,6 +60,8 @@ def _terms(args: argparse.Namespace) -> tuple[str, ...] | None:
 
 
 def _guard(args: argparse.Namespace) -> GuardSettings:
+    from fog_temp_comp.core.compensator import GuardSettings
+
     if args.extrapolate_tdot:
         print('note: --extrapolate-tdot is the default now; the flag is ignored', file=sys.stderr)
     return GuardSettings(clamp_tdot=args.clamp_tdot)
@@ -133,7 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
         '--terms',
         default=None,
         metavar='LIST',
-        help=f'model terms, comma separated, from {sorted(TERMS)}. Default: calibrate '
+        help=f'model terms, comma separated, from {sorted(TERM_NAMES)}. Default: calibrate '
         'chooses the terms, the sensor-to-coil lead-lag and the Kalman settings by '
         'cross-validation on the bags (any of --terms, --denoise, --fit-coil-lag, '
         '--online-tdot or --leave-one-run-out fits what is asked instead; --terms '
@@ -231,7 +238,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Dispatch parsed arguments to a command."""
+    """Dispatch parsed arguments to a command (imported here, not at start-up)."""
+    from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+    from fog_temp_comp.tools import commands
+
     if args.command == 'simulate':
         return commands.simulate_command(
             args.out_dir,
@@ -292,6 +302,8 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fog-temp-comp`` console script."""
     args = build_parser().parse_args(argv)
+    from fog_temp_comp.tools import commands
+
     try:
         return run(args)
     except commands.USER_ERRORS as err:
