@@ -498,37 +498,18 @@ class KalmanTdotEstimator:
         return math.sqrt(max(self._p11, 0.0)) * S_PER_MIN
 
 
-class CoilLagEstimator:
-    """Any estimator followed by the sensor-to-coil lag on its temperature and Tdot output.
+class _FollowingEstimator:
+    """An estimator that transforms each new estimate of an inner one (``_apply``)."""
 
-    Parameters
-    ----------
-    inner : TdotEstimator
-        The estimator on the sensor's temperature.
-    coil_lag_s : float
-        Time constant of the lag, s (> 0).
-
-    """
-
-    def __init__(self, inner: TdotEstimator, coil_lag_s: float) -> None:
+    def __init__(self, inner: TdotEstimator) -> None:
         self.inner = inner
-        self._lag_t = CoilLag(coil_lag_s)
-        self._lag_r = CoilLag(coil_lag_s)
         self._estimate: TdotEstimate | None = None
 
     def _apply(self, e: TdotEstimate) -> TdotEstimate:
-        self._estimate = TdotEstimate(
-            e.stamp_s,
-            self._lag_t.update(e.stamp_s, e.temperature_degC),
-            self._lag_r.update(e.stamp_s, e.tdot_degC_per_min),
-            e.raw_tdot_degC_per_min,
-            e.tdot_std_degC_per_min,
-            ready=e.ready,
-        )
-        return self._estimate
+        raise NotImplementedError
 
     def add(self, stamp_s: float, temperature_degC: float) -> bool:
-        """Feed the inner estimator; lag its new estimate."""
+        """Feed the inner estimator; transform its new estimate."""
         if not self.inner.add(stamp_s, temperature_degC):
             return False
         estimate = self.inner.estimate
@@ -542,13 +523,42 @@ class CoilLagEstimator:
 
     @property
     def estimate(self) -> TdotEstimate | None:
-        """Coil temperature (degC) and coil Tdot (degC/min) at the inner estimate's stamp."""
+        """The transformed latest estimate."""
         return self._estimate
 
     @property
     def ready(self) -> bool:
         """Whether the inner estimator is warmed up."""
         return self.inner.ready
+
+
+class CoilLagEstimator(_FollowingEstimator):
+    """Any estimator followed by the sensor-to-coil lag on its temperature and Tdot output.
+
+    Parameters
+    ----------
+    inner : TdotEstimator
+        The estimator on the sensor's temperature.
+    coil_lag_s : float
+        Time constant of the lag, s (> 0).
+
+    """
+
+    def __init__(self, inner: TdotEstimator, coil_lag_s: float) -> None:
+        super().__init__(inner)
+        self._lag_t = CoilLag(coil_lag_s)
+        self._lag_r = CoilLag(coil_lag_s)
+
+    def _apply(self, e: TdotEstimate) -> TdotEstimate:
+        self._estimate = TdotEstimate(
+            e.stamp_s,
+            self._lag_t.update(e.stamp_s, e.temperature_degC),
+            self._lag_r.update(e.stamp_s, e.tdot_degC_per_min),
+            e.raw_tdot_degC_per_min,
+            e.tdot_std_degC_per_min,
+            ready=e.ready,
+        )
+        return self._estimate
 
     def reset(self) -> None:
         """Forget all samples."""
@@ -576,7 +586,7 @@ def shrink_tdot(
     return tdot_degC_per_min * (1.0 - (threshold / tdot_degC_per_min) ** 2)
 
 
-class TdotShaper:
+class TdotShaper(_FollowingEstimator):
     """Any estimator followed by the Tdot shrinkage and the ``Tdot_lag`` lag.
 
     Tdot is shrunk toward 0 by :func:`shrink_tdot` with ``settings.tdot_shrink_sigmas`` (and
@@ -594,10 +604,9 @@ class TdotShaper:
     """
 
     def __init__(self, inner: TdotEstimator, settings: DenoiseSettings) -> None:
-        self.inner = inner
+        super().__init__(inner)
         self._sigmas = settings.tdot_shrink_sigmas
         self._lag = CoilLag(settings.tdot_lag_s)
-        self._estimate: TdotEstimate | None = None
 
     def _apply(self, e: TdotEstimate) -> TdotEstimate:
         tdot = shrink_tdot(e.tdot_degC_per_min, e.tdot_std_degC_per_min, self._sigmas, e.ready)
@@ -611,29 +620,6 @@ class TdotShaper:
             e.ready,
         )
         return self._estimate
-
-    def add(self, stamp_s: float, temperature_degC: float) -> bool:
-        """Feed the inner estimator; shape its new estimate."""
-        if not self.inner.add(stamp_s, temperature_degC):
-            return False
-        estimate = self.inner.estimate
-        assert estimate is not None
-        self._apply(estimate)
-        return True
-
-    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
-        """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
-        return [self._apply(e) for e in self.inner.add_block(stamps_s, temperature_degC)]
-
-    @property
-    def estimate(self) -> TdotEstimate | None:
-        """The shaped latest estimate."""
-        return self._estimate
-
-    @property
-    def ready(self) -> bool:
-        """Whether the inner estimator is warmed up."""
-        return self.inner.ready
 
     def reset(self) -> None:
         """Forget all samples."""
