@@ -21,6 +21,8 @@ Rows per plant and seed:
 - ``ideal fit``: least squares on the training run with the true coil temperature and rate and
   the true model terms, applied to the held-out runs. What a calibration from this one run
   could reach with perfect temperature knowledge (the bias wander it absorbs is the limit);
+- ``ideal GLS``: the same, prewhitened for the wandering bias (:mod:`fog_temp_comp.core.gls`,
+  which ``calibrate`` picks where it wins on held-out data);
 - ``default``: this package with no flags;
 - ``previous default``: what ``calibrate``/``compensate`` did before (the paper's terms, Kalman
   with fixed sensor settings, Tdot clamped to the calibrated range).
@@ -48,6 +50,7 @@ from fog_temp_comp.core.calibration import calibrate
 from fog_temp_comp.core.compensator import GuardSettings
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.evaluate import compensate_record, score_record
+from fog_temp_comp.core.gls import gls_coefficients
 from fog_temp_comp.core.grid import bin_means
 from fog_temp_comp.core.model import PAPER_TERMS, design_matrix
 from fog_temp_comp.core.model_choice import choose_and_calibrate
@@ -56,7 +59,7 @@ from fog_temp_comp.tools.plants import HELDBACK_PLANTS, TUNING_PLANTS, describe,
 from fog_temp_comp.tools.simulate import SimulatedRun, simulate_plan
 
 TRAINING_RUN = 'cycle_0p2'
-PIPELINES = ('oracle', 'ideal fit', 'default', 'previous default')
+PIPELINES = ('oracle', 'ideal fit', 'ideal GLS', 'default', 'previous default')
 #: acceptance of the issue, against the oracle
 LIMITS = {'r10': 0.005, 's100': 1.05, 'range_cycles': 0.03, 'range_soaks': 0.03}
 
@@ -84,8 +87,13 @@ def metrics(runs: dict[str, SimulatedRun], corrected: dict[str, np.ndarray]) -> 
     }
 
 
-def ideal_fit(runs: dict[str, SimulatedRun], terms: Sequence[str]) -> dict[str, np.ndarray]:
-    """True coil T/Tdot and true terms, least squares on the training run's 10 s bins."""
+def ideal_fit(
+    runs: dict[str, SimulatedRun], terms: Sequence[str], *, gls: bool = False
+) -> dict[str, np.ndarray]:
+    """True coil T/Tdot and true terms, least squares on the training run's 10 s bins.
+
+    ``gls``: prewhitened for the wandering bias (:mod:`fog_temp_comp.core.gls`), as calibrate.
+    """
     train = runs[TRAINING_RUN]
 
     def design(run: SimulatedRun) -> np.ndarray:
@@ -94,6 +102,8 @@ def ideal_fit(runs: dict[str, SimulatedRun], terms: Sequence[str]) -> dict[str, 
     _, _, x = bin_means(train.imu_stamps_s, design(train), 10.0)
     _, _, y = bin_means(train.imu_stamps_s, train.rates_rad_s * DEG_H_PER_RAD_S, 10.0)
     coef = np.linalg.lstsq(x, y, rcond=None)[0]
+    if gls:
+        coef = gls_coefficients(x, y, [0], const=list(terms).index('const'))[0]
     return {
         name: run.rates_rad_s - (design(run) @ coef) * RAD_S_PER_DEG_H
         for name, run in runs.items()
@@ -114,6 +124,7 @@ def study_one(job: tuple[int, int]) -> dict[str, object]:
         runs, {n: r.rates_rad_s - r.true_drift_deg_h * RAD_S_PER_DEG_H for n, r in heldout.items()}
     )
     rows['ideal fit'] = metrics(runs, ideal_fit(runs, cfg.terms))
+    rows['ideal GLS'] = metrics(runs, ideal_fit(runs, cfg.terms, gls=True))
     t_cal = time.perf_counter()
     result, _, chosen = choose_and_calibrate(train, RECOMMENDED_SETTINGS)
     cal_s = time.perf_counter() - t_cal
@@ -195,7 +206,7 @@ def summary(results: Sequence[dict[str, object]]) -> str:
         sub = [r for r in results if r['set'] == which]
         if not sub:
             continue
-        for against in ('oracle', 'ideal fit'):
+        for against in ('oracle', 'ideal fit', 'ideal GLS'):
             counts = {k: 0 for k in LIMITS}
             every = 0
             for res in sub:

@@ -26,6 +26,7 @@ from fog_temp_comp.core.fitstats import (
     fit_ols,
     fit_summary,
 )
+from fog_temp_comp.core.gls import fit_gls
 from fog_temp_comp.core.grid import bin_means, temperature_grid
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range, design_matrix
 from fog_temp_comp.core.record import ChamberRecord
@@ -50,13 +51,16 @@ class GridTable:
 
     ``temperature_degC``, ``tdot_degC_per_min``, ``tdot_lag_degC_per_min`` (Tdot through the
     ``tdot_lag_s`` lag, for the ``Tdot_lag`` term; None means Tdot itself): (K,);
-    ``rate_deg_h``: (K, 3) gyro bin means.
+    ``rate_deg_h``: (K, 3) gyro bin means; ``bin_index``: (K,) absolute grid bin of each row
+    (None: unknown), where consecutive rows of one run differ by 1 (the GLS fit restarts its
+    whitening wherever they do not: a gap, the next bag).
     """
 
     temperature_degC: FloatArray
     tdot_degC_per_min: FloatArray
     rate_deg_h: FloatArray
     tdot_lag_degC_per_min: FloatArray | None = None
+    bin_index: NDArray[np.int64] | None = None
 
     @property
     def tdot_lag(self) -> FloatArray:
@@ -68,14 +72,35 @@ class GridTable:
         """Regressors of ``terms`` on these rows, shape (K, len(terms))."""
         return design_matrix(self.temperature_degC, self.tdot_degC_per_min, terms, self.tdot_lag)
 
+    def rows(self, mask: NDArray[np.bool_]) -> GridTable:
+        """The rows where ``mask`` (K,) is True."""
+        return GridTable(
+            self.temperature_degC[mask],
+            self.tdot_degC_per_min[mask],
+            self.rate_deg_h[mask],
+            self.tdot_lag[mask],
+            None if self.bin_index is None else self.bin_index[mask],
+        )
+
     @staticmethod
     def concatenate(tables: Sequence[GridTable]) -> GridTable:
-        """Stack the rows of several tables."""
+        """Stack the rows of several tables (a new run starts at each table)."""
+        index = None
+        if tables and all(t.bin_index is not None for t in tables):
+            # each table's bins restart well apart from the previous one's: never consecutive
+            parts, offset = [], 0
+            for t in tables:
+                assert t.bin_index is not None
+                b = t.bin_index - (t.bin_index[0] if t.bin_index.size else 0) + offset
+                parts.append(b)
+                offset = int(b[-1]) + 2 if b.size else offset
+            index = np.concatenate(parts)
         return GridTable(
             np.concatenate([t.temperature_degC for t in tables]),
             np.concatenate([t.tdot_degC_per_min for t in tables]),
             np.concatenate([t.rate_deg_h for t in tables]),
             np.concatenate([t.tdot_lag for t in tables]),
+            index,
         )
 
 
@@ -155,13 +180,20 @@ def table_of(record: ChamberRecord, series: EstimateSeries, period_s: float) -> 
     common, ti, gi = np.intersect1d(t_idx, g_idx, assume_unique=True, return_indices=True)
     if common.size == 0:
         raise CalibrationError(f'{record.path}: gyro and temperature stamps do not overlap')
-    return GridTable(means[ti, 0], means[ti, 1], rate[gi] * DEG_H_PER_RAD_S, means[ti, 2])
+    return GridTable(means[ti, 0], means[ti, 1], rate[gi] * DEG_H_PER_RAD_S, means[ti, 2], common)
 
 
 def fit_table(
-    table: GridTable, terms: Sequence[str] = PAPER_TERMS, *, lag: int | None = None
+    table: GridTable,
+    terms: Sequence[str] = PAPER_TERMS,
+    *,
+    lag: int | None = None,
+    gls: bool = False,
 ) -> list[AxisFitStats]:
     """Least squares per axis with classical and Newey-West standard errors, R^2, condition.
+
+    ``gls``: prewhitened for a wandering bias (:func:`fog_temp_comp.core.gls.fit_gls`, which is
+    OLS when the residual shows none) instead of ordinary least squares.
 
     Raises :class:`CalibrationError` for a fit the data cannot identify (too small a swing).
     """
@@ -172,7 +204,9 @@ def fit_table(
     a = table.design(terms)
     if np.linalg.matrix_rank(a) < p:
         raise CalibrationError('design matrix is rank deficient; the terms are not identifiable')
-    return fit_ols(a, table.rate_deg_h, names=tuple(terms), lag=lag)
+    if not gls:
+        return fit_ols(a, table.rate_deg_h, names=tuple(terms), lag=lag)
+    return fit_gls(a, table.rate_deg_h, names=tuple(terms), bin_index=table.bin_index, lag=lag)
 
 
 def check_identifiable(table: GridTable, terms: Sequence[str]) -> list[str]:
@@ -211,6 +245,7 @@ def calibrate_detailed(
     coil_lag_bounds_s: tuple[float, float] = (0.0, 1800.0),
     coil_lag_highpass_s: float = 1800.0,
     online_tdot: bool = False,
+    fit: str = 'ols',
     hac_lag: int | None = None,
     provenance: dict[str, Any] | None = None,
 ) -> CalibrationResult:
@@ -243,6 +278,10 @@ def calibrate_detailed(
         Fit with the Tdot the node computes (the online estimator run causally over each
         record) also for the grid methods; by default ``'wavelet'`` uses the paper's
         whole-record denoising. ``'llr'`` and ``'kalman'`` always run online.
+    fit : str
+        ``'ols'``: ordinary least squares (the paper); ``'gls'``: prewhitened for the gyro's
+        wandering bias (:mod:`fog_temp_comp.core.gls`; what the default model choice picks
+        unless OLS does better on held-out data).
     hac_lag : int, optional
         Newey-West lag of the standard errors (default: data-driven).
     provenance : dict, optional
@@ -312,7 +351,9 @@ def calibrate_detailed(
             [grid_table(r, settings, online_tdot=online_tdot) for r in records]
         )
     warnings = check_identifiable(table, terms)
-    fits = fit_table(table, terms, lag=hac_lag)
+    if fit not in ('ols', 'gls'):
+        raise ValueError(f"fit must be 'ols' or 'gls', got {fit!r}")
+    fits = fit_table(table, terms, lag=hac_lag, gls=fit == 'gls')
     model = DriftModel(
         tuple(terms),
         np.stack([f.coefficients for f in fits], axis=1),

@@ -80,6 +80,8 @@ class AxisFitStats:
         Number of rows n.
     residuals : ndarray, shape (n,)
         ``y - X b``, unit of the response.
+    whitening_theta : float
+        The prewhitening filter of a GLS fit (:mod:`fog_temp_comp.core.gls`); 1 for OLS.
 
     """
 
@@ -94,6 +96,7 @@ class AxisFitStats:
     condition_number: float
     n_samples: int
     residuals: FloatArray
+    whitening_theta: float = 1.0
 
     @property
     def standard_errors(self) -> FloatArray:
@@ -441,7 +444,13 @@ def fit_summary(fits: Sequence[AxisFitStats]) -> dict[str, dict[str, Any]]:
             'r_squared': f.r_squared,
             'n_samples': f.n_samples,
             'condition_number': f.condition_number,
-            'standard_error_method': f'{SE_METHOD} (Bartlett kernel, {f.hac_lag} lags)',
+            'standard_error_method': f'{SE_METHOD} (Bartlett kernel, {f.hac_lag} lags)'
+            + (
+                ''
+                if f.whitening_theta >= 1.0
+                else f' of the prewhitened fit (GLS, theta {f.whitening_theta:.4f})'
+            ),
+            'fit_method': 'ols' if f.whitening_theta >= 1.0 else 'gls',
             'standard_errors': {
                 coefficient_key(t): float(se) for t, se in zip(f.names, f.se_hac, strict=True)
             },

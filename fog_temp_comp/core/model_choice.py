@@ -46,6 +46,7 @@ from fog_temp_comp.core.calibration import (
     table_of,
 )
 from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.gls import gls_coefficients, segment_starts
 from fog_temp_comp.core.model import PAPER_TERMS
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.tdot import EstimateSeries, offline_estimates
@@ -151,6 +152,9 @@ class Structure:
         Time constant of ``Tdot_lag`` (0 without that term), s.
     coil_lag_s : float
         Sensor-to-coil lag applied to the estimated temperature and Tdot (0: none), s.
+    fit : str
+        ``'gls'``: least squares prewhitened for the wandering bias
+        (:mod:`fog_temp_comp.core.gls`); ``'ols'``: ordinary least squares.
 
     """
 
@@ -159,6 +163,7 @@ class Structure:
     shrink_sigmas: float
     tdot_lag_s: float = 0.0
     coil_lag_s: float = 0.0
+    fit: str = 'ols'
 
     @property
     def model(self) -> str:
@@ -175,7 +180,10 @@ class Structure:
         """Label for reports."""
         lag = f', tdot_lag_s {self.tdot_lag_s:g}' if 'Tdot_lag' in self.terms else ''
         coil = f', coil_lag_s {self.coil_lag_s:g}' if self.coil_lag_s else ''
-        return f'{self.model} (walk {self.walk:g}, shrink {self.shrink_sigmas:g}{lag}{coil})'
+        return (
+            f'{self.model} (walk {self.walk:g}, shrink {self.shrink_sigmas:g}{lag}{coil}, '
+            f'{self.fit})'
+        )
 
     def settings(self, base: DenoiseSettings) -> DenoiseSettings:
         """``base`` (a Kalman setting) with this structure's estimator settings."""
@@ -331,12 +339,7 @@ def _parts(
 
 
 def _rows(table: GridTable, mask: NDArray[np.bool_]) -> GridTable:
-    return GridTable(
-        table.temperature_degC[mask],
-        table.tdot_degC_per_min[mask],
-        table.rate_deg_h[mask],
-        table.tdot_lag[mask],
-    )
+    return table.rows(mask)
 
 
 def _log_ratios(before: FloatArray, after: FloatArray, period_s: float) -> list[float]:
@@ -355,14 +358,25 @@ def _log_ratios(before: FloatArray, after: FloatArray, period_s: float) -> list[
 
 
 def _score(
-    folds: Sequence[tuple[GridTable, list[GridTable]]], terms: Sequence[str], period_s: float
+    folds: Sequence[tuple[GridTable, list[GridTable]]],
+    terms: Sequence[str],
+    period_s: float,
+    fit: str = 'gls',
 ) -> tuple[float, list[float]]:
     logs: list[float] = []
     for train, tests in folds:
         a = train.design(terms)
         if a.shape[0] <= a.shape[1] or np.linalg.matrix_rank(a) < a.shape[1]:
             raise CalibrationError('too few rows or a rank-deficient fold')
-        coef = np.linalg.lstsq(a, train.rate_deg_h, rcond=None)[0]
+        if fit == 'ols':
+            coef = np.linalg.lstsq(a, train.rate_deg_h, rcond=None)[0]
+        else:
+            coef = gls_coefficients(
+                a,
+                train.rate_deg_h,
+                segment_starts(train.bin_index, a.shape[0]),
+                const=list(terms).index('const') if 'const' in terms else None,
+            )[0]
         for test in tests:
             after = test.rate_deg_h - test.design(terms) @ coef
             logs += _log_ratios(test.rate_deg_h, after, period_s)
@@ -426,7 +440,12 @@ def cross_validate(
                 table_of(r, s.lagged(coil).shaped(shrink, lag), period)
                 for r, s in zip(heldout, test_series, strict=True)
             ]
-            result.criterion, result.parts = _score(_parts(tables, tests), structure.terms, period)
+            # a structure the final fit would refuse (e.g. a coil lag so long that the lagged
+            # temperature no longer swings) is not a candidate
+            check_identifiable(GridTable.concatenate(tables), structure.terms)
+            result.criterion, result.parts = _score(
+                _parts(tables, tests), structure.terms, period, structure.fit
+            )
         except CalibrationError as err:
             result.error = str(err)
     return scores
@@ -501,6 +520,29 @@ def refine_time_constant(
     return best
 
 
+def choose_fit(
+    chosen: StructureScore,
+    records: Sequence[ChamberRecord],
+    base: DenoiseSettings,
+    heldout: Sequence[ChamberRecord] = (),
+    tolerance: float = TOLERANCE,
+) -> StructureScore:
+    """The chosen structure fitted by OLS, unless GLS scores better by more than ``tolerance``.
+
+    GLS (:mod:`fog_temp_comp.core.gls`) weighs the rows by the measured bias wander, so less
+    of the wander is taken for a temperature coefficient; but it weighs the fast part of the
+    data most, where the Tdot estimate's own lag and noise are largest. On the accuracy study
+    the second effect wins on most plants (``benchmarks/accuracy.py``), so GLS must earn its
+    place on held-out data.
+    """
+    (gls,) = cross_validate(
+        records, base, [dataclasses.replace(chosen.structure, fit='gls')], heldout
+    )
+    if gls.criterion < chosen.criterion * (1.0 - tolerance):
+        return gls
+    return chosen
+
+
 def choose_and_calibrate(
     records: Sequence[ChamberRecord],
     base: DenoiseSettings,
@@ -558,7 +600,13 @@ def choose_and_calibrate(
         PAPER_TERMS,
     )
     scores = cross_validate(records, base, candidates, heldout)
-    chosen = refine_time_constant(choose(scores, tolerance), records, base, heldout)
+    chosen = choose_fit(
+        refine_time_constant(choose(scores, tolerance), records, base, heldout),
+        records,
+        base,
+        heldout,
+        tolerance,
+    )
     period = base.tdot_period_s
     walk = chosen.structure.walk
     mode = fold_mode(
@@ -596,11 +644,13 @@ def choose_and_calibrate(
             for key, s in best_per_model.items()
         },
         'candidates': len(scores),
+        'fit': chosen.structure.fit,
     }
     result = calibrate_detailed(
         records,
         chosen.structure.settings(base),
         terms=chosen.structure.terms,
+        fit=chosen.structure.fit,
         hac_lag=hac_lag,
         provenance={**(provenance or {}), 'selection': selection},
     )
