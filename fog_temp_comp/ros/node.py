@@ -181,6 +181,8 @@ def resolve_path(path: str) -> str:
 #: attitude integration downstream, so the queue rides out scheduling hiccups (a GC pause, a
 #: busy core) that a depth of 5 (2.5 ms at 2 kHz) cannot; ``benchmarks/bench_node.py``
 IMU_INPUT_DEPTH = 100
+#: values of the ``executor`` parameter
+EXECUTORS = ('auto', 'events', 'single')
 IMU_INPUT_QOS = QoSProfile(
     history=qos_profile_sensor_data.history,
     depth=IMU_INPUT_DEPTH,
@@ -202,6 +204,11 @@ class CompensatorNode(Node):
         super().__init__(node_name, **kwargs)
         self._check_params_files([*params_file_paths, *params_files(kwargs.get('cli_args'))])
         self._declare_parameters()
+        executor = self.get_parameter('executor').value
+        if executor not in EXECUTORS:
+            raise ParameterError(
+                f'parameter executor: expected one of {EXECUTORS}, got {executor!r}'
+            )
         for line in unknown_warnings(self._given_parameters(), self._parameters):
             self.get_logger().warning(line)
         self.config = self._build_config({})

@@ -50,18 +50,44 @@ def params_files(args: Sequence[str] | None) -> list[str]:
 
 
 def read_params_file(path: str | Path) -> Any:
-    """The parsed YAML of a params file; :class:`ParameterError` if unreadable or not YAML."""
+    """The parsed YAML of a params file.
+
+    Raises
+    ------
+    ParameterError
+        The file cannot be read, is not YAML, or has a node section without
+        ``ros__parameters`` (which rcl refuses).
+
+    """
     try:
         text = Path(path).read_text(encoding='utf-8')
     except (OSError, UnicodeDecodeError) as err:
         raise ParameterError(f'params file {path}: cannot read it ({err})') from None
     try:
-        return yaml.safe_load(text)
+        yaml.safe_load(text)
     except yaml.YAMLError as err:
         where = getattr(err, 'problem_mark', None)
         line = f' at line {where.line + 1}' if where is not None else ''
         problem = getattr(err, 'problem', None) or 'invalid syntax'
         raise ParameterError(f'params file {path} is not YAML{line}: {problem}') from None
+    data = yaml.safe_load(text)
+    if isinstance(data, dict):
+        for key, value in data.items():
+            if isinstance(value, dict) and not _has_parameters(value):
+                raise ParameterError(
+                    f'params file {path}: section {key} has no ros__parameters (write '
+                    f'{key}: ros__parameters: name: value, indented)'
+                )
+    return data
+
+
+def _has_parameters(section: dict[Any, Any]) -> bool:
+    """Whether a node section holds ``ros__parameters``, maybe under nested namespaces."""
+    if 'ros__parameters' in section:
+        return True
+    return bool(section) and all(
+        isinstance(v, dict) and _has_parameters(v) for v in section.values()
+    )
 
 
 def _tokens(name: str) -> list[str]:
