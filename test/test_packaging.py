@@ -62,9 +62,9 @@ EXEC_DEPENDS = {
     'diagnostic_msgs',
     'python3-numpy',
     'python3-scipy',
-    'python3-pywt',
+    'python3-pywavelets-pip',
+    'python3-rosbags-pip',
     'python3-yaml',
-    'python3-apsw',
     'ament_index_python',
 }
 
