@@ -208,6 +208,8 @@ def test_installed_layout(install_base: Path) -> None:
         f'share/{PACKAGE}/package.xml',
         f'share/{PACKAGE}/config/compensator.yaml',
         f'share/{PACKAGE}/config/example_coefficients.yaml',
+        f'share/{PACKAGE}/launch/compensator.launch.py',
+        f'share/{PACKAGE}/rosdep/fog_temp_comp.yaml',
         f'share/ament_index/resource_index/packages/{PACKAGE}',
     ):
         assert (prefix / relative).is_file(), f'{prefix / relative} missing'
