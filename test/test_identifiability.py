@@ -115,7 +115,11 @@ def test_progress_is_redrawn_on_a_terminal() -> None:
             progress = Progress('bag_a', stream=stream)
             progress.update(10, 2_000_000_000, 1_000_000_000)
             progress.close()
-            written = os.read(controller, 4096).decode()
+            written = ''
+            for _ in range(100):  # bounded: read until the final newline
+                written += os.read(controller, 4096).decode()
+                if '\n' in written:
+                    break
     finally:
         os.close(terminal)
         os.close(controller)

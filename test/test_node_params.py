@@ -71,6 +71,12 @@ STOPPING = [
         "stale_policy must be one of ('hold', 'none'), got 'keep'",
     ),
     (
+        'denoise not among the choices',
+        section(denoise='wavelets'),
+        "parameter denoise: expected one of ('wavelet', 'iir', 'none', 'llr', 'kalman'), got "
+        "'wavelets'",
+    ),
+    (
         'executor not among the choices',
         section(executor='fast'),
         "parameter executor: expected one of ('auto', 'events', 'single'), got 'fast'",

@@ -365,6 +365,10 @@ class CompensatorNode(Node):
             value = self._value(name, changes)
             if value is not None:
                 overrides[field] = value
+        if overrides.get('method', METHODS[0]) not in METHODS:
+            raise ParameterError(
+                f'parameter denoise: expected one of {METHODS}, got {overrides["method"]!r}'
+            )
         settings = dataclasses.replace(coefficients.denoise, **overrides)
         guard = GuardSettings(**{name: self._value(name, changes) for name in GUARD_PARAMETERS})
         return Config(path, coefficients, settings, guard)
