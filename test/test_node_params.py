@@ -23,7 +23,15 @@ from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.ros.params import params_files, section_matches
 
 NODE = 'fog_temp_compensator'
-RUN_MAIN = 'import sys; from fog_temp_comp.ros.node import main; sys.exit(main(sys.argv))'
+#: one process runs main() on each params file in turn (one start-up for the whole table)
+RUN_MAIN = """
+import sys
+from fog_temp_comp.ros.node import main
+for path in sys.argv[1:]:
+    print(f'=== {path}', file=sys.stderr, flush=True)
+    code = main(['compensator', '--ros-args', '--params-file', path])
+    print(f'=== exit {code}', file=sys.stderr, flush=True)
+"""
 
 
 def section(**params: str) -> str:
@@ -152,25 +160,20 @@ def coefficients_file(tmp_path: Path) -> Path:
 
 @pytest.fixture(scope='module')
 def stopped(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, int, str]]:
-    """Each stopping case run through ``main()`` in its own process (all in parallel)."""
+    """Each stopping case run through ``main()``, all in one subprocess: (file, exit, stderr)."""
     tmp = tmp_path_factory.mktemp('params')
     coeffs = coefficients_file(tmp)
-    runs = {}
+    paths = {}
     for k, (case, text, _) in enumerate(STOPPING):
-        path = tmp / f'case{k}.yaml'
+        paths[case] = tmp / f'case{k}.yaml'
         if text is not None:
-            path.write_text(text.replace('COEFFS', str(coeffs)))
-        command = [sys.executable, '-c', RUN_MAIN, '--ros-args', '--params-file', str(path)]
-        process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
-        runs[case] = (path, process)
-    results = {}
-    for case, (path, process) in runs.items():
-        try:
-            _, err = process.communicate(timeout=120)
-        finally:
-            process.kill()
-        results[case] = (path, process.returncode, err)
-    return results
+            paths[case].write_text(text.replace('COEFFS', str(coeffs)))
+    command = [sys.executable, '-c', RUN_MAIN, *map(str, paths.values())]
+    done = subprocess.run(command, stderr=subprocess.PIPE, text=True, timeout=300, check=True)
+    blocks = re.findall(r'^=== (\S+)\n(.*?)^=== exit (-?\d+)$', done.stderr, re.M | re.S)
+    by_path = {path: (int(code), err) for path, err, code in blocks}
+    assert len(by_path) == len(paths), done.stderr
+    return {case: (path, *by_path[str(path)]) for case, path in paths.items()}
 
 
 @pytest.mark.parametrize(('case', 'text', 'expected'), STOPPING, ids=[c[0] for c in STOPPING])
