@@ -413,7 +413,7 @@ def test_runtime_change_of_denoise_method(harness: Harness) -> None:
     assert result.successful
     assert node.config.settings.method == 'wavelet' and node.reconfigurations == 1
     refused = node.set_parameters([Parameter('denoise', value='median')])[0]
-    assert not refused.successful and 'method' in refused.reason
+    assert not refused.successful and 'parameter denoise' in refused.reason
     assert node.config.settings.method == 'wavelet'
 
 

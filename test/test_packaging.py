@@ -62,9 +62,9 @@ EXEC_DEPENDS = {
     'diagnostic_msgs',
     'python3-numpy',
     'python3-scipy',
-    'python3-pywt',
+    'python3-pywavelets-pip',
+    'python3-rosbags-pip',
     'python3-yaml',
-    'python3-apsw',
     'ament_index_python',
 }
 
@@ -208,6 +208,8 @@ def test_installed_layout(install_base: Path) -> None:
         f'share/{PACKAGE}/package.xml',
         f'share/{PACKAGE}/config/compensator.yaml',
         f'share/{PACKAGE}/config/example_coefficients.yaml',
+        f'share/{PACKAGE}/launch/compensator.launch.py',
+        f'share/{PACKAGE}/rosdep/fog_temp_comp.yaml',
         f'share/ament_index/resource_index/packages/{PACKAGE}',
     ):
         assert (prefix / relative).is_file(), f'{prefix / relative} missing'

@@ -62,7 +62,11 @@ class Chunk:
 
 
 class Progress:
-    """One self-overwriting progress line on stderr: messages read and seconds of data."""
+    """Progress on stderr: messages read and seconds of data.
+
+    On a terminal one line redrawn in place (carriage returns); into a file or pipe (a log)
+    only the final line, one per bag.
+    """
 
     def __init__(self, label: str, *, quiet: bool = False, stream: TextIO | None = None) -> None:
         self.label = label
@@ -72,6 +76,8 @@ class Progress:
         self.first_ns: int | None = None
         self.last_ns = 0
         self._shown = 0.0
+        isatty = getattr(self.stream, 'isatty', None)
+        self.redraw = bool(isatty and isatty())
 
     def update(self, messages: int, log_ns: int, first_ns: int | None = None) -> None:
         """Count ``messages`` more, the newest with log time ``log_ns`` (oldest ``first_ns``)."""
@@ -81,14 +87,14 @@ class Progress:
             self.first_ns = oldest
         self.last_ns = max(self.last_ns, log_ns)
         now = time.monotonic()
-        if not self.quiet and now - self._shown > 0.5:
+        if self.redraw and not self.quiet and now - self._shown > 0.5:
             self._shown = now
             self._write('\r')
 
     def close(self) -> None:
         """Print the final line."""
         if not self.quiet:
-            self._write('\r')
+            self._write('\r' if self.redraw else '')
             self.stream.write('\n')
             self.stream.flush()
 

@@ -29,7 +29,12 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
-from rclpy.exceptions import ParameterUninitializedException
+from rclpy._rclpy_pybind11 import RCLError
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterUninitializedException,
+)
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -48,6 +53,14 @@ from fog_temp_comp.core.denoise import (
 )
 from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.diagnostics import build_report
+from fog_temp_comp.ros.params import (
+    ParameterError,
+    expected_text,
+    params_files,
+    read_params_file,
+    sections_warning,
+    unknown_warnings,
+)
 
 _T = Parameter.Type
 #: Tdot filter parameters, unset = as in the coefficients file: name -> (field, type, text)
@@ -168,6 +181,8 @@ def resolve_path(path: str) -> str:
 #: attitude integration downstream, so the queue rides out scheduling hiccups (a GC pause, a
 #: busy core) that a depth of 5 (2.5 ms at 2 kHz) cannot; ``benchmarks/bench_node.py``
 IMU_INPUT_DEPTH = 100
+#: values of the ``executor`` parameter
+EXECUTORS = ('auto', 'events', 'single')
 IMU_INPUT_QOS = QoSProfile(
     history=qos_profile_sensor_data.history,
     depth=IMU_INPUT_DEPTH,
@@ -179,9 +194,23 @@ IMU_INPUT_QOS = QoSProfile(
 class CompensatorNode(Node):
     """Subscribes raw gyro rate and temperature, publishes the drift-corrected Imu."""
 
-    def __init__(self, node_name: str = 'fog_temp_compensator', **kwargs: Any) -> None:
+    def __init__(
+        self,
+        node_name: str = 'fog_temp_compensator',
+        *,
+        params_file_paths: Sequence[str] = (),
+        **kwargs: Any,
+    ) -> None:
         super().__init__(node_name, **kwargs)
+        self._check_params_files([*params_file_paths, *params_files(kwargs.get('cli_args'))])
         self._declare_parameters()
+        executor = self.get_parameter('executor').value
+        if executor not in EXECUTORS:
+            raise ParameterError(
+                f'parameter executor: expected one of {EXECUTORS}, got {executor!r}'
+            )
+        for line in unknown_warnings(self._given_parameters(), self._parameters):
+            self.get_logger().warning(line)
         self.config = self._build_config({})
         self.compensator = Compensator(
             self.config.coefficients.model, self.config.settings, self.config.guard
@@ -190,6 +219,9 @@ class CompensatorNode(Node):
         self.frame_mismatches = 0
         self._require_frame_match = bool(self.get_parameter('require_frame_id_match').value)
         self._inflate_covariance = bool(self.get_parameter('inflate_covariance').value)
+        self._throttle_s = float(self.get_parameter('log_throttle_s').value)
+        self._warm_up_start_s: float | None = None
+        self._last_frame_mismatches = 0
         self._log_config('started')
 
         qos_options = QoSOverridingOptions.with_default_policies()
@@ -219,7 +251,7 @@ class CompensatorNode(Node):
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
-        self.declare_parameter(
+        self._declare(
             'coefficients_file',
             '',
             ParameterDescriptor(
@@ -238,15 +270,15 @@ class CompensatorNode(Node):
                 ]
             if ptype == _T.INTEGER:
                 descriptor.integer_range = [IntegerRange(from_value=0, to_value=1 << 20, step=1)]
-            self.declare_parameter(name, ptype, descriptor)
+            self._declare(name, ptype, descriptor)
         for name, (default, text) in GUARD_PARAMETERS.items():
             descriptor = ParameterDescriptor(description=text)
             if isinstance(default, float):
                 descriptor.floating_point_range = [
                     FloatingPointRange(from_value=0.001, to_value=1e6, step=0.0)
                 ]
-            self.declare_parameter(name, default, descriptor)
-        self.declare_parameter(
+            self._declare(name, default, descriptor)
+        self._declare(
             'require_frame_id_match',
             False,
             ParameterDescriptor(
@@ -254,7 +286,7 @@ class CompensatorNode(Node):
                 'one through uncorrected (else correct them and warn)'
             ),
         )
-        self.declare_parameter(
+        self._declare(
             'inflate_covariance',
             False,
             ParameterDescriptor(
@@ -262,7 +294,7 @@ class CompensatorNode(Node):
                 'covariance diagonal (when the covariance is known)'
             ),
         )
-        self.declare_parameter(
+        self._declare(
             'executor',
             'auto',
             ParameterDescriptor(
@@ -274,7 +306,7 @@ class CompensatorNode(Node):
                 additional_constraints="one of 'auto', 'events', 'single'",
             ),
         )
-        self.declare_parameter(
+        self._declare(
             'diagnostics_period_s',
             1.0,
             ParameterDescriptor(
@@ -283,6 +315,36 @@ class CompensatorNode(Node):
                 floating_point_range=[FloatingPointRange(from_value=0.01, to_value=60.0)],
             ),
         )
+        self._declare(
+            'log_throttle_s',
+            10.0,
+            ParameterDescriptor(
+                description='each kind of console warning is printed at most once per this '
+                'many seconds (s)',
+                read_only=True,
+                floating_point_range=[FloatingPointRange(from_value=0.01, to_value=3600.0)],
+            ),
+        )
+
+    def _declare(self, name: str, value: Any, descriptor: ParameterDescriptor) -> None:
+        """Declare one parameter; a bad override raises a one-line :class:`ParameterError`."""
+        try:
+            self.declare_parameter(name, value, descriptor)
+        except (InvalidParameterTypeException, InvalidParameterValueException):
+            raise ParameterError(_bad_value_text(self, name, value, descriptor)) from None
+
+    def _given_parameters(self) -> list[str]:
+        """Names set for this node from the command line or a params file."""
+        return list(getattr(self, '_parameter_overrides', {}))
+
+    def _check_params_files(self, paths: Sequence[str]) -> None:
+        """Warn about params files that set nothing for this node."""
+        for path in paths:
+            warning = sections_warning(
+                path, read_params_file(path), self.get_fully_qualified_name()
+            )
+            if warning:
+                self.get_logger().warning(warning)
 
     def _value(self, name: str, changes: dict[str, Parameter]) -> Any:
         if name in changes:
@@ -303,6 +365,10 @@ class CompensatorNode(Node):
             value = self._value(name, changes)
             if value is not None:
                 overrides[field] = value
+        if overrides.get('method', METHODS[0]) not in METHODS:
+            raise ParameterError(
+                f'parameter denoise: expected one of {METHODS}, got {overrides["method"]!r}'
+            )
         settings = dataclasses.replace(coefficients.denoise, **overrides)
         guard = GuardSettings(**{name: self._value(name, changes) for name in GUARD_PARAMETERS})
         return Config(path, coefficients, settings, guard)
@@ -344,7 +410,24 @@ class CompensatorNode(Node):
     # ------------------------------------------------------------------ data
     def _on_temperature(self, msg: Temperature) -> None:
         stamp = msg.header.stamp
-        self.compensator.add_temperature(stamp.sec + stamp.nanosec * 1e-9, msg.temperature)
+        stamp_s = stamp.sec + stamp.nanosec * 1e-9
+        was_ready = self.compensator.status.estimator_ready
+        if self.compensator.add_temperature(stamp_s, msg.temperature):
+            self._track_warm_up(stamp_s, was_ready)
+
+    def _track_warm_up(self, stamp_s: float, was_ready: bool) -> None:
+        """INFO once when the Tdot estimator becomes ready: its Tdot terms start to apply."""
+        if not self.compensator.status.estimator_ready:
+            if self._warm_up_start_s is None or was_ready:
+                self._warm_up_start_s = stamp_s
+            return
+        if not was_ready and self._warm_up_start_s is not None:
+            self.get_logger().info(
+                f'Tdot estimator {self.config.settings.method} warmed up after '
+                f'{stamp_s - self._warm_up_start_s:.1f} s of temperature: full correction '
+                'from now on (Tdot terms included)'
+            )
+        self._warm_up_start_s = None
 
     def _on_imu(self, msg: Imu) -> None:
         stamp = msg.header.stamp
@@ -372,6 +455,76 @@ class CompensatorNode(Node):
             std_deg_h = float(fit.get(axis, {}).get('residual_std_deg_h', 0.0))
             cov[4 * j] += (std_deg_h * RAD_S_PER_DEG_H) ** 2
 
+    # ------------------------------------------------------------------ console
+    def _log_console(self, counters: Any, previous: Any) -> None:
+        """Throttled console lines for what went wrong since the last report.
+
+        Each kind has its own call (rclpy throttles per call site), at most one line per
+        ``log_throttle_s``.
+        """
+        status = self.compensator.status
+        log = self.get_logger()
+        every = self._throttle_s
+        topic = self._temp_sub.topic_name
+        uncorrected = counters.imu_uncorrected - previous.imu_uncorrected
+        if uncorrected and not status.has_temperature:
+            log.warning(
+                f'no temperature received on {topic}: gyro passed through uncorrected '
+                f'({uncorrected} messages)',
+                throttle_duration_sec=every,
+            )
+        if counters.temperature_rejected > previous.temperature_rejected:
+            log.warning(
+                f'non-finite temperature on {topic}: samples rejected '
+                f'({counters.temperature_rejected - previous.temperature_rejected})',
+                throttle_duration_sec=every,
+            )
+        guard = self.compensator.guard
+        age_s = status.last_imu_stamp_s - status.last_temperature_stamp_s
+        if counters.imu_held > previous.imu_held:
+            log.warning(
+                f'temperature on {topic} stale: last sample {age_s:.1f} s before the gyro '
+                f'stamp (temperature_timeout_s {guard.temperature_timeout_s:g}): holding the '
+                'last correction',
+                throttle_duration_sec=every,
+            )
+        if uncorrected and status.has_temperature and status.temperature_stale:
+            log.error(
+                f'fallback to pass-through: temperature on {topic} stale, last sample '
+                f'{age_s:.1f} s before the gyro stamp (temperature_timeout_s '
+                f'{guard.temperature_timeout_s:g}, stale_policy none): gyro not corrected',
+                throttle_duration_sec=every,
+            )
+        if self._require_frame_match and self.frame_mismatches > self._last_frame_mismatches:
+            log.error(
+                'fallback to pass-through: gyro frame_id differs from the calibrated '
+                f'{self.config.coefficients.frame_id!r} (require_frame_id_match): '
+                f'{self.frame_mismatches - self._last_frame_mismatches} messages not corrected',
+                throttle_duration_sec=every,
+            )
+        self._last_frame_mismatches = self.frame_mismatches
+        model = self.config.coefficients.model
+        if counters.imu_temperature_clamped > previous.imu_temperature_clamped:
+            t_range = model.temperature_range_degC
+            log.warning(
+                f'temperature {status.temperature_degC:.2f} degC outside the calibrated '
+                f'[{t_range.low:.2f}, {t_range.high:.2f}] degC: clamped to '
+                f'{status.temperature_used_degC:.2f} degC',
+                throttle_duration_sec=every,
+            )
+        if counters.imu_tdot_clamped > previous.imu_tdot_clamped:
+            log.warning(
+                f'Tdot {status.tdot_degC_per_min:.3f} degC/min clamped to '
+                f'{status.tdot_used_degC_per_min:.3f} degC/min ('
+                + (
+                    'clamp_tdot: calibrated range'
+                    if guard.clamp_tdot
+                    else f'tdot_limit_degC_per_min {guard.tdot_limit_degC_per_min:g}'
+                )
+                + ')',
+                throttle_duration_sec=every,
+            )
+
     # ------------------------------------------------------------------ diagnostics
     def publish_diagnostics(self) -> None:
         """Publish one DiagnosticArray with the compensator's health."""
@@ -391,6 +544,7 @@ class CompensatorNode(Node):
             frame_mismatches=self.frame_mismatches,
             require_frame_match=self._require_frame_match,
         )
+        self._log_console(counters, previous)
         self._last_counters = dataclasses.replace(counters)
         self._last_report_time = now
         status = DiagnosticStatus(
@@ -403,6 +557,38 @@ class CompensatorNode(Node):
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(array)
+
+
+_KINDS = {
+    _T.BOOL: 'bool',
+    _T.INTEGER: 'integer',
+    _T.DOUBLE: 'double',
+    _T.STRING: 'string',
+}
+
+
+def _bad_value_text(node: Node, name: str, value: Any, descriptor: ParameterDescriptor) -> str:
+    """One line: the parameter, the type and range it takes, and the value it was given."""
+    if isinstance(value, Parameter.Type):
+        ptype = value
+    else:
+        ptype = Parameter.Type.from_parameter_value(value)
+    low = high = None
+    if descriptor.floating_point_range:
+        low = descriptor.floating_point_range[0].from_value
+        high = descriptor.floating_point_range[0].to_value
+    elif descriptor.integer_range:
+        low = descriptor.integer_range[0].from_value
+        high = descriptor.integer_range[0].to_value
+    expected = expected_text(_KINDS.get(ptype, ptype.name.lower()), low, high)
+    given = getattr(node, '_parameter_overrides', {}).get(name)
+    if given is None:
+        return f'parameter {name}: expected {expected}'
+    given_kind = _KINDS.get(given.type_, given.type_.name.lower())
+    hint = ''
+    if ptype == _T.DOUBLE and given.type_ == _T.INTEGER:
+        hint = f' (write {given.value}.0 for a double)'
+    return f'parameter {name}: expected {expected}, got {given.value!r} ({given_kind}){hint}'
 
 
 def make_executor(node: Node) -> Executor:
@@ -426,11 +612,22 @@ def make_executor(node: Node) -> Executor:
 
 def main(args: Sequence[str] | None = None) -> int:
     """Entry point of ``ros2 run fog_temp_comp compensator``."""
-    rclpy.init(args=None if args is None else list(args))
+    argv = list(sys.argv if args is None else args)
+    try:  # before rcl, which logs its own error and raises on a file it cannot parse
+        files = params_files(argv)
+        for path in files:
+            read_params_file(path)
+        rclpy.init(args=argv)
+    except ParameterError as err:
+        print(f'ERROR: {err}', file=sys.stderr)
+        return 1
+    except RCLError as err:
+        print(f'ERROR: {str(err).splitlines()[0]}', file=sys.stderr)
+        return 1
     node = None
     executor = None
     try:
-        node = CompensatorNode()
+        node = CompensatorNode(params_file_paths=files)
         executor = make_executor(node)
         executor.add_node(node)
         if isinstance(executor, SingleThreadedExecutor):

@@ -153,6 +153,13 @@ def build_parser() -> argparse.ArgumentParser:
         'rate included, comes from a start-up calibration)',
     )
     g.add_argument(
+        '--drop-unidentifiable',
+        action='store_true',
+        help='fit without the terms the bags together do not excite (Tdot over soaks only, '
+        'T over one soak), with a warning; default: refuse, naming the term and each '
+        "bag's T and Tdot span",
+    )
+    g.add_argument(
         '--fit-coil-lag',
         action='store_true',
         help='fit a first-order lag (s) between the temperature sensor and the coil',
@@ -272,6 +279,7 @@ def run(args: argparse.Namespace) -> int:
             report_dir=args.report,
             clamp_tdot=_guard(args).clamp_tdot,
             quiet=args.quiet,
+            drop_unidentifiable=args.drop_unidentifiable,
         )
         return commands.calibrate_command(args.bags, args.output, options=options)
     if args.command == 'compensate':

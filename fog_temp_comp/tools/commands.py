@@ -28,6 +28,7 @@ from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, coefficient_key
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
 from fog_temp_comp.core.units import AXES
+from fog_temp_comp.tools.excitation import identifiable_terms
 from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
 
 #: errors that end a command with one ``ERROR:`` line and exit code 1
@@ -137,6 +138,8 @@ class CalibrateOptions:
     report_dir: Path | None = None
     clamp_tdot: bool = False
     quiet: bool = True
+    #: fit without the terms the bags do not excite (with a warning) instead of refusing
+    drop_unidentifiable: bool = False
 
 
 def calibrate_command(
@@ -177,6 +180,8 @@ def calibrate_command(
     earth, provenance = _earth_correction(opt)
     period = opt.settings.tdot_period_s
     records = [earth(reduce_record(b, period, **read)) for b in bags]  # type: ignore[arg-type]
+    terms = identifiable_terms(records, opt.terms, drop=opt.drop_unidentifiable, stdout=stdout)
+    opt = dataclasses.replace(opt, terms=terms)
     automatic = (
         opt.terms is None
         and not opt.fit_coil_lag

@@ -1,0 +1,238 @@
+"""What a ROS user reads on the console: one throttled line per kind of trouble.
+
+rclpy logs through rcutils, which writes to the process's stderr (file descriptor 2), so
+``capfd`` sees exactly what ``ros2 run`` prints. Each case runs the real node in an in-process
+executor, makes the trouble happen three times and checks: one line the first time, none while
+throttled (``log_throttle_s``), one again once the interval is over.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+from rosharness import Harness
+
+from fog_temp_comp.core.coefficients import Coefficients, save
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS, DenoiseSettings
+from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
+from fog_temp_comp.ros.node import CompensatorNode
+
+T0 = 1_700_000_000.0
+RATE = np.array([1e-4, -2e-4, 3e-4])  # rad/s
+THROTTLE_S = 1.0
+LINE = re.compile(r'^\[(DEBUG|INFO|WARN|ERROR|FATAL)\] \[[0-9.]+\] \[([^\]]+)\]: (.*)$')
+
+
+def coefficients(denoise: DenoiseSettings) -> Coefficients:
+    model = DriftModel(
+        PAPER_TERMS,
+        np.array([[-12.5, 3.2, -0.85], [-8.7e-4, 2.4e-3, -1.6e-3], [0.93, -0.62, 0.45]]),
+        Range(-40.0, 60.0),
+        Range(-0.5, 0.5),
+    )
+    return Coefficients(model=model, denoise=denoise, frame_id='imu_link')
+
+
+def start(context: object, tmp_path: Path, denoise: DenoiseSettings, **params: object) -> Harness:
+    path = tmp_path / 'coeffs.yaml'
+    save(coefficients(denoise), path)
+    overrides = [
+        Parameter('coefficients_file', value=str(path)),
+        Parameter('log_throttle_s', value=THROTTLE_S),
+        Parameter('diagnostics_period_s', value=60.0),  # the test calls publish_diagnostics
+    ]
+    overrides += [Parameter(k, value=v) for k, v in params.items()]
+    return Harness(context, CompensatorNode(context=context, parameter_overrides=overrides))
+
+
+@pytest.fixture()
+def harness_factory(ros_context: object, tmp_path: Path) -> Iterator[Callable[..., Harness]]:
+    made: list[Harness] = []
+
+    def make(denoise: DenoiseSettings | None = None, **params: object) -> Harness:
+        made.append(start(ros_context, tmp_path, denoise or DenoiseSettings('iir'), **params))
+        return made[-1]
+
+    yield make
+    for h in made:
+        h.close()
+
+
+class Console:
+    """The node's console lines (level, message) from stderr, read as they come."""
+
+    def __init__(self, capfd: pytest.CaptureFixture[str]) -> None:
+        self.capfd = capfd
+        self.lines: list[tuple[str, str]] = []
+
+    def read(self) -> list[tuple[str, str]]:
+        for line in self.capfd.readouterr().err.splitlines():
+            match = LINE.match(line)
+            assert match, f'not a log line: {line!r}'
+            if match.group(2) == 'fog_temp_compensator':
+                self.lines.append((match.group(1), match.group(3)))
+        return self.lines
+
+    def matching(self, level: str, pattern: str) -> list[str]:
+        return [text for lvl, text in self.read() if lvl == level and re.search(pattern, text)]
+
+
+def three_times(
+    console: Console, harness: Harness, cause: Callable[[int], None], level: str, pattern: str
+) -> list[str]:
+    """Cause the trouble three times (the third after the throttle interval); the lines."""
+    console.read()
+    console.lines.clear()
+    cause(0)
+    harness.node.publish_diagnostics()
+    assert len(console.matching(level, pattern)) == 1, console.lines
+    cause(1)
+    harness.node.publish_diagnostics()
+    assert len(console.matching(level, pattern)) == 1, 'not throttled'
+    time.sleep(THROTTLE_S * 1.05)
+    cause(2)
+    harness.node.publish_diagnostics()
+    lines = console.matching(level, pattern)
+    assert len(lines) == 2, console.lines
+    return lines
+
+
+def test_temperature_missing_warns_throttled(
+    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
+) -> None:
+    h = harness_factory()
+    lines = three_times(
+        Console(capfd),
+        h,
+        lambda k: h.send_imu(T0 + k, RATE),
+        'WARN',
+        r'^no temperature received on /imu/temperature: gyro passed through uncorrected',
+    )
+    assert lines[0].endswith('(1 messages)')
+
+
+def test_temperature_stale_warns_throttled(
+    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
+) -> None:
+    h = harness_factory()
+    h.send_temperature(T0, 25.0)
+    h.send_imu(T0 + 1.0, RATE)
+    lines = three_times(
+        Console(capfd),
+        h,
+        lambda k: h.send_imu(T0 + 60.0 + k, RATE),
+        'WARN',
+        r'^temperature on /imu/temperature stale: .* holding the last correction$',
+    )
+    assert 'last sample 60.0 s before the gyro stamp (temperature_timeout_s 10)' in lines[0]
+
+
+def test_nonfinite_temperature_warns_throttled(
+    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
+) -> None:
+    h = harness_factory()
+    h.send_temperature(T0, 25.0)
+    lines = three_times(
+        Console(capfd),
+        h,
+        lambda k: h.send_temperature(T0 + 1 + k, [math.nan, math.inf, -math.inf][k]),
+        'WARN',
+        r'^non-finite temperature on /imu/temperature: samples rejected \(1\)$',
+    )
+    assert len(lines) == 2
+
+
+def test_temperature_clamped_warns_throttled(
+    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
+) -> None:
+    h = harness_factory()
+    h.send_temperature(T0, 95.0)
+    lines = three_times(
+        Console(capfd),
+        h,
+        lambda k: h.send_imu(T0 + 0.1 * (k + 1), RATE),
+        'WARN',
+        r'^temperature 95\.00 degC outside the calibrated \[-40\.00, 60\.00\] degC: clamped',
+    )
+    assert lines[0].endswith('clamped to 60.00 degC')
+
+
+def test_tdot_clamped_warns_throttled(
+    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
+) -> None:
+    h = harness_factory(clamp_tdot=True)
+    for k in range(61):  # 1.5 degC/min, calibrated range +-0.5
+        h.send_temperature(T0 + k, 20.0 + 1.5 * k / 60.0)
+    lines = three_times(
+        Console(capfd),
+        h,
+        lambda k: h.send_imu(T0 + 60.1 + 0.1 * k, RATE),
+        'WARN',
+        r'^Tdot 1\.[45]\d\d degC/min clamped to 0\.500 degC/min \(clamp_tdot: calibrated range\)$',
+    )
+    assert len(lines) == 2
+
+
+def test_fallback_to_pass_through_is_an_error_with_the_reason(
+    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
+) -> None:
+    h = harness_factory(stale_policy='none')
+    h.send_temperature(T0, 25.0)
+    h.send_imu(T0 + 1.0, RATE)
+    lines = three_times(
+        Console(capfd),
+        h,
+        lambda k: h.send_imu(T0 + 30.0 + k, RATE),
+        'ERROR',
+        r'^fallback to pass-through: temperature on /imu/temperature stale',
+    )
+    assert '(temperature_timeout_s 10, stale_policy none): gyro not corrected' in lines[0]
+
+
+def test_frame_mismatch_fallback_is_an_error(
+    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
+) -> None:
+    h = harness_factory(require_frame_id_match=True)
+    h.send_temperature(T0, 25.0)
+    lines = three_times(
+        Console(capfd),
+        h,
+        lambda k: h.send_imu(T0 + 0.1 * (k + 1), RATE, frame_id='other'),
+        'ERROR',
+        r"^fallback to pass-through: gyro frame_id differs from the calibrated 'imu_link'",
+    )
+    assert lines[0].endswith('1 messages not corrected')
+
+
+@pytest.mark.parametrize('hz', [1.0, 10.0])
+def test_warm_up_done_is_one_info_line_with_its_duration(
+    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str], hz: float
+) -> None:
+    h = harness_factory(RECOMMENDED_SETTINGS)
+    console = Console(capfd)
+    console.read()
+    console.lines.clear()
+    ready_at = None
+    for k in range(int(120 * hz)):  # 0.3 degC/min for 2 min
+        stamp = T0 + k / hz
+        h.send_temperature(stamp, 20.0 + 0.005 * k / hz)
+        if ready_at is None and h.node.compensator.status.estimator_ready:
+            ready_at = stamp
+    assert ready_at is not None
+    lines = console.matching('INFO', r'^Tdot estimator kalman warmed up after ')
+    assert lines == [
+        f'Tdot estimator kalman warmed up after {ready_at - T0:.1f} s of temperature: '
+        'full correction from now on (Tdot terms included)'
+    ]
+    assert 10.0 < ready_at - T0 < 60.0
+    # a temperature gap restarts the estimate: it warms up again and says so once more
+    for k in range(int(120 * hz)):
+        h.send_temperature(T0 + 200.0 + k / hz, 21.0)
+    assert len(console.matching('INFO', r'warmed up after')) == 2
