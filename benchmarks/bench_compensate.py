@@ -137,7 +137,10 @@ def main(argv: list[str] | None = None) -> int:
         'python -c pass': ([sys.executable, '-c', 'pass'], None),
         'rosbags: read + deserialize': ([sys.executable, '-c', ROSBAGS, str(bag)], None),
         'calibrate': ([tool, 'calibrate', str(bag), '-o', str(coeffs), '--quiet'], None),
-        'compensate': ([tool, 'compensate', str(bag), str(COEFFS), str(out)], out),
+        'compensate': (
+            [tool, 'compensate', str(bag), '--coeffs', str(COEFFS), '-o', str(out)],
+            out,
+        ),
     }
     if not args.no_per_message:
         cases['compensate (per message)'] = (

@@ -1082,8 +1082,14 @@ def _patch_blocks(n: int, blocks: Iterator[_Parsed], new_rates: ArrayLike) -> li
 
 
 def _patch_rates(parsed: _Parsed, rates: FloatArray) -> list[bytes]:
-    n = parsed.lengths.size
     out = bytearray(parsed.data)
+    _write_rates(out, parsed, rates)
+    return _split(bytes(out), parsed.starts, parsed.lengths)
+
+
+def _write_rates(out: bytearray, parsed: _Parsed, rates: FloatArray) -> None:
+    """Write ``rates`` (N, 3) over the angular velocities of ``parsed``'s messages in ``out``."""
+    n = parsed.lengths.size
     buf = np.frombuffer(out, dtype=np.uint8)
     words = np.ascontiguousarray(rates).view(np.uint64)
     little = words.astype('<u8').view(np.uint8).reshape(n, 24)
@@ -1094,7 +1100,6 @@ def _patch_rates(parsed: _Parsed, rates: FloatArray) -> list[bytes]:
         values = np.where(parsed.little[:, None], little, big)
     pos = parsed.starts + parsed.float_offset + 8 * IMU_ANGULAR_VELOCITY
     buf[pos[:, None] + np.arange(24)] = values
-    return _split(bytes(out), parsed.starts, parsed.lengths)
 
 
 def patch_imu_angular_velocity_cdr(
@@ -1120,6 +1125,35 @@ def patch_imu_angular_velocity_cdr(
     """
     raws = _as_list(raws)
     return _patch_blocks(len(raws), _cdr_blocks(raws, IMU_FLOATS, IMU_NAME), new_rates)
+
+
+def patch_imu_angular_velocity_spans(spans: Spans, new_rates: ArrayLike) -> bytearray:
+    """A copy of ``spans.buffer`` with the CDR ``sensor_msgs/Imu`` at ``spans`` patched.
+
+    As :func:`patch_imu_angular_velocity_cdr`, for messages lying in one buffer (e.g. an MCAP
+    chunk): message k of the result is ``out[spans.starts[k]:][:spans.lengths[k]]``; every byte
+    outside the messages' angular velocities is the input's.
+
+    Parameters
+    ----------
+    spans : Spans, length N
+        Serialized messages (validated as in :func:`decode_imu_cdr`).
+    new_rates : array_like, shape (N, 3)
+        New angular velocity x, y, z (rad/s), written bit for bit.
+
+    Returns
+    -------
+    bytearray
+        The patched copy of the buffer.
+
+    """
+    rates = np.asarray(new_rates, dtype=np.float64)
+    if rates.shape != (len(spans), 3):
+        raise ValueError(f'new_rates has shape {rates.shape}, expected {(len(spans), 3)}')
+    out = bytearray(spans.buffer)
+    for parsed in _cdr_blocks(spans, IMU_FLOATS, IMU_NAME):
+        _write_rates(out, parsed, rates[parsed.base : parsed.base + parsed.lengths.size])
+    return out
 
 
 def patch_imu_angular_velocity_ros1(

@@ -33,9 +33,15 @@ _OP_CHUNK = 0x06
 _OP_MESSAGE_INDEX = 0x07
 #: opcode, record length, channel id, sequence, log time, publish time
 _MESSAGE_HEADER = np.dtype(
-    [('op', 'u1'), ('length', '<u8'), ('channel', '<u2'), ('sequence', '<u4'),
-     ('log_time', '<u8'), ('publish_time', '<u8')]
-)  # fmt: skip
+    [
+        ('op', 'u1'),
+        ('length', '<u8'),
+        ('channel', '<u2'),
+        ('sequence', '<u4'),
+        ('log_time', '<u8'),
+        ('publish_time', '<u8'),
+    ]
+)
 _HEAD = _MESSAGE_HEADER.itemsize  # 31
 _INDEX_ENTRY = np.dtype([('log_time', '<u8'), ('offset', '<u8')])
 _U64 = struct.Struct('<Q')
@@ -65,8 +71,13 @@ def _record(op: int, body: bytes) -> bytes:
     return bytes([op]) + _U64.pack(len(body)) + body
 
 
-def _gather(out: NDArray[np.uint8], dst: NDArray[np.int64], src: NDArray[np.uint8],
-            starts: NDArray[np.int64], lengths: NDArray[np.int64]) -> None:  # fmt: skip
+def _gather(
+    out: NDArray[np.uint8],
+    dst: NDArray[np.int64],
+    src: NDArray[np.uint8],
+    starts: NDArray[np.int64],
+    lengths: NDArray[np.int64],
+) -> None:
     """Copy ``src[starts[k]:][:lengths[k]]`` to ``out[dst[k]:]``, one ``memcpy`` per message."""
     unique = np.unique(lengths)
     for length in unique.tolist():
@@ -104,8 +115,9 @@ class McapBlockWriter:
         self._times: list[NDArray[np.int64]] = []
         self._offsets: list[NDArray[np.int64]] = []
 
-    def write(self, channel_ids: NDArray[np.int64], log_times_ns: NDArray[np.int64],
-              spans: Spans) -> None:  # fmt: skip
+    def write(
+        self, channel_ids: NDArray[np.int64], log_times_ns: NDArray[np.int64], spans: Spans
+    ) -> None:
         """Append messages in order: channel (rosbags connection id), log time (ns), data."""
         cids = np.asarray(channel_ids, dtype=np.int64)
         times = np.asarray(log_times_ns, dtype=np.int64)
@@ -142,9 +154,14 @@ class McapBlockWriter:
             writer.counts[cid] += count
             storage.channel_stats[cid] += count
 
-    def _append(self, cids: NDArray[np.int64], times: NDArray[np.int64],
-                src: NDArray[np.uint8], starts: NDArray[np.int64],
-                lengths: NDArray[np.int64]) -> None:  # fmt: skip
+    def _append(
+        self,
+        cids: NDArray[np.int64],
+        times: NDArray[np.int64],
+        src: NDArray[np.uint8],
+        starts: NDArray[np.int64],
+        lengths: NDArray[np.int64],
+    ) -> None:
         """Message records of these messages at the end of the pending chunk."""
         sizes = _HEAD + lengths
         at = np.cumsum(sizes) - sizes
@@ -155,8 +172,9 @@ class McapBlockWriter:
         head['channel'] = cids
         head['log_time'] = times
         head['publish_time'] = times
-        _gather(out, at, head.view(np.uint8), np.arange(cids.size) * _HEAD,
-                np.full(cids.size, _HEAD))  # fmt: skip
+        _gather(
+            out, at, head.view(np.uint8), np.arange(cids.size) * _HEAD, np.full(cids.size, _HEAD)
+        )
         _gather(out, at + _HEAD, src, starts, lengths)
         self._channels.append(cids)
         self._times.append(times)
@@ -195,11 +213,17 @@ class McapBlockWriter:
             entries['log_time'] = times[mine]
             entries['offset'] = offsets[mine]
             index_offsets.append((cid, bio.tell()))
-            bio.write(_record(_OP_MESSAGE_INDEX,
-                              struct.pack('<HI', cid, entries.nbytes) + entries.tobytes()))  # fmt: skip
+            bio.write(
+                _record(
+                    _OP_MESSAGE_INDEX, struct.pack('<HI', cid, entries.nbytes) + entries.tobytes()
+                )
+            )
         info = BytesIO()
-        info.write(struct.pack('<QQQQI', start, end, chunk_start, chunk_end - chunk_start,
-                               len(index_offsets) * 10))  # fmt: skip
+        info.write(
+            struct.pack(
+                '<QQQQI', start, end, chunk_start, chunk_end - chunk_start, len(index_offsets) * 10
+            )
+        )
         for cid, offset in index_offsets:
             info.write(struct.pack('<HQ', cid, offset))
         info.write(_U64.pack(bio.tell() - chunk_end))

@@ -28,6 +28,7 @@ from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, coefficient_key
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
 from fog_temp_comp.core.units import AXES
+from fog_temp_comp.tools import blockreplay
 from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
 
 #: errors that end a command with one ``ERROR:`` line and exit code 1
@@ -279,9 +280,15 @@ def calibrate_command(
         for name, record, corrected in runs:
             scores += score_record(name, record.imu_stamps_s, record.rates_rad_s, corrected)
             report_runs.append(
-                ReportRun(name, record.imu_stamps_s, record.rates_rad_s, corrected,
-                          record.temp_stamps_s, record.temperature_degC)
-            )  # fmt: skip
+                ReportRun(
+                    name,
+                    record.imu_stamps_s,
+                    record.rates_rad_s,
+                    corrected,
+                    record.temp_stamps_s,
+                    record.temperature_degC,
+                )
+            )
         index = write_report(
             opt.report_dir,
             table=result.table,
@@ -364,53 +371,128 @@ def compensate_command(
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
     stdout: TextIO | None = None,
+    fast: bool = True,
 ) -> int:
     """Replay ``in_bag`` through a :class:`Compensator`; write all inputs plus corrected Imu.
 
     Messages are processed in the bag's log-time order, i.e. the order a node sees on replay.
+    ``fast`` (the default) reads an MCAP bag a chunk at a time and writes blocks
+    (:mod:`~fog_temp_comp.tools.blockreplay`), other bags through ``AnyReader`` and
+    :meth:`BagWriter.write_many`; ``fast=False`` writes through rosbags one message at a time.
+    Both give the same bag.
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
     if out_bag.exists():
         raise FileExistsError(f'{out_bag}: exists already, not overwriting')
-    compensator = Compensator(coeffs.model, effective_settings(coeffs, denoise_method), guard)
+    settings = effective_settings(coeffs, denoise_method)
     fmt = bagio.bag_format(in_bag)
     if output_topic and not output_topic.startswith('/'):
         output_topic = '/' + output_topic
-    n_out = 0
     with bagio.open_bag(in_bag) as reader:
-        imu_name = bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic')
-        temp_name = bagio.resolve_topic(reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic')
+        job = _CompensateJob(
+            reader=reader,
+            in_bag=in_bag,
+            out_bag=out_bag,
+            fmt=fmt,
+            imu_name=bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic'),
+            temp_name=bagio.resolve_topic(
+                reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic'
+            ),
+            output_topic=output_topic,
+        )
         if output_topic in reader.topics:
             raise BagError(f'--output-topic {output_topic}: already in {in_bag}; choose another')
-        try:
-            with BagWriter(out_bag, fmt) as writer:
-                for conn in reader.connections:
-                    if conn.topic not in writer.topics:
-                        writer.add_topic(conn.topic, conn.msgtype, like=conn)
-                imu_conn = next(c for c in reader.connections if c.topic == imu_name)
-                # ROS 1: the corrected messages keep the input's layout (Header with seq)
-                writer.add_topic(
-                    output_topic, bagio.IMU_TYPE, like=imu_conn if fmt == 'ros1' else None
-                )
-                messages = bagio.temperature_first(reader.messages(), temp_name)
-                replayer = ChunkReplayer(compensator, reader, imu_name, temp_name)
-                for chunk in chunked(messages, 20_000):
-                    for topic, log_ns, raw in replayer.run(chunk):
-                        writer.write_raw(topic or output_topic, log_ns, raw)
-                        n_out += topic is None
-        except Exception as err:
-            remove_bag(out_bag)  # no half-written output
-            if isinstance(err, BagError):
-                raise
-            raise BagError(f'{in_bag}: failed while replaying (truncated bag?): {err}') from err
-    counters = compensator.status.counters
+        mcap = blockreplay.single_mcap_file(in_bag) if fast and reader.is2 else None
+        result = None
+        if mcap is not None:
+            try:
+                result = job.run(Compensator(coeffs.model, settings, guard), mcap=mcap)
+            except (blockreplay.UnsupportedError, ValueError):
+                remove_bag(out_bag)  # the per-message path decides (and words any error)
+        if result is None:
+            result = job.run(Compensator(coeffs.model, settings, guard), batched=fast)
+    n_out, counters = result
     print(
         f'wrote {out_bag}: {n_out} corrected Imu on {output_topic} '
         f'({counters.imu_uncorrected} before the first temperature passed through)',
         file=stdout,
     )
     return 0
+
+
+@dataclass
+class _CompensateJob:
+    """One ``compensate`` output: the input reader, the topics, where to write."""
+
+    reader: Any
+    in_bag: Path
+    out_bag: Path
+    fmt: str
+    imu_name: str
+    temp_name: str
+    output_topic: str
+
+    def run(
+        self, compensator: Compensator, *, mcap: Path | None = None, batched: bool = True
+    ) -> tuple[int, CompensatorCounters]:
+        """Write the output bag; (corrected Imu written, the compensator's counters).
+
+        With ``mcap``, :class:`blockreplay.UnsupportedError` and ``ValueError`` (damaged file)
+        pass through for the caller to fall back; other errors become :class:`BagError`.
+        The output is removed on any error.
+        """
+        try:
+            with BagWriter(self.out_bag, self.fmt) as writer:
+                self._add_topics(writer)
+                if mcap is not None:
+                    n_out = blockreplay.replay_mcap(
+                        mcap,
+                        writer,
+                        compensator,
+                        topics=set(self.reader.topics),
+                        imu_topic=self.imu_name,
+                        temp_topic=self.temp_name,
+                        output_topic=self.output_topic,
+                    )
+                else:
+                    n_out = self._replay_messages(writer, compensator, batched)
+        except Exception as err:
+            remove_bag(self.out_bag)  # no half-written output
+            if isinstance(err, BagError) or (
+                mcap is not None and isinstance(err, (blockreplay.UnsupportedError, ValueError))
+            ):
+                raise
+            raise BagError(
+                f'{self.in_bag}: failed while replaying (truncated bag?): {err}'
+            ) from err
+        return n_out, compensator.status.counters
+
+    def _add_topics(self, writer: BagWriter) -> None:
+        reader = self.reader
+        for conn in reader.connections:
+            if conn.topic not in writer.topics:
+                writer.add_topic(conn.topic, conn.msgtype, like=conn)
+        imu_conn = next(c for c in reader.connections if c.topic == self.imu_name)
+        # ROS 1: the corrected messages keep the input's layout (Header with seq)
+        writer.add_topic(
+            self.output_topic, bagio.IMU_TYPE, like=imu_conn if self.fmt == 'ros1' else None
+        )
+
+    def _replay_messages(self, writer: BagWriter, compensator: Compensator, batched: bool) -> int:
+        """Through ``AnyReader``, a chunk at a time, written as a block or one by one."""
+        messages = bagio.temperature_first(self.reader.messages(), self.temp_name)
+        replayer = ChunkReplayer(compensator, self.reader, self.imu_name, self.temp_name)
+        n_out = 0
+        for chunk in chunked(messages, 20_000):
+            out = [(topic or self.output_topic, ns, raw) for topic, ns, raw in replayer.run(chunk)]
+            n_out += len(out) - len(chunk)
+            if batched:
+                writer.write_many(out)
+            else:
+                for topic, log_ns, raw in out:
+                    writer.write_raw(topic, log_ns, raw)
+        return n_out
 
 
 def effective_settings(coeffs: Coefficients, denoise_method: str | None) -> DenoiseSettings:
