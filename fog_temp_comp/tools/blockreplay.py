@@ -142,12 +142,11 @@ def _replay_chunk(
     lengths = np.concatenate([s.lengths for _, _, s in batches]).astype(np.int64)
     kind = np.concatenate([np.full(t.size, kind_of.get(n, _OTHER)) for n, t, _ in batches])
     cid = np.concatenate([np.full(t.size, connection[n]) for n, t, _ in batches])
-    local = np.concatenate([np.arange(t.size) for _, t, _ in batches])
     # AnyReader: stable by log time in file order; then temperature first on equal times
     order = np.lexsort((starts, kind != _TEMP, times))
     boundary.check(times[order], kind[order] == _TEMP)
     spans = {n: s for n, _, s in batches}
-    rates, keep = _compensate(compensator, kind[order], local[order], spans, imu_topic, temp_topic)
+    rates, keep = _compensate(compensator, kind[order], spans, imu_topic, temp_topic)
     patched = b''
     if imu_topic in spans and keep.any():
         imu = spans[imu_topic]
@@ -173,31 +172,42 @@ def _replay_chunk(
 def _compensate(
     compensator: Compensator,
     kind: NDArray[np.int64],
-    local: IntArray,
     spans: dict[str, Spans],
     imu_topic: str,
     temp_topic: str,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """Feed the messages in order; corrected rates (N_imu, 3) and which Imu were not dropped."""
+    """Feed the messages in order; corrected rates (N_imu, 3) and which Imu were not dropped.
+
+    ``kind`` is the chunk's merged order; Imu and temperatures each come in their batch's
+    order in it, so the Imu between two temperatures are a slice, corrected with one ``map``.
+    """
     n_imu = len(spans[imu_topic]) if imu_topic in spans else 0
+    corrected: list[tuple[float, float, float] | None] = []
+    correct_xyz = compensator.correct_xyz
     if n_imu:
         imu = cdr.decode_imu_rates_cdr(spans[imu_topic])
-        imu_stamps = imu.stamps_s.tolist()
-        rates = imu.angular_velocity_rad_s.tolist()
-    if temp_topic in spans:
+        stamps = imu.stamps_s.tolist()
+        xs, ys, zs = imu.angular_velocity_rad_s.T.tolist()
+    # Imu before each temperature, in the merged order
+    fed = kind[kind != _OTHER]
+    before = np.cumsum(fed == _IMU)[fed == _TEMP].tolist()
+    done = 0
+    if before:
         temp = cdr.decode_temperature_cdr(spans[temp_topic])
-        temp_stamps = temp.stamps_s.tolist()
-        temps = temp.temperature_degC.tolist()
-    fed = kind != _OTHER
-    corrected: list[tuple[float, float, float] | None] = [None] * n_imu
-    add_temperature, correct_xyz = compensator.add_temperature, compensator.correct_xyz
-    for is_temp, j in zip((kind[fed] == _TEMP).tolist(), local[fed].tolist(), strict=True):
-        if is_temp:
-            add_temperature(temp_stamps[j], temps[j])
-        else:
-            x, y, z = rates[j]
-            corrected[j] = correct_xyz(imu_stamps[j], x, y, z)
-    keep = np.fromiter((c is not None for c in corrected), dtype=np.bool_, count=n_imu)
+        for stop, stamp, value in zip(
+            before, temp.stamps_s.tolist(), temp.temperature_degC.tolist(), strict=True
+        ):
+            if stop > done:
+                part = slice(done, stop)
+                corrected += map(correct_xyz, stamps[part], xs[part], ys[part], zs[part])
+                done = stop
+            compensator.add_temperature(stamp, value)
+    if n_imu > done:
+        part = slice(done, n_imu)
+        corrected += map(correct_xyz, stamps[part], xs[part], ys[part], zs[part])
+    if corrected.count(None) == 0:
+        return np.array(corrected, dtype=np.float64).reshape(n_imu, 3), np.ones(n_imu, bool)
+    keep = np.array([c is not None for c in corrected], dtype=np.bool_)
     zero = (0.0, 0.0, 0.0)
-    rates_out = np.array([c or zero for c in corrected], dtype=np.float64).reshape(n_imu, 3)
-    return rates_out, keep
+    rates = np.array([c or zero for c in corrected], dtype=np.float64).reshape(n_imu, 3)
+    return rates, keep
