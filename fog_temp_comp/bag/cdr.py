@@ -505,7 +505,7 @@ class Spans:
     def __len__(self) -> int:
         return int(self.starts.size)
 
-    def __getitem__(self, part: slice) -> Spans:
+    def __getitem__(self, part: slice | NDArray[Any]) -> Spans:
         return Spans(self.buffer, self.starts[part], self.lengths[part])
 
     def payloads(self) -> list[memoryview]:

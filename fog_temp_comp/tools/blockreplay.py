@@ -147,7 +147,7 @@ def _replay_chunk(
     boundary.check(times[order], kind[order] == _TEMP)
     spans = {n: s for n, _, s in batches}
     rates, keep = _compensate(compensator, kind[order], spans, imu_topic, temp_topic)
-    patched = b''
+    patched: bytes | bytearray = b''
     if imu_topic in spans and keep.any():
         imu = spans[imu_topic]
         patched = cdr.patch_imu_angular_velocity_spans(imu[keep], rates[keep])
