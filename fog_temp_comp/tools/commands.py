@@ -17,7 +17,7 @@ from fog_temp_comp.bag import bagio, cdr
 from fog_temp_comp.bag.bagio import BagError, BagWriter
 from fog_temp_comp.bag.reduce import reduce_record
 from fog_temp_comp.bag.stream import read_record
-from fog_temp_comp.core.calibration import CalibrationError, calibrate_detailed
+from fog_temp_comp.core.calibration import CalibrationError, CalibrationResult, calibrate_detailed
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load, save
 from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS, DenoiseSettings
@@ -167,17 +167,48 @@ def calibrate_command(
         gyro_topic=gyro_topic or opt.gyro_topic,
         temp_topic=temp_topic or opt.temp_topic,
     )
-    guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
-    read = dict(
-        gyro_topic=opt.gyro_topic,
-        temp_topic=opt.temp_topic,
-        temp_field=opt.temp_field,
-        time_source=opt.time_source,
-        quiet=opt.quiet,
-    )
     earth, provenance = _earth_correction(opt)
-    period = opt.settings.tdot_period_s
-    records = [earth(reduce_record(b, period, **read)) for b in bags]  # type: ignore[arg-type]
+
+    def load_record(bag: Path, *, reduced: bool = False) -> ChamberRecord:
+        """A bag's record with the Earth rate removed (reduced to the Tdot grid if asked)."""
+        read: dict[str, Any] = dict(
+            gyro_topic=opt.gyro_topic,
+            temp_topic=opt.temp_topic,
+            temp_field=opt.temp_field,
+            time_source=opt.time_source,
+            quiet=opt.quiet,
+        )
+        if reduced:
+            return earth(reduce_record(bag, opt.settings.tdot_period_s, **read))
+        return earth(read_record(bag, **read))
+
+    records = [load_record(b, reduced=True) for b in bags]
+    result = _fit(opt, records, [load_record(b) for b in opt.heldout], provenance, stdout)
+    coeffs = result.coefficients
+    if opt.no_constant:
+        coeffs = _without_constant(coeffs)
+    save(coeffs, output)
+    _print_fit(result, coeffs, len(records), output, stdout)
+    runs = _validate(opt, coeffs, [(b.name, load_record(b)) for b in opt.validate], stdout)
+    if opt.report_dir is not None:
+        if not runs:  # no validation bags: show the training runs
+            guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
+            for record in records:
+                corrected, _ = replay_record(record, coeffs, guard=guard)
+                runs.append((f'{record.path.name} (training)', record, corrected))
+        index = _write_calibration_report(opt.report_dir, bags, runs, result, coeffs, provenance)
+        print(f'report: {index}', file=stdout)
+    return 0
+
+
+def _fit(
+    opt: CalibrateOptions,
+    records: list[ChamberRecord],
+    heldout: list[ChamberRecord],
+    provenance: dict[str, Any],
+    stdout: TextIO,
+) -> CalibrationResult:
+    """The calibration result: chosen by cross-validation, by held-out runs, or as asked."""
     automatic = (
         opt.terms is None
         and not opt.fit_coil_lag
@@ -188,29 +219,28 @@ def calibrate_command(
     if automatic:
         from fog_temp_comp.core import model_choice
 
-        heldout_records = [earth(read_record(b, **read)) for b in opt.heldout]  # type: ignore[arg-type]
         result, cv_scores, cv_chosen = model_choice.choose_and_calibrate(
             records,
             opt.settings,
-            heldout=heldout_records,
+            heldout=heldout,
             tolerance=opt.tolerance,
             hac_lag=opt.hac_lag,
             provenance=provenance,
         )
         print(model_choice.format_scores(cv_scores, cv_chosen), file=stdout)
-    elif opt.heldout or opt.leave_one_run_out:
-        heldout = [earth(read_record(b, **read)) for b in opt.heldout] or None  # type: ignore[arg-type]
+        return result
+    if opt.heldout or opt.leave_one_run_out:
         candidates = default_candidates(opt.settings)
         coeffs, chosen, results = select_and_calibrate(
             candidates,
             records,
-            heldout,
-            guard=guard,
+            heldout or None,
+            guard=GuardSettings(clamp_tdot=opt.clamp_tdot),
             tolerance=opt.tolerance,
         )
         print(format_results(results, chosen), file=stdout)
         candidate = chosen.candidate
-        result = calibrate_detailed(
+        return calibrate_detailed(
             records,
             coeffs.denoise,
             terms=candidate.terms,
@@ -218,24 +248,25 @@ def calibrate_command(
             hac_lag=opt.hac_lag,
             provenance={**provenance, 'selection': coeffs.provenance.get('selection')},
         )
-    else:
-        result = calibrate_detailed(
-            records,
-            opt.settings,
-            terms=opt.terms or PAPER_TERMS,
-            fit_coil_lag=opt.fit_coil_lag,
-            online_tdot=opt.online_tdot,
-            hac_lag=opt.hac_lag,
-            provenance=provenance,
-        )
-    coeffs = result.coefficients
-    if opt.no_constant:
-        coeffs = _without_constant(coeffs)
-    save(coeffs, output)
+    return calibrate_detailed(
+        records,
+        opt.settings,
+        terms=opt.terms or PAPER_TERMS,
+        fit_coil_lag=opt.fit_coil_lag,
+        online_tdot=opt.online_tdot,
+        hac_lag=opt.hac_lag,
+        provenance=provenance,
+    )
+
+
+def _print_fit(
+    result: CalibrationResult, coeffs: Coefficients, n_bags: int, output: Path, stdout: TextIO
+) -> None:
+    """The fitted terms, each fit's statistics, the calibrated range and the warnings."""
     model = coeffs.model
     lag = coeffs.denoise.coil_lag_s
     print(
-        f'fitted {", ".join(model.terms)} on {len(records)} bag(s), Tdot estimator '
+        f'fitted {", ".join(model.terms)} on {n_bags} bag(s), Tdot estimator '
         f'{coeffs.denoise.method}'
         + (f', coil lag {lag:.0f} s' if lag else '')
         + f'; wrote {output}',
@@ -251,60 +282,66 @@ def calibrate_command(
     )
     for warning in result.warnings:
         print(f'WARNING: {warning}', file=stdout)
-    runs = []
-    if opt.validate:
-        scores = []
-        notes = []
-        for bag in opt.validate:
-            record = earth(read_record(bag, **read))  # type: ignore[arg-type]
-            corrected, status = replay_record(record, coeffs, guard=guard)
-            scores += score_record(bag.name, record.imu_stamps_s, record.rates_rad_s, corrected)
-            notes += clamp_notes(bag.name, status.counters, coeffs)
-            runs.append((bag.name, record, corrected))
-        print('\nheld-out validation:', file=stdout)
-        print(format_scores(scores), file=stdout)
-        for note in notes:
-            print(note, file=stdout)
-    if opt.report_dir is not None:
-        from fog_temp_comp.tools.report import (  # matplotlib only when asked
-            ReportRun,
-            write_report,
-        )
 
-        if not runs:  # no validation bags: show the training runs
-            for record in records:
-                corrected, _ = replay_record(record, coeffs, guard=guard)
-                runs.append((f'{record.path.name} (training)', record, corrected))
-        scores = []
-        report_runs = []
-        for name, record, corrected in runs:
-            scores += score_record(name, record.imu_stamps_s, record.rates_rad_s, corrected)
-            report_runs.append(
-                ReportRun(
-                    name,
-                    record.imu_stamps_s,
-                    record.rates_rad_s,
-                    corrected,
-                    record.temp_stamps_s,
-                    record.temperature_degC,
-                )
-            )
-        index = write_report(
-            opt.report_dir,
-            table=result.table,
-            model=coeffs.model,
-            fits=result.fits,
-            runs=report_runs,
-            scores=scores,
-            warnings=result.warnings,
-            context={
-                'bags': ', '.join(str(b) for b in bags),
-                'Tdot estimator': coeffs.denoise.method,
-                'Earth rate': str(provenance.get('earth_rate', 'not removed')),
-            },
-        )
-        print(f'report: {index}', file=stdout)
-    return 0
+
+def _validate(
+    opt: CalibrateOptions,
+    coeffs: Coefficients,
+    named: list[tuple[str, ChamberRecord]],
+    stdout: TextIO,
+) -> list[tuple[str, ChamberRecord, Any]]:
+    """Replay the validation records, print their table; (name, record, corrected) each."""
+    runs: list[tuple[str, ChamberRecord, Any]] = []
+    if not named:
+        return runs
+    guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
+    scores = []
+    notes = []
+    for name, record in named:
+        corrected, status = replay_record(record, coeffs, guard=guard)
+        scores += score_record(name, record.imu_stamps_s, record.rates_rad_s, corrected)
+        notes += clamp_notes(name, status.counters, coeffs)
+        runs.append((name, record, corrected))
+    print('\nheld-out validation:', file=stdout)
+    print(format_scores(scores), file=stdout)
+    for note in notes:
+        print(note, file=stdout)
+    return runs
+
+
+def _write_calibration_report(
+    report_dir: Path,
+    bags: Sequence[Path],
+    runs: list[tuple[str, ChamberRecord, Any]],
+    result: CalibrationResult,
+    coeffs: Coefficients,
+    provenance: dict[str, Any],
+) -> Path:
+    """The HTML report of a calibration (matplotlib imported only here); its index page."""
+    from fog_temp_comp.tools.report import ReportRun, write_report
+
+    scores = []
+    report_runs = []
+    for name, record, corrected in runs:
+        scores += score_record(name, record.imu_stamps_s, record.rates_rad_s, corrected)
+        report_runs.append(
+            ReportRun(name, record.imu_stamps_s, record.rates_rad_s, corrected,
+                      record.temp_stamps_s, record.temperature_degC)
+        )  # fmt: skip
+    return write_report(
+        report_dir,
+        table=result.table,
+        model=coeffs.model,
+        fits=result.fits,
+        runs=report_runs,
+        scores=scores,
+        warnings=result.warnings,
+        context={
+            'bags': ', '.join(str(b) for b in bags),
+            'Tdot estimator': coeffs.denoise.method,
+            'Earth rate': str(provenance.get('earth_rate', 'not removed')),
+        },
+    )
 
 
 def _earth_correction(
