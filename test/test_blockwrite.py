@@ -287,3 +287,22 @@ def test_single_mcap_file(tmp_path: Path) -> None:
     assert blockreplay.single_mcap_file(bag / 'a.mcap') == bag / 'a.mcap'
     shutil.copy(bag / 'a.mcap', bag / 'b.mcap')
     assert blockreplay.single_mcap_file(bag) is None  # split bags: per message
+
+
+@pytest.mark.parametrize('compress', [False, True])
+def test_compensate_compresses_mcap_as_the_input_was(
+    tmp_path: Path, messages: list[tuple[str, int, Any]], compress: bool
+) -> None:
+    in_bag = write_bag(tmp_path / 'in', 'mcap', messages[:3000], compress=compress)
+    assert mcapwrite.chunk_compression(in_bag / 'in.mcap') == ('zstd' if compress else '')
+    out = tmp_path / 'out'
+    assert compensate_command(in_bag, COEFFS, out, stdout=io.StringIO()) == 0
+    assert mcapwrite.chunk_compression(out / 'out.mcap') == ('zstd' if compress else '')
+
+
+def test_chunk_compression_of_other_files(tmp_path: Path) -> None:
+    (tmp_path / 'empty.mcap').write_bytes(b'')
+    (tmp_path / 'text.mcap').write_bytes(b'not an mcap file at all')
+    (tmp_path / 'cut.mcap').write_bytes(mcapwrite.MAGIC + b'\x01\x05')
+    for name in ('empty', 'text', 'cut'):
+        assert mcapwrite.chunk_compression(tmp_path / f'{name}.mcap') == ''

@@ -7,7 +7,8 @@ block at a time: the 31-byte record headers from one structured array, the paylo
 chunk boundaries, record layout, chunk and index records, compression, statistics and
 ``metadata.yaml`` are those of the per-message writer (rosbags writes the summary and the
 metadata when it closes), so the file is byte for byte what ``Writer.write`` per message gives
-(tested).
+(tested). Compressed chunks are compressed in a thread (zstd releases the GIL), so that the
+compression overlaps with the caller's work on the next block; they are written in order.
 
 It relies on the internals of the pinned rosbags version (``Writer.storage``, the MCAP storage's
 pending chunk): :func:`supports` says whether they look as expected; if not, write per message.
@@ -16,7 +17,10 @@ pending chunk): :func:`supports` says whether they look as expected; if not, wri
 from __future__ import annotations
 
 import struct
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from io import BytesIO
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,8 +28,9 @@ from numpy.typing import NDArray
 
 from fog_temp_comp.bag.cdr import Spans
 
-__all__ = ['McapBlockWriter', 'supports']
+__all__ = ['McapBlockWriter', 'chunk_compression', 'supports']
 
+MAGIC = b'\x89MCAP0\r\n'
 #: rosbags closes a chunk after the message that takes it over this many bytes
 CHUNK_BYTES = 1 << 20
 _OP_MESSAGE = 0x05
@@ -43,6 +48,8 @@ _MESSAGE_HEADER = np.dtype(
     ]
 )
 _HEAD = _MESSAGE_HEADER.itemsize  # 31
+#: compressed chunks waiting to be written at most
+_IN_FLIGHT = 2
 _INDEX_ENTRY = np.dtype([('log_time', '<u8'), ('offset', '<u8')])
 _U64 = struct.Struct('<Q')
 
@@ -60,6 +67,30 @@ def supports(writer: Any) -> bool:
         and getattr(writer, 'compression_mode', None) is not None
         and writer.compression_mode.name in ('NONE', 'STORAGE')
     )
+
+
+def chunk_compression(path: str | Path) -> str:
+    """Compression of an MCAP file's first chunk (``''`` for none or no chunk), e.g. ``'zstd'``.
+
+    To write an output compressed as its input was. Reads the records before the first chunk
+    only; a file that is not MCAP or ends early gives ``''``.
+    """
+    with open(path, 'rb') as file:
+        if file.read(8) != MAGIC:
+            return ''
+        for _ in range(64):
+            head = file.read(9)
+            if len(head) < 9:
+                return ''
+            op, length = struct.unpack('<BQ', head)
+            if op == _OP_CHUNK:
+                body = file.read(32)
+                if len(body) < 32:
+                    return ''
+                size = struct.unpack_from('<I', body, 28)[0]
+                return file.read(size).decode(errors='replace')
+            file.seek(length, 1)
+    return ''
 
 
 def _string(text: str) -> bytes:
@@ -114,6 +145,12 @@ class McapBlockWriter:
         self._channels: list[NDArray[np.int64]] = []
         self._times: list[NDArray[np.int64]] = []
         self._offsets: list[NDArray[np.int64]] = []
+        self._written = False
+        # chunks are compressed in a thread (zstd releases the GIL) while the caller goes on;
+        # they are written in order, at most _IN_FLIGHT waiting
+        self._compress = self._storage.compressor
+        self._pool = ThreadPoolExecutor(1) if self._storage.compression else None
+        self._queue: deque[tuple[Any, ...]] = deque()
 
     def write(
         self, channel_ids: NDArray[np.int64], log_times_ns: NDArray[np.int64], spans: Spans
@@ -127,6 +164,7 @@ class McapBlockWriter:
             raise ValueError('channel_ids, log_times_ns and spans must have one length')
         if cids.size == 0:
             return
+        self._written = True
         self._count(cids, times)
         src = np.frombuffer(spans.buffer, dtype=np.uint8)
         sizes = _HEAD + lengths
@@ -183,14 +221,32 @@ class McapBlockWriter:
         self._size += out.size
 
     def _close_chunk(self) -> None:
-        """Write the pending chunk, its Message Index records, and keep its Chunk Index."""
-        storage = self._storage
+        """Hand the pending chunk to the compressor thread; write the chunks done by then."""
         cids = np.concatenate(self._channels)
         times = np.concatenate(self._times)
         offsets = np.concatenate(self._offsets)
-        start, end = int(times.min()), int(times.max())
         data = b''.join(self._parts)
-        compressed = storage.compressor(data)
+        self._parts, self._size = [], 0
+        self._channels, self._times, self._offsets = [], [], []
+        if self._pool is None:  # no compression: nothing to overlap
+            self._write_chunk(cids, times, offsets, data, data)
+            return
+        self._queue.append((cids, times, offsets, data, self._pool.submit(self._compress, data)))
+        while self._queue and (len(self._queue) > _IN_FLIGHT or self._queue[0][-1].done()):
+            cids, times, offsets, data, future = self._queue.popleft()
+            self._write_chunk(cids, times, offsets, data, future.result())
+
+    def _write_chunk(
+        self,
+        cids: NDArray[np.int64],
+        times: NDArray[np.int64],
+        offsets: NDArray[np.int64],
+        data: bytes,
+        compressed: bytes,
+    ) -> None:
+        """Write a chunk record, its Message Index records, and keep its Chunk Index."""
+        storage = self._storage
+        start, end = int(times.min()), int(times.max())
         body = b''.join(
             [
                 struct.pack('<QQQI', start, end, len(data), 0),
@@ -230,13 +286,18 @@ class McapBlockWriter:
         info.write(_string(storage.compression))
         info.write(struct.pack('<QQ', len(compressed), len(data)))
         storage.chunks.append(info)
-        self._parts, self._size = [], 0
-        self._channels, self._times, self._offsets = [], [], []
 
     def finish(self) -> None:
-        """Close the last, partly filled chunk (as the writer's close would)."""
-        if self._channels:
-            self._close_chunk()
-        elif self._size:  # only the schema and channel records: leave them to the writer
-            return
-        self._storage.chunk.bio = BytesIO()
+        """Close the last, partly filled chunk and write every chunk (as ``close`` would)."""
+        try:
+            if self._channels:
+                self._close_chunk()
+            while self._queue:
+                cids, times, offsets, data, future = self._queue.popleft()
+                self._write_chunk(cids, times, offsets, data, future.result())
+        finally:
+            if self._pool is not None:
+                self._pool.shutdown(wait=True, cancel_futures=True)
+                self._pool = None
+        if self._written:
+            self._storage.chunk.bio = BytesIO()

@@ -13,7 +13,7 @@ from typing import Any, TextIO
 import numpy as np
 import yaml
 
-from fog_temp_comp.bag import bagio, cdr
+from fog_temp_comp.bag import bagio, cdr, mcapwrite
 from fog_temp_comp.bag.bagio import BagError, BagWriter
 from fog_temp_comp.bag.reduce import reduce_record
 from fog_temp_comp.bag.stream import read_record
@@ -437,6 +437,7 @@ def compensate_command(
                 reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic'
             ),
             output_topic=output_topic,
+            compress=fmt == 'mcap' and _compressed_mcap(in_bag),
         )
         if output_topic in reader.topics:
             raise BagError(f'--output-topic {output_topic}: already in {in_bag}; choose another')
@@ -458,6 +459,12 @@ def compensate_command(
     return 0
 
 
+def _compressed_mcap(bag: Path) -> bool:
+    """Whether an MCAP bag's (first file's first) chunk is compressed."""
+    files = [bag] if bag.is_file() else sorted(bag.glob('*.mcap'))
+    return bool(files) and mcapwrite.chunk_compression(files[0]) != ''
+
+
 @dataclass
 class _CompensateJob:
     """One ``compensate`` output: the input reader, the topics, where to write."""
@@ -469,6 +476,7 @@ class _CompensateJob:
     imu_name: str
     temp_name: str
     output_topic: str
+    compress: bool = False
 
     def run(
         self, compensator: Compensator, *, mcap: Path | None = None, batched: bool = True
@@ -480,7 +488,7 @@ class _CompensateJob:
         The output is removed on any error.
         """
         try:
-            with BagWriter(self.out_bag, self.fmt) as writer:
+            with BagWriter(self.out_bag, self.fmt, compress=self.compress) as writer:
                 self._add_topics(writer)
                 if mcap is not None:
                     n_out = blockreplay.replay_mcap(
