@@ -306,3 +306,28 @@ def test_chunk_compression_of_other_files(tmp_path: Path) -> None:
     (tmp_path / 'cut.mcap').write_bytes(mcapwrite.MAGIC + b'\x01\x05')
     for name in ('empty', 'text', 'cut'):
         assert mcapwrite.chunk_compression(tmp_path / f'{name}.mcap') == ''
+
+
+def test_message_compressed_bags_take_the_per_message_path(
+    tmp_path: Path, messages: list[tuple[str, int, Any]]
+) -> None:
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+
+    in_bag = tmp_path / 'in'
+    writer = Writer(in_bag, version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
+    types = {
+        '/imu/temperature': TEMPERATURE_TYPE,
+        '/imu/data_raw': IMU_TYPE,
+        '/notes': STRING_TYPE,
+    }
+    with writer:
+        conns = {t: writer.add_connection(t, m, typestore=typestore()) for t, m in types.items()}
+        for topic, ns, msg in messages[:2000]:
+            writer.write(conns[topic], ns, typestore().serialize_cdr(msg, types[topic]))
+    with AnyReader([in_bag], default_typestore=typestore()) as reader:
+        assert blockreplay.per_message_compressed(reader)
+    fast, slow = compensate_both(in_bag, tmp_path, 'mcap')
+    assert read_back(fast) == read_back(slow)
+    assert sum(m[0] == '/imu/data' for m in read_back(fast)[0]) > 1000

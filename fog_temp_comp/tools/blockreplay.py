@@ -29,7 +29,7 @@ from fog_temp_comp.bag.cdr import Spans
 from fog_temp_comp.bag.mcapscan import scan_mcap
 from fog_temp_comp.core.compensator import Compensator
 
-__all__ = ['UnsupportedError', 'replay_mcap', 'single_mcap_file']
+__all__ = ['UnsupportedError', 'per_message_compressed', 'replay_mcap', 'single_mcap_file']
 
 _OTHER, _IMU, _TEMP = 0, 1, 2
 IntArray = NDArray[np.int64]
@@ -48,6 +48,15 @@ def single_mcap_file(path: Path) -> Path | None:
         if len(files) == 1 and not list(path.glob('*.mcap.*')):
             return files[0]
     return None
+
+
+def per_message_compressed(reader: Any) -> bool:
+    """Whether an open ``AnyReader``'s rosbag2 bag compresses messages or files (not chunks).
+
+    Such bags hold zstd frames where the block path expects CDR; rosbags decompresses them.
+    """
+    modes = [getattr(r, 'compression_mode', None) for r in getattr(reader, 'readers', [])]
+    return any(modes)
 
 
 def _chunks(

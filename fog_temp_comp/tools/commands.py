@@ -441,7 +441,9 @@ def compensate_command(
         )
         if output_topic in reader.topics:
             raise BagError(f'--output-topic {output_topic}: already in {in_bag}; choose another')
-        mcap = blockreplay.single_mcap_file(in_bag) if fast and reader.is2 else None
+        mcap = None
+        if fast and reader.is2 and not blockreplay.per_message_compressed(reader):
+            mcap = blockreplay.single_mcap_file(in_bag)
         result = None
         if mcap is not None:
             try:
