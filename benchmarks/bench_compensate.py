@@ -23,14 +23,17 @@ Every case is a fresh process, timed from outside, so start-up is included:
   (:data:`IO_ONLY`): what reading, decoding, patching and writing cost without the core;
 - ``python -c pass``: the interpreter's own start-up.
 
-With ``--rounds`` > 1 every round runs every case once (round robin) and the table shows each
-case's best round, so a load spike from another process hits all cases alike.
+Every round runs every case once (round robin). The table shows each case's best time, the
+ratio of the best times, and the ratio to the rosbags read of the same round (each round, and
+their median): on a shared machine the load changes between rounds, and a round's cases run
+under about the same load.
 """
 
 from __future__ import annotations
 
 import argparse
 import shutil
+import statistics
 import subprocess
 import sys
 import time
@@ -181,21 +184,29 @@ def main(argv: list[str] | None = None) -> int:
             [sys.executable, '-c', PER_MESSAGE, str(bag), str(COEFFS), str(out)],
             out,
         )
-    best: dict[str, float] = {}
+    times: dict[str, list[float]] = {name: [] for name in cases}
     for r in range(args.rounds):
         for name, (cmd, cleanup) in cases.items():
-            seconds = timed(cmd, cleanup)
-            best[name] = min(best.get(name, seconds), seconds)
-            print(f'  round {r + 1}: {name}: {seconds:.2f} s', flush=True)
-    ref = best['rosbags: read + deserialize']
+            times[name].append(timed(cmd, cleanup))
+            print(f'  round {r + 1}: {name}: {times[name][-1]:.2f} s', flush=True)
+    ref = times['rosbags: read + deserialize']
     rows = []
-    for name, seconds in best.items():
-        goal = next((g for key, g in GOALS.items() if name == key), None)
+    for name, values in times.items():
+        goal = GOALS.get(name)
+        ratios = [v / f for v, f in zip(values, ref, strict=True)]
         rows.append(
-            [name, f'{seconds:.2f}', f'{seconds / ref:.3f}', '-' if goal is None else f'<= {goal}']
+            [
+                name,
+                f'{min(values):.2f}',
+                f'{min(values) / min(ref):.3f}',
+                f'{statistics.median(ratios):.3f}',
+                ' '.join(f'{x:.2f}' for x in ratios),
+                '-' if goal is None else f'<= {goal}',
+            ]
         )
-    print(f'\n{machine()}; {count} messages ({bag.name}, MCAP, zstd), best of {args.rounds}')
-    print(table(['case', 'wall s', 'x rosbags read', 'goal'], rows))
+    print(f'\n{machine()}; {count} messages ({bag.name}, MCAP, zstd), {args.rounds} rounds')
+    headers = ['case', 'best s', 'best / best read', 'median ratio', 'ratio per round', 'goal']
+    print(table(headers, rows))
     return 0
 
 
