@@ -105,6 +105,7 @@ def write_chamber_bag_fast(
     frame_id: str = 'imu_link',
     imu_topic: str = '/imu/data_raw',
     temp_topic: str = '/imu/temperature',
+    compress: bool = False,
 ) -> None:
     """What ``bagio.write_chamber_bag`` writes, serialized in chunks by ``bag.cdr``.
 
@@ -114,7 +115,7 @@ def write_chamber_bag_fast(
     n_imu = imu_stamps_ns.size
     all_ns = np.r_[imu_stamps_ns, temp_stamps_ns]
     order = np.lexsort((np.r_[np.ones(n_imu), np.zeros(temp_stamps_ns.size)], all_ns))
-    with BagWriter(path, fmt_name) as writer:
+    with BagWriter(path, fmt_name, compress=compress) as writer:
         writer.add_topic(temp_topic, TEMPERATURE_TYPE)
         writer.add_topic(imu_topic, IMU_TYPE)
         ros1 = writer.is_ros1

@@ -90,7 +90,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
+    for add in (_add_simulate, _add_calibrate, _add_compensate, _add_evaluate, _add_demo):
+        add(sub)
+    return parser
 
+
+def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``simulate`` command."""
     p = sub.add_parser('simulate', help='write synthetic thermal-chamber runs as bags')
     p.add_argument('out_dir', type=Path, metavar='OUT_DIR')
     p.add_argument('--format', choices=FORMATS, default='mcap', dest='fmt')
@@ -104,12 +110,21 @@ def build_parser() -> argparse.ArgumentParser:
         'overshoot, T^2 nonlinearity, wandering bias',
     )
 
+
+def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``calibrate`` command: bags, output, then its option groups."""
     p = sub.add_parser('calibrate', help='fit drift coefficients from chamber bags')
     p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
     p.add_argument('-o', '--output', type=Path, required=True, metavar='COEFFS.yaml')
     _add_topics(p)
     _add_denoise(p, None)
-    g = p.add_argument_group('input')
+    _add_calibrate_input(p.add_argument_group('input'))
+    _add_calibrate_model(p.add_argument_group('model'))
+    _add_calibrate_selection(p.add_argument_group('selection and validation (held-out runs)'))
+
+
+def _add_calibrate_input(g: argparse._ArgumentGroup) -> None:
+    """Input options of calibrate: temperature field, time source, Earth rate."""
     g.add_argument(
         '--temp-field',
         metavar='FIELD',
@@ -135,7 +150,10 @@ def build_parser() -> argparse.ArgumentParser:
         help='sensor axes in ENU for --latitude-deg: enu, ned, nwu, ..., a '
         'quaternion x,y,z,w or a row-major 3x3 matrix',
     )
-    g = p.add_argument_group('model')
+
+
+def _add_calibrate_model(g: argparse._ArgumentGroup) -> None:
+    """Model options of calibrate: terms, constant, coil lag, Tdot, standard errors."""
     g.add_argument(
         '--terms',
         default=None,
@@ -175,7 +193,10 @@ def build_parser() -> argparse.ArgumentParser:
         metavar='N',
         help='Newey-West lag of the standard errors (default: data-driven)',
     )
-    g = p.add_argument_group('selection and validation (held-out runs)')
+
+
+def _add_calibrate_selection(g: argparse._ArgumentGroup) -> None:
+    """Selection, validation, report and guard options of calibrate."""
     g.add_argument(
         '--heldout',
         type=Path,
@@ -211,6 +232,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_guard(g)
 
+
+def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``compensate`` command."""
     p = sub.add_parser('compensate', help='replay a bag through the compensator')
     p.add_argument('in_bag', type=Path, metavar='IN_BAG')
     p.add_argument('--coeffs', type=Path, required=True, metavar='COEFFS.yaml')
@@ -225,6 +249,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_denoise(p, None)
     _add_guard(p)
 
+
+def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``evaluate`` command."""
     p = sub.add_parser('evaluate', help='bias stability and range before/after compensation')
     p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
     p.add_argument('--coeffs', type=Path, required=True, metavar='COEFFS.yaml')
@@ -232,6 +259,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_denoise(p, None)
     _add_guard(p)
 
+
+def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``demo`` command."""
     p = sub.add_parser('demo', help="the paper's experiment on sample or simulated bags")
     p.add_argument(
         '--bags',
@@ -241,7 +271,6 @@ def build_parser() -> argparse.ArgumentParser:
         help='directory with manifest.yaml (default: simulate into OUT)',
     )
     p.add_argument('--out', type=Path, default=Path('demo_out'), metavar='OUT')
-    return parser
 
 
 def run(args: argparse.Namespace) -> int:

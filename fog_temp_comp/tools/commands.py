@@ -13,11 +13,11 @@ from typing import Any, TextIO
 import numpy as np
 import yaml
 
-from fog_temp_comp.bag import bagio, cdr
+from fog_temp_comp.bag import bagio, cdr, mcapwrite
 from fog_temp_comp.bag.bagio import BagError, BagWriter
 from fog_temp_comp.bag.reduce import reduce_record
 from fog_temp_comp.bag.stream import read_record
-from fog_temp_comp.core.calibration import CalibrationError, calibrate_detailed
+from fog_temp_comp.core.calibration import CalibrationError, CalibrationResult, calibrate_detailed
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load, save
 from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS, DenoiseSettings
@@ -28,6 +28,7 @@ from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, coefficient_key
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
 from fog_temp_comp.core.units import AXES
+from fog_temp_comp.tools import blockreplay
 from fog_temp_comp.tools.excitation import identifiable_terms
 from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
 
@@ -169,19 +170,50 @@ def calibrate_command(
         gyro_topic=gyro_topic or opt.gyro_topic,
         temp_topic=temp_topic or opt.temp_topic,
     )
-    guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
-    read = dict(
-        gyro_topic=opt.gyro_topic,
-        temp_topic=opt.temp_topic,
-        temp_field=opt.temp_field,
-        time_source=opt.time_source,
-        quiet=opt.quiet,
-    )
     earth, provenance = _earth_correction(opt)
-    period = opt.settings.tdot_period_s
-    records = [earth(reduce_record(b, period, **read)) for b in bags]  # type: ignore[arg-type]
+
+    def load_record(bag: Path, *, reduced: bool = False) -> ChamberRecord:
+        """A bag's record with the Earth rate removed (reduced to the Tdot grid if asked)."""
+        read: dict[str, Any] = dict(
+            gyro_topic=opt.gyro_topic,
+            temp_topic=opt.temp_topic,
+            temp_field=opt.temp_field,
+            time_source=opt.time_source,
+            quiet=opt.quiet,
+        )
+        if reduced:
+            return earth(reduce_record(bag, opt.settings.tdot_period_s, **read))
+        return earth(read_record(bag, **read))
+
+    records = [load_record(b, reduced=True) for b in bags]
     terms = identifiable_terms(records, opt.terms, drop=opt.drop_unidentifiable, stdout=stdout)
     opt = dataclasses.replace(opt, terms=terms)
+    result = _fit(opt, records, [load_record(b) for b in opt.heldout], provenance, stdout)
+    coeffs = result.coefficients
+    if opt.no_constant:
+        coeffs = _without_constant(coeffs)
+    save(coeffs, output)
+    _print_fit(result, coeffs, len(records), output, stdout)
+    runs = _validate(opt, coeffs, [(b.name, load_record(b)) for b in opt.validate], stdout)
+    if opt.report_dir is not None:
+        if not runs:  # no validation bags: show the training runs
+            guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
+            for record in records:
+                corrected, _ = replay_record(record, coeffs, guard=guard)
+                runs.append((f'{record.path.name} (training)', record, corrected))
+        index = _write_calibration_report(opt.report_dir, bags, runs, result, coeffs, provenance)
+        print(f'report: {index}', file=stdout)
+    return 0
+
+
+def _fit(
+    opt: CalibrateOptions,
+    records: list[ChamberRecord],
+    heldout: list[ChamberRecord],
+    provenance: dict[str, Any],
+    stdout: TextIO,
+) -> CalibrationResult:
+    """The calibration result: chosen by cross-validation, by held-out runs, or as asked."""
     automatic = (
         opt.terms is None
         and not opt.fit_coil_lag
@@ -192,29 +224,28 @@ def calibrate_command(
     if automatic:
         from fog_temp_comp.core import model_choice
 
-        heldout_records = [earth(read_record(b, **read)) for b in opt.heldout]  # type: ignore[arg-type]
         result, cv_scores, cv_chosen = model_choice.choose_and_calibrate(
             records,
             opt.settings,
-            heldout=heldout_records,
+            heldout=heldout,
             tolerance=opt.tolerance,
             hac_lag=opt.hac_lag,
             provenance=provenance,
         )
         print(model_choice.format_scores(cv_scores, cv_chosen), file=stdout)
-    elif opt.heldout or opt.leave_one_run_out:
-        heldout = [earth(read_record(b, **read)) for b in opt.heldout] or None  # type: ignore[arg-type]
+        return result
+    if opt.heldout or opt.leave_one_run_out:
         candidates = default_candidates(opt.settings)
         coeffs, chosen, results = select_and_calibrate(
             candidates,
             records,
-            heldout,
-            guard=guard,
+            heldout or None,
+            guard=GuardSettings(clamp_tdot=opt.clamp_tdot),
             tolerance=opt.tolerance,
         )
         print(format_results(results, chosen), file=stdout)
         candidate = chosen.candidate
-        result = calibrate_detailed(
+        return calibrate_detailed(
             records,
             coeffs.denoise,
             terms=candidate.terms,
@@ -222,24 +253,25 @@ def calibrate_command(
             hac_lag=opt.hac_lag,
             provenance={**provenance, 'selection': coeffs.provenance.get('selection')},
         )
-    else:
-        result = calibrate_detailed(
-            records,
-            opt.settings,
-            terms=opt.terms or PAPER_TERMS,
-            fit_coil_lag=opt.fit_coil_lag,
-            online_tdot=opt.online_tdot,
-            hac_lag=opt.hac_lag,
-            provenance=provenance,
-        )
-    coeffs = result.coefficients
-    if opt.no_constant:
-        coeffs = _without_constant(coeffs)
-    save(coeffs, output)
+    return calibrate_detailed(
+        records,
+        opt.settings,
+        terms=opt.terms or PAPER_TERMS,
+        fit_coil_lag=opt.fit_coil_lag,
+        online_tdot=opt.online_tdot,
+        hac_lag=opt.hac_lag,
+        provenance=provenance,
+    )
+
+
+def _print_fit(
+    result: CalibrationResult, coeffs: Coefficients, n_bags: int, output: Path, stdout: TextIO
+) -> None:
+    """The fitted terms, each fit's statistics, the calibrated range and the warnings."""
     model = coeffs.model
     lag = coeffs.denoise.coil_lag_s
     print(
-        f'fitted {", ".join(model.terms)} on {len(records)} bag(s), Tdot estimator '
+        f'fitted {", ".join(model.terms)} on {n_bags} bag(s), Tdot estimator '
         f'{coeffs.denoise.method}'
         + (f', coil lag {lag:.0f} s' if lag else '')
         + f'; wrote {output}',
@@ -255,54 +287,66 @@ def calibrate_command(
     )
     for warning in result.warnings:
         print(f'WARNING: {warning}', file=stdout)
-    runs = []
-    if opt.validate:
-        scores = []
-        notes = []
-        for bag in opt.validate:
-            record = earth(read_record(bag, **read))  # type: ignore[arg-type]
-            corrected, status = replay_record(record, coeffs, guard=guard)
-            scores += score_record(bag.name, record.imu_stamps_s, record.rates_rad_s, corrected)
-            notes += clamp_notes(bag.name, status.counters, coeffs)
-            runs.append((bag.name, record, corrected))
-        print('\nheld-out validation:', file=stdout)
-        print(format_scores(scores), file=stdout)
-        for note in notes:
-            print(note, file=stdout)
-    if opt.report_dir is not None:
-        from fog_temp_comp.tools.report import (  # matplotlib only when asked
-            ReportRun,
-            write_report,
-        )
 
-        if not runs:  # no validation bags: show the training runs
-            for record in records:
-                corrected, _ = replay_record(record, coeffs, guard=guard)
-                runs.append((f'{record.path.name} (training)', record, corrected))
-        scores = []
-        report_runs = []
-        for name, record, corrected in runs:
-            scores += score_record(name, record.imu_stamps_s, record.rates_rad_s, corrected)
-            report_runs.append(
-                ReportRun(name, record.imu_stamps_s, record.rates_rad_s, corrected,
-                          record.temp_stamps_s, record.temperature_degC)
-            )  # fmt: skip
-        index = write_report(
-            opt.report_dir,
-            table=result.table,
-            model=coeffs.model,
-            fits=result.fits,
-            runs=report_runs,
-            scores=scores,
-            warnings=result.warnings,
-            context={
-                'bags': ', '.join(str(b) for b in bags),
-                'Tdot estimator': coeffs.denoise.method,
-                'Earth rate': str(provenance.get('earth_rate', 'not removed')),
-            },
-        )
-        print(f'report: {index}', file=stdout)
-    return 0
+
+def _validate(
+    opt: CalibrateOptions,
+    coeffs: Coefficients,
+    named: list[tuple[str, ChamberRecord]],
+    stdout: TextIO,
+) -> list[tuple[str, ChamberRecord, Any]]:
+    """Replay the validation records, print their table; (name, record, corrected) each."""
+    runs: list[tuple[str, ChamberRecord, Any]] = []
+    if not named:
+        return runs
+    guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
+    scores = []
+    notes = []
+    for name, record in named:
+        corrected, status = replay_record(record, coeffs, guard=guard)
+        scores += score_record(name, record.imu_stamps_s, record.rates_rad_s, corrected)
+        notes += clamp_notes(name, status.counters, coeffs)
+        runs.append((name, record, corrected))
+    print('\nheld-out validation:', file=stdout)
+    print(format_scores(scores), file=stdout)
+    for note in notes:
+        print(note, file=stdout)
+    return runs
+
+
+def _write_calibration_report(
+    report_dir: Path,
+    bags: Sequence[Path],
+    runs: list[tuple[str, ChamberRecord, Any]],
+    result: CalibrationResult,
+    coeffs: Coefficients,
+    provenance: dict[str, Any],
+) -> Path:
+    """The HTML report of a calibration (matplotlib imported only here); its index page."""
+    from fog_temp_comp.tools.report import ReportRun, write_report
+
+    scores = []
+    report_runs = []
+    for name, record, corrected in runs:
+        scores += score_record(name, record.imu_stamps_s, record.rates_rad_s, corrected)
+        report_runs.append(
+            ReportRun(name, record.imu_stamps_s, record.rates_rad_s, corrected,
+                      record.temp_stamps_s, record.temperature_degC)
+        )  # fmt: skip
+    return write_report(
+        report_dir,
+        table=result.table,
+        model=coeffs.model,
+        fits=result.fits,
+        runs=report_runs,
+        scores=scores,
+        warnings=result.warnings,
+        context={
+            'bags': ', '.join(str(b) for b in bags),
+            'Tdot estimator': coeffs.denoise.method,
+            'Earth rate': str(provenance.get('earth_rate', 'not removed')),
+        },
+    )
 
 
 def _earth_correction(
@@ -369,53 +413,138 @@ def compensate_command(
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
     stdout: TextIO | None = None,
+    fast: bool = True,
 ) -> int:
     """Replay ``in_bag`` through a :class:`Compensator`; write all inputs plus corrected Imu.
 
     Messages are processed in the bag's log-time order, i.e. the order a node sees on replay.
+    ``fast`` (the default) reads an MCAP bag a chunk at a time and writes blocks
+    (:mod:`~fog_temp_comp.tools.blockreplay`), other bags through ``AnyReader`` and
+    :meth:`BagWriter.write_many`; ``fast=False`` writes through rosbags one message at a time.
+    Both give the same bag.
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
     if out_bag.exists():
         raise FileExistsError(f'{out_bag}: exists already, not overwriting')
-    compensator = Compensator(coeffs.model, effective_settings(coeffs, denoise_method), guard)
+    settings = effective_settings(coeffs, denoise_method)
     fmt = bagio.bag_format(in_bag)
     if output_topic and not output_topic.startswith('/'):
         output_topic = '/' + output_topic
-    n_out = 0
     with bagio.open_bag(in_bag) as reader:
-        imu_name = bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic')
-        temp_name = bagio.resolve_topic(reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic')
+        job = _CompensateJob(
+            reader=reader,
+            in_bag=in_bag,
+            out_bag=out_bag,
+            fmt=fmt,
+            imu_name=bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic'),
+            temp_name=bagio.resolve_topic(
+                reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic'
+            ),
+            output_topic=output_topic,
+            compress=fmt == 'mcap' and _compressed_mcap(in_bag),
+        )
         if output_topic in reader.topics:
             raise BagError(f'--output-topic {output_topic}: already in {in_bag}; choose another')
-        try:
-            with BagWriter(out_bag, fmt) as writer:
-                for conn in reader.connections:
-                    if conn.topic not in writer.topics:
-                        writer.add_topic(conn.topic, conn.msgtype, like=conn)
-                imu_conn = next(c for c in reader.connections if c.topic == imu_name)
-                # ROS 1: the corrected messages keep the input's layout (Header with seq)
-                writer.add_topic(
-                    output_topic, bagio.IMU_TYPE, like=imu_conn if fmt == 'ros1' else None
-                )
-                messages = bagio.temperature_first(reader.messages(), temp_name)
-                replayer = ChunkReplayer(compensator, reader, imu_name, temp_name)
-                for chunk in chunked(messages, 20_000):
-                    for topic, log_ns, raw in replayer.run(chunk):
-                        writer.write_raw(topic or output_topic, log_ns, raw)
-                        n_out += topic is None
-        except Exception as err:
-            remove_bag(out_bag)  # no half-written output
-            if isinstance(err, BagError):
-                raise
-            raise BagError(f'{in_bag}: failed while replaying (truncated bag?): {err}') from err
-    counters = compensator.status.counters
+        mcap = None
+        if fast and reader.is2 and not blockreplay.per_message_compressed(reader):
+            mcap = blockreplay.single_mcap_file(in_bag)
+        result = None
+        if mcap is not None:
+            try:
+                result = job.run(Compensator(coeffs.model, settings, guard), mcap=mcap)
+            except (blockreplay.UnsupportedError, ValueError):
+                remove_bag(out_bag)  # the per-message path decides (and words any error)
+        if result is None:
+            result = job.run(Compensator(coeffs.model, settings, guard), batched=fast)
+    n_out, counters = result
     print(
         f'wrote {out_bag}: {n_out} corrected Imu on {output_topic} '
         f'({counters.imu_uncorrected} before the first temperature passed through)',
         file=stdout,
     )
     return 0
+
+
+def _compressed_mcap(bag: Path) -> bool:
+    """Whether an MCAP bag's (first file's first) chunk is compressed."""
+    files = [bag] if bag.is_file() else sorted(bag.glob('*.mcap'))
+    return bool(files) and mcapwrite.chunk_compression(files[0]) != ''
+
+
+@dataclass
+class _CompensateJob:
+    """One ``compensate`` output: the input reader, the topics, where to write."""
+
+    reader: Any
+    in_bag: Path
+    out_bag: Path
+    fmt: str
+    imu_name: str
+    temp_name: str
+    output_topic: str
+    compress: bool = False
+
+    def run(
+        self, compensator: Compensator, *, mcap: Path | None = None, batched: bool = True
+    ) -> tuple[int, CompensatorCounters]:
+        """Write the output bag; (corrected Imu written, the compensator's counters).
+
+        With ``mcap``, :class:`blockreplay.UnsupportedError` and ``ValueError`` (damaged file)
+        pass through for the caller to fall back; other errors become :class:`BagError`.
+        The output is removed on any error.
+        """
+        try:
+            with BagWriter(self.out_bag, self.fmt, compress=self.compress) as writer:
+                self._add_topics(writer)
+                if mcap is not None:
+                    n_out = blockreplay.replay_mcap(
+                        mcap,
+                        writer,
+                        compensator,
+                        topics=set(self.reader.topics),
+                        imu_topic=self.imu_name,
+                        temp_topic=self.temp_name,
+                        output_topic=self.output_topic,
+                    )
+                else:
+                    n_out = self._replay_messages(writer, compensator, batched)
+        except Exception as err:
+            remove_bag(self.out_bag)  # no half-written output
+            if isinstance(err, BagError) or (
+                mcap is not None and isinstance(err, (blockreplay.UnsupportedError, ValueError))
+            ):
+                raise
+            raise BagError(
+                f'{self.in_bag}: failed while replaying (truncated bag?): {err}'
+            ) from err
+        return n_out, compensator.status.counters
+
+    def _add_topics(self, writer: BagWriter) -> None:
+        reader = self.reader
+        for conn in reader.connections:
+            if conn.topic not in writer.topics:
+                writer.add_topic(conn.topic, conn.msgtype, like=conn)
+        imu_conn = next(c for c in reader.connections if c.topic == self.imu_name)
+        # ROS 1: the corrected messages keep the input's layout (Header with seq)
+        writer.add_topic(
+            self.output_topic, bagio.IMU_TYPE, like=imu_conn if self.fmt == 'ros1' else None
+        )
+
+    def _replay_messages(self, writer: BagWriter, compensator: Compensator, batched: bool) -> int:
+        """Through ``AnyReader``, a chunk at a time, written as a block or one by one."""
+        messages = bagio.temperature_first(self.reader.messages(), self.temp_name)
+        replayer = ChunkReplayer(compensator, self.reader, self.imu_name, self.temp_name)
+        n_out = 0
+        for chunk in chunked(messages, 20_000):
+            out = [(topic or self.output_topic, ns, raw) for topic, ns, raw in replayer.run(chunk)]
+            n_out += len(out) - len(chunk)
+            if batched:
+                writer.write_many(out)
+            else:
+                for topic, log_ns, raw in out:
+                    writer.write_raw(topic, log_ns, raw)
+        return n_out
 
 
 def effective_settings(coeffs: Coefficients, denoise_method: str | None) -> DenoiseSettings:

@@ -170,65 +170,14 @@ def write_report(
     temp = np.asarray(table.temperature_degC, dtype=np.float64)
     tdot = np.asarray(table.tdot_degC_per_min, dtype=np.float64)
     rate = np.asarray(table.rate_deg_h, dtype=np.float64)
-    figures: list[tuple[str, str, str]] = []  # (file name, heading, caption)
-
-    name = 'drift_vs_temperature.png'
-    _plot_drift_vs_temperature(out / name, temp, tdot, rate, model)
-    figures.append(
-        (
-            name,
-            'Drift against temperature',
-            'Gyro 10 s means used in the fit (dots, coloured by Tdot) and the fitted model at '
-            'the same temperature and Tdot (black). The dashed line is the model at Tdot = 0; '
-            'the loops around it are the Tdot term.',
-        )
-    )
-    name = 'residual_histogram.png'
-    _plot_residuals(out / name, fits)
-    figures.append(
-        (
-            name,
-            'Fit residuals',
-            'Histogram of measured minus modelled drift on the 10 s grid, with the normal '
-            'density of the same standard deviation.',
-        )
-    )
+    figures = _fit_figures(out, temp, tdot, rate, model, fits)
     allan: list[tuple[str, list[AllanCurve], list[AllanCurve]]] = []
     used: set[str] = set()
     for run_tuple in runs:
         run = ReportRun(*run_tuple)
-        slug = _slug(run.name, used)
-        stamps = np.asarray(run.stamps_s, dtype=np.float64)
-        raw = np.asarray(run.raw_rad_s, dtype=np.float64) * DEG_H_PER_RAD_S
-        corrected = np.asarray(run.corrected_rad_s, dtype=np.float64) * DEG_H_PER_RAD_S
-        name = f'timeseries_{slug}.png'
-        _plot_timeseries(out / name, run, stamps, raw, corrected)
-        figures.append(
-            (
-                name,
-                f'{run.name}: before and after compensation',
-                f'{PLOT_WINDOW_S:g} s means of the gyro output before (raw) and after '
-                'compensation, each with its own mean removed (means in the panel titles), '
-                'and the gyro temperature (right axis).',
-            )
-        )
-        before = [allan_deviation(stamps, raw[:, j]) for j in range(len(AXES))]
-        after = [allan_deviation(stamps, corrected[:, j]) for j in range(len(AXES))]
-        if any(c.taus_s.size for c in before + after):
-            name = f'allan_{slug}.png'
-            _plot_allan(out / name, run.name, before, after)
-            figures.append(
-                (
-                    name,
-                    f'{run.name}: Allan deviation',
-                    'Overlapping Allan deviation (IEEE Std 952, octave-spaced averaging times) '
-                    'before and after compensation. Temperature drift shows as the rise at '
-                    'long averaging times; compensation should bring it down. The longest '
-                    'averaging times rest on few averages and are uncertain.',
-                )
-            )
+        run_figures, before, after = _run_figures(out, run, _slug(run.name, used))
+        figures += run_figures
         allan.append((run.name, before, after))
-
     page = _html_page(
         title=title,
         model=model,
@@ -244,6 +193,75 @@ def write_report(
     index = out / 'index.html'
     index.write_text(page, encoding='utf-8')
     return index
+
+
+def _fit_figures(
+    out: Path,
+    temp: FloatArray,
+    tdot: FloatArray,
+    rate: FloatArray,
+    model: DriftModel,
+    fits: Sequence[AxisFitStats],
+) -> list[tuple[str, str, str]]:
+    """Plot the fit (drift against temperature, residuals); (file name, heading, caption) each."""
+    name = 'drift_vs_temperature.png'
+    _plot_drift_vs_temperature(out / name, temp, tdot, rate, model)
+    figures = [
+        (
+            name,
+            'Drift against temperature',
+            'Gyro 10 s means used in the fit (dots, coloured by Tdot) and the fitted model at '
+            'the same temperature and Tdot (black). The dashed line is the model at Tdot = 0; '
+            'the loops around it are the Tdot term.',
+        )
+    ]
+    name = 'residual_histogram.png'
+    _plot_residuals(out / name, fits)
+    figures.append(
+        (
+            name,
+            'Fit residuals',
+            'Histogram of measured minus modelled drift on the 10 s grid, with the normal '
+            'density of the same standard deviation.',
+        )
+    )
+    return figures
+
+
+def _run_figures(
+    out: Path, run: ReportRun, slug: str
+) -> tuple[list[tuple[str, str, str]], list[AllanCurve], list[AllanCurve]]:
+    """Plot one run before/after compensation; its figures and Allan curves (before, after)."""
+    stamps = np.asarray(run.stamps_s, dtype=np.float64)
+    raw = np.asarray(run.raw_rad_s, dtype=np.float64) * DEG_H_PER_RAD_S
+    corrected = np.asarray(run.corrected_rad_s, dtype=np.float64) * DEG_H_PER_RAD_S
+    name = f'timeseries_{slug}.png'
+    _plot_timeseries(out / name, run, stamps, raw, corrected)
+    figures = [
+        (
+            name,
+            f'{run.name}: before and after compensation',
+            f'{PLOT_WINDOW_S:g} s means of the gyro output before (raw) and after '
+            'compensation, each with its own mean removed (means in the panel titles), '
+            'and the gyro temperature (right axis).',
+        )
+    ]
+    before = [allan_deviation(stamps, raw[:, j]) for j in range(len(AXES))]
+    after = [allan_deviation(stamps, corrected[:, j]) for j in range(len(AXES))]
+    if any(c.taus_s.size for c in before + after):
+        name = f'allan_{slug}.png'
+        _plot_allan(out / name, run.name, before, after)
+        figures.append(
+            (
+                name,
+                f'{run.name}: Allan deviation',
+                'Overlapping Allan deviation (IEEE Std 952, octave-spaced averaging times) '
+                'before and after compensation. Temperature drift shows as the rise at '
+                'long averaging times; compensation should bring it down. The longest '
+                'averaging times rest on few averages and are uncertain.',
+            )
+        )
+    return figures, before, after
 
 
 # -- plots -------------------------------------------------------------------------------------

@@ -1,0 +1,222 @@
+"""``compensate`` on an MCAP bag a chunk at a time: no Python object per message but the core's.
+
+:func:`replay_mcap` reads each chunk with :func:`fog_temp_comp.bag.mcapscan.scan_mcap` (spans
+in the decompressed chunk), decodes the chunk's Imu and Temperature in one call each, feeds the
+compensator every message in the order ``AnyReader.messages()`` + ``temperature_first`` gives,
+patches the corrected angular velocities into a copy of the chunk, and hands the writer the
+chunk's messages with each corrected Imu's output after it, as one block
+(:meth:`fog_temp_comp.bag.bagio.BagWriter.write_spans`). The compensator calls are those of the
+per-message path, so the output is the same, message for message (tested).
+
+The order is provably the same only when chunks follow each other in time; a bag where they do
+not (or where a group of messages sharing a log time spans two chunks and would be reordered
+by ``temperature_first``) raises :class:`UnsupportedError`; the caller then takes the
+per-message path.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fog_temp_comp.bag import cdr
+from fog_temp_comp.bag.bagio import BagWriter
+from fog_temp_comp.bag.cdr import Spans
+from fog_temp_comp.bag.mcapscan import scan_mcap
+from fog_temp_comp.core.compensator import Compensator
+
+__all__ = ['UnsupportedError', 'per_message_compressed', 'replay_mcap', 'single_mcap_file']
+
+_OTHER, _IMU, _TEMP = 0, 1, 2
+IntArray = NDArray[np.int64]
+
+
+class UnsupportedError(Exception):
+    """The bag needs the per-message path (the block path cannot promise the same output)."""
+
+
+def single_mcap_file(path: Path) -> Path | None:
+    """The bag's MCAP file if it is one (a ``.mcap`` or a directory with one), else None."""
+    if path.is_file() and path.suffix == '.mcap':
+        return path
+    if path.is_dir():
+        files = list(path.glob('*.mcap'))
+        if len(files) == 1 and not list(path.glob('*.mcap.*')):
+            return files[0]
+    return None
+
+
+def per_message_compressed(reader: Any) -> bool:
+    """Whether an open ``AnyReader``'s rosbag2 bag compresses messages or files (not chunks).
+
+    Such bags hold zstd frames where the block path expects CDR; rosbags decompresses them.
+    """
+    modes = [getattr(r, 'compression_mode', None) for r in getattr(reader, 'readers', [])]
+    return any(modes)
+
+
+def _chunks(
+    mcap: Path, topics: set[str]
+) -> Iterator[tuple[Any, list[tuple[str, IntArray, Spans]]]]:
+    """(buffer, [(topic, log times, spans)]) per chunk (scan_mcap's batches of one buffer)."""
+    group: list[tuple[str, IntArray, Spans]] = []
+    for topic, times, spans in scan_mcap(mcap, topics):
+        if group and spans.buffer is not group[0][2].buffer:
+            yield group[0][2].buffer, group
+            group = []
+        group.append((topic, times, spans))
+    if group:
+        yield group[0][2].buffer, group
+
+
+class _Boundary:
+    """Checks that concatenating chunk after chunk gives the per-message path's order."""
+
+    def __init__(self) -> None:
+        self.last_ns = -1
+        self.tail_has_other = False  # a non-temperature message at the previous chunk's end
+
+    def check(self, times: IntArray, is_temp: NDArray[np.bool_]) -> None:
+        first, last = int(times[0]), int(times[-1])
+        if first < self.last_ns:
+            raise UnsupportedError('chunks overlap in time')
+        if first == self.last_ns and self.tail_has_other and bool(is_temp[times == first].any()):
+            raise UnsupportedError(
+                'a temperature would move before a message of the previous chunk'
+            )
+        self.last_ns = last
+        self.tail_has_other = bool((~is_temp[times == last]).any())
+
+
+def replay_mcap(
+    mcap: Path,
+    writer: BagWriter,
+    compensator: Compensator,
+    *,
+    topics: set[str],
+    imu_topic: str,
+    temp_topic: str,
+    output_topic: str,
+) -> int:
+    """Compensate ``mcap`` into ``writer`` (topics registered already); corrected Imu written.
+
+    Raises
+    ------
+    UnsupportedError
+        Before the first write if the file's order cannot be followed; after it the caller
+        must discard the output and use the per-message path.
+    ValueError
+        From the scanner or decoders for a damaged file or message.
+
+    """
+    connection = {topic: writer.connection_id(topic) for topic in topics}
+    output_id = writer.connection_id(output_topic)
+    boundary = _Boundary()
+    n_out = 0
+    for buffer, batches in _chunks(mcap, topics):
+        n_out += _replay_chunk(
+            buffer,
+            batches,
+            writer,
+            compensator,
+            boundary,
+            connection=connection,
+            output_id=output_id,
+            imu_topic=imu_topic,
+            temp_topic=temp_topic,
+        )
+    return n_out
+
+
+def _replay_chunk(
+    buffer: Any,
+    batches: list[tuple[str, IntArray, Spans]],
+    writer: BagWriter,
+    compensator: Compensator,
+    boundary: _Boundary,
+    *,
+    connection: dict[str, int],
+    output_id: int,
+    imu_topic: str,
+    temp_topic: str,
+) -> int:
+    """One chunk: order, compensate, patch, write; return the corrected Imu written."""
+    kind_of = {imu_topic: _IMU, temp_topic: _TEMP}
+    times = np.concatenate([t for _, t, _ in batches])
+    starts = np.concatenate([s.starts for _, _, s in batches]).astype(np.int64)
+    lengths = np.concatenate([s.lengths for _, _, s in batches]).astype(np.int64)
+    kind = np.concatenate([np.full(t.size, kind_of.get(n, _OTHER)) for n, t, _ in batches])
+    cid = np.concatenate([np.full(t.size, connection[n]) for n, t, _ in batches])
+    # AnyReader: stable by log time in file order; then temperature first on equal times
+    order = np.lexsort((starts, kind != _TEMP, times))
+    boundary.check(times[order], kind[order] == _TEMP)
+    spans = {n: s for n, _, s in batches}
+    rates, keep = _compensate(compensator, kind[order], spans, imu_topic, temp_topic)
+    patched: bytes | bytearray = b''
+    if imu_topic in spans and keep.any():
+        imu = spans[imu_topic]
+        patched = cdr.patch_imu_angular_velocity_spans(imu[keep], rates[keep])
+    # every message in order, each kept Imu followed by its output (in the patched copy)
+    extra = np.zeros(times.size, dtype=np.bool_)
+    extra[np.flatnonzero(kind == _IMU)[keep]] = True
+    counts = 1 + extra[order]
+    message = np.repeat(order, counts)
+    is_out = np.zeros(message.size, dtype=np.bool_)
+    is_out[(np.cumsum(counts) - counts)[extra[order]] + 1] = True
+    original = bytes(buffer)
+    writer.write_spans(
+        np.where(is_out, output_id, cid[message]),
+        times[message],
+        Spans(
+            original + bytes(patched), starts[message] + is_out * len(original), lengths[message]
+        ),
+    )
+    return int(keep.sum())
+
+
+def _compensate(
+    compensator: Compensator,
+    kind: NDArray[np.int64],
+    spans: dict[str, Spans],
+    imu_topic: str,
+    temp_topic: str,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Feed the messages in order; corrected rates (N_imu, 3) and which Imu were not dropped.
+
+    ``kind`` is the chunk's merged order; Imu and temperatures each come in their batch's
+    order in it, so the Imu between two temperatures are a slice, corrected with one ``map``.
+    """
+    n_imu = len(spans[imu_topic]) if imu_topic in spans else 0
+    corrected: list[tuple[float, float, float] | None] = []
+    correct_xyz = compensator.correct_xyz
+    if n_imu:
+        imu = cdr.decode_imu_rates_cdr(spans[imu_topic])
+        stamps = imu.stamps_s.tolist()
+        xs, ys, zs = imu.angular_velocity_rad_s.T.tolist()
+    # Imu before each temperature, in the merged order
+    fed = kind[kind != _OTHER]
+    before = np.cumsum(fed == _IMU)[fed == _TEMP].tolist()
+    done = 0
+    if before:
+        temp = cdr.decode_temperature_cdr(spans[temp_topic])
+        for stop, stamp, value in zip(
+            before, temp.stamps_s.tolist(), temp.temperature_degC.tolist(), strict=True
+        ):
+            if stop > done:
+                part = slice(done, stop)
+                corrected += map(correct_xyz, stamps[part], xs[part], ys[part], zs[part])
+                done = stop
+            compensator.add_temperature(stamp, value)
+    if n_imu > done:
+        part = slice(done, n_imu)
+        corrected += map(correct_xyz, stamps[part], xs[part], ys[part], zs[part])
+    if corrected.count(None) == 0:
+        return np.array(corrected, dtype=np.float64).reshape(n_imu, 3), np.ones(n_imu, bool)
+    keep = np.array([c is not None for c in corrected], dtype=np.bool_)
+    zero = (0.0, 0.0, 0.0)
+    rates = np.array([c or zero for c in corrected], dtype=np.float64).reshape(n_imu, 3)
+    return rates, keep
