@@ -303,6 +303,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fog-temp-comp`` console script."""
     args = build_parser().parse_args(argv)
     from fog_temp_comp.tools import commands
+    from fog_temp_comp.tools.atomic import Terminated
 
     try:
         return run(args)
@@ -314,6 +315,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
+    except Terminated as err:  # SIGTERM, SIGHUP during a command that writes
+        return err.exit_code
 
 
 if __name__ == '__main__':

@@ -28,6 +28,7 @@ from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, coefficient_key
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
 from fog_temp_comp.core.units import AXES
+from fog_temp_comp.tools.atomic import AtomicOutputs
 from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
 
 #: errors that end a command with one ``ERROR:`` line and exit code 1
@@ -73,42 +74,45 @@ def simulate_command(
         'coil_lag_s': float(cfg.coil_lag_s),
         'runs': [],
     }
-    for k, (kind, setpoint) in enumerate(runs or paper_plan()):
-        run = simulate_run(kind, setpoint, cfg, seed=seed * 1000 + k)
-        path = out_dir / bag_name(run.name, fmt)
-        bagio.write_chamber_bag(
-            path,
-            fmt,
-            imu_stamps_s=run.imu_stamps_s,
-            rates_rad_s=run.rates_rad_s,
-            temp_stamps_s=run.temp_stamps_s,
-            temperature_degC=run.temperature_degC,
-            compress=compress,
-        )
-        truth = out_dir / f'{run.name}.truth.npz'
-        np.savez_compressed(
-            truth,
-            imu_stamps_s=run.imu_stamps_s,
-            true_drift_deg_h=run.true_drift_deg_h,
-            true_temperature_degC=run.true_temperature_degC,
-            true_tdot_degC_per_min=run.true_tdot_degC_per_min,
-        )
-        unit = 'degC_per_min' if kind == 'cycle' else 'degC'
-        manifest['runs'].append(
-            {
-                'name': run.name,
-                'kind': kind,
-                f'setpoint_{unit}': setpoint,
-                'bag': path.name,
-                'truth': truth.name,
-                'duration_s': float(run.imu_stamps_s[-1] - run.imu_stamps_s[0]),
-            }
-        )
-        print(
-            f'wrote {path} ({run.imu_stamps_s.size} Imu, {run.temp_stamps_s.size} Temperature)',
-            file=stdout,
-        )
-    (out_dir / 'manifest.yaml').write_text(yaml.safe_dump(manifest, sort_keys=False))
+    with AtomicOutputs() as outputs:  # all files appear at the end, or none
+        for k, (kind, setpoint) in enumerate(runs or paper_plan()):
+            run = simulate_run(kind, setpoint, cfg, seed=seed * 1000 + k)
+            path = out_dir / bag_name(run.name, fmt)
+            bagio.write_chamber_bag(
+                outputs.path(path),
+                fmt,
+                imu_stamps_s=run.imu_stamps_s,
+                rates_rad_s=run.rates_rad_s,
+                temp_stamps_s=run.temp_stamps_s,
+                temperature_degC=run.temperature_degC,
+                compress=compress,
+            )
+            truth = out_dir / f'{run.name}.truth.npz'
+            np.savez_compressed(
+                outputs.path(truth),
+                imu_stamps_s=run.imu_stamps_s,
+                true_drift_deg_h=run.true_drift_deg_h,
+                true_temperature_degC=run.true_temperature_degC,
+                true_tdot_degC_per_min=run.true_tdot_degC_per_min,
+            )
+            unit = 'degC_per_min' if kind == 'cycle' else 'degC'
+            manifest['runs'].append(
+                {
+                    'name': run.name,
+                    'kind': kind,
+                    f'setpoint_{unit}': setpoint,
+                    'bag': path.name,
+                    'truth': truth.name,
+                    'duration_s': float(run.imu_stamps_s[-1] - run.imu_stamps_s[0]),
+                }
+            )
+            print(
+                f'wrote {path} ({run.imu_stamps_s.size} Imu, '
+                f'{run.temp_stamps_s.size} Temperature)',
+                file=stdout,
+            )
+        manifest_path = outputs.path(out_dir / 'manifest.yaml', replace=True)
+        manifest_path.write_text(yaml.safe_dump(manifest, sort_keys=False))
     return 0
 
 
@@ -157,6 +161,21 @@ def calibrate_command(
     stdout = stdout or sys.stdout
     if not output.parent.is_dir():
         raise ValueError(f'-o {output}: directory {output.parent} does not exist')
+    with AtomicOutputs() as outputs:  # -o and --report appear together, complete, or not at all
+        return _calibrate(bags, output, outputs, options, settings, gyro_topic, temp_topic, stdout)
+
+
+def _calibrate(
+    bags: Sequence[Path],
+    output: Path,
+    outputs: AtomicOutputs,
+    options: CalibrateOptions | None,
+    settings: DenoiseSettings | None,
+    gyro_topic: str | None,
+    temp_topic: str | None,
+    stdout: TextIO,
+) -> int:
+    """:func:`calibrate_command` writing its outputs to the temporary paths of ``outputs``."""
     opt = options or CalibrateOptions()
     if opt.terms is not None and not opt.terms:
         raise ValueError('--terms: give at least one model term')
@@ -230,7 +249,7 @@ def calibrate_command(
     coeffs = result.coefficients
     if opt.no_constant:
         coeffs = _without_constant(coeffs)
-    save(coeffs, output)
+    save(coeffs, outputs.path(output))
     model = coeffs.model
     lag = coeffs.denoise.coil_lag_s
     print(
@@ -283,7 +302,7 @@ def calibrate_command(
                           record.temp_stamps_s, record.temperature_degC)
             )  # fmt: skip
         index = write_report(
-            opt.report_dir,
+            outputs.path(opt.report_dir, merge_into_dir=True),
             table=result.table,
             model=coeffs.model,
             fits=result.fits,
@@ -296,7 +315,7 @@ def calibrate_command(
                 'Earth rate': str(provenance.get('earth_rate', 'not removed')),
             },
         )
-        print(f'report: {index}', file=stdout)
+        print(f'report: {opt.report_dir / index.name}', file=stdout)
     return 0
 
 
@@ -384,7 +403,7 @@ def compensate_command(
         if output_topic in reader.topics:
             raise BagError(f'--output-topic {output_topic}: already in {in_bag}; choose another')
         try:
-            with BagWriter(out_bag, fmt) as writer:
+            with AtomicOutputs() as outputs, BagWriter(outputs.path(out_bag), fmt) as writer:
                 for conn in reader.connections:
                     if conn.topic not in writer.topics:
                         writer.add_topic(conn.topic, conn.msgtype, like=conn)
@@ -399,9 +418,8 @@ def compensate_command(
                     for topic, log_ns, raw in replayer.run(chunk):
                         writer.write_raw(topic or output_topic, log_ns, raw)
                         n_out += topic is None
-        except Exception as err:
-            remove_bag(out_bag)  # no half-written output
-            if isinstance(err, BagError):
+        except Exception as err:  # AtomicOutputs removed the partial output
+            if isinstance(err, (BagError, FileExistsError)):
                 raise
             raise BagError(f'{in_bag}: failed while replaying (truncated bag?): {err}') from err
     counters = compensator.status.counters
