@@ -24,7 +24,7 @@ __all__ = ['AtomicOutputs', 'Terminated', 'partial_dir']
 
 
 class Terminated(BaseException):
-    """Raised in the main thread when SIGTERM (or SIGHUP) arrives during an :class:`AtomicOutputs`."""
+    """Raised in the main thread on SIGTERM or SIGHUP inside an :class:`AtomicOutputs`."""
 
     def __init__(self, signum: int) -> None:
         super().__init__(f'terminated by {signal.Signals(signum).name}')
