@@ -10,14 +10,18 @@ instead when the caller asked for ``strict`` reading.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from fog_temp_comp.bag.bagio import BagError
+from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.units import NS_PER_S
 
-__all__ = ['RecoveryError', 'Salvage']
+__all__ = ['RecoveryError', 'Salvage', 'split_at_gaps']
 
 
 class RecoveryError(BagError):
@@ -98,3 +102,34 @@ class Salvage:
             ],
             'messages_lost': self.lost_messages,
         }
+
+
+def split_at_gaps(record: ChamberRecord, salvage: Salvage | None) -> list[ChamberRecord]:
+    """The record cut at the skipped spans inside it, so no grid or fit bridges them.
+
+    A span ``(start, end)`` inside the run splits it into the samples stamped before
+    ``start`` and those from ``end`` on (log time; header stamps of a recorder follow it).
+    Pieces left without gyro or temperature samples are dropped.
+    """
+    if salvage is None:
+        return [record]
+    cuts = sorted((a, b) for a, b in salvage.gap_spans_s() if b is not None)
+    if not cuts:
+        return [record]
+    pieces = []
+    low = -np.inf
+    for start, end in [*cuts, (np.inf, np.inf)]:
+        imu = (record.imu_stamps_s >= low) & (record.imu_stamps_s < start)
+        temp = (record.temp_stamps_s >= low) & (record.temp_stamps_s < start)
+        if imu.any() and temp.any():
+            pieces.append(
+                dataclasses.replace(
+                    record,
+                    imu_stamps_s=record.imu_stamps_s[imu],
+                    rates_rad_s=record.rates_rad_s[imu],
+                    temp_stamps_s=record.temp_stamps_s[temp],
+                    temperature_degC=record.temperature_degC[temp],
+                )
+            )
+        low = end
+    return pieces

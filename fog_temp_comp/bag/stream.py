@@ -17,7 +17,7 @@ from __future__ import annotations
 import struct
 import sys
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -38,9 +38,10 @@ from fog_temp_comp.bag.bagio import (
     resolve_topic_in,
     stamp_to_s,
 )
-from fog_temp_comp.bag.mcapscan import scan_mcap
+from fog_temp_comp.bag.mcapscan import mcap_topics, scan_mcap
 from fog_temp_comp.bag.names import TIME_SOURCES
 from fog_temp_comp.bag.ros1scan import Ros1Bag, Ros1FormatError
+from fog_temp_comp.bag.salvage import RecoveryError, Salvage
 from fog_temp_comp.bag.sqlitescan import plain_sqlite_files, scan_sqlite, topic_types
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.units import NS_PER_S
@@ -131,6 +132,9 @@ class BagStream:
         Messages per chunk and stream.
     progress : Progress, optional
         Progress display to update.
+    strict : bool
+        Refuse a damaged bag (:class:`~fog_temp_comp.bag.salvage.RecoveryError`) instead of
+        reading it as far as it is intact; what was skipped is in :attr:`salvage` either way.
 
     """
 
@@ -144,6 +148,7 @@ class BagStream:
         time_source: str = 'header',
         chunk_size: int = 10_000,
         progress: Progress | None = None,
+        strict: bool = False,
     ) -> None:
         if time_source not in TIME_SOURCES:
             raise ValueError(f'time_source must be one of {TIME_SOURCES}, got {time_source!r}')
@@ -164,8 +169,13 @@ class BagStream:
         self.imu_topic = ''
         self.temp_topic = ''
         self.frame_id = ''
+        #: damage found so far (filled while reading; complete after :meth:`chunks`)
+        self.salvage = Salvage(self.path, strict=strict)
+        self._salvage_mcap: list[Path] = []  # MCAP files rosbags cannot open
 
     def __enter__(self) -> BagStream:
+        if not self.path.exists():
+            raise BagError(f'{self.path}: no such bag')
         self._sqlite_files = plain_sqlite_files(self.path) if self.temp_field is None else None
         if self._sqlite_files:  # read without rosbags: its open counts every row first
             try:
@@ -182,8 +192,13 @@ class BagStream:
         if self._ros1 is not None:
             self._open = True
             return self
-        self._context = open_bag(self.path)
-        reader = self._context.__enter__()
+        try:
+            self._context = open_bag(self.path)
+            reader = self._context.__enter__()
+        except BagError as err:
+            if not self._open_damaged_mcap(err):
+                raise
+            return self
         try:
             self.imu_topic = resolve_topic(reader, self._gyro_topic, IMU_TYPE, '--gyro-topic')
             if self.temp_field is None:
@@ -199,6 +214,32 @@ class BagStream:
         self.reader = reader
         self._open = True
         return self
+
+    def _open_damaged_mcap(self, err: BagError) -> bool:
+        """After rosbags failed: read MCAP files on our own (cut, no summary, no metadata)."""
+        files = self._mcap_files()
+        if not files or self.temp_field is not None:
+            return False
+        if self.path.is_dir() and not (self.path / 'metadata.yaml').is_file():
+            self.salvage.damage('no metadata.yaml (recorder killed?): read the .mcap files')
+        topics: dict[str, str] = {}
+        try:
+            for file in files:
+                for name, msgtype in mcap_topics(file).items():
+                    topics.setdefault(name, msgtype)
+        except (ValueError, OSError, struct.error):
+            return False
+        if not topics:
+            return False
+        if (self.path / 'metadata.yaml').is_file() or not self.path.is_dir():
+            self.salvage.damage(f'cannot open as a whole bag ({err})')
+        self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
+        self.temp_topic = resolve_topic_in(
+            topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
+        )
+        self._salvage_mcap = files
+        self._open = True
+        return True
 
     def _open_ros1(self) -> Ros1Bag | None:
         """The bag as a :class:`Ros1Bag` with its topics resolved, or None to use rosbags.
@@ -248,6 +289,13 @@ class BagStream:
         if self._ros1 is not None:
             yield from self._scan_ros1(self._ros1)
             return
+        if self._salvage_mcap:
+            ros2 = {
+                self.imu_topic: cdr.decode_imu_rates_cdr,
+                self.temp_topic: cdr.decode_temperature_cdr,
+            }
+            yield from self._scan_files(self._salvage_mcap, ros2)
+            return
         reader = self.reader
         assert reader is not None
         conns = [c for c in reader.connections if c.topic in (self.imu_topic, self.temp_topic)]
@@ -295,10 +343,16 @@ class BagStream:
         self, files: list[Path], decoders: dict[int, Any], conns: list[Any]
     ) -> Iterator[Chunk]:
         """Read MCAP chunks with :func:`fog_temp_comp.bag.mcapscan.scan_mcap`, decoded in place."""
-        by_topic = {c.topic: decoders[c.id] for c in conns}
+        yield from self._scan_files(files, {c.topic: decoders[c.id] for c in conns})
+
+    def _scan_files(self, files: list[Path], by_topic: dict[str, Any]) -> Iterator[Chunk]:
+        """Read MCAP files with ``scan_mcap`` (damage recorded in :attr:`salvage`)."""
         try:
             for file in files:
-                yield from self._from_spans(scan_mcap(file, set(by_topic)), by_topic)
+                batches = scan_mcap(file, set(by_topic), salvage=self.salvage)
+                yield from self._from_spans(batches, by_topic)
+        except RecoveryError:
+            raise
         except (ValueError, struct.error) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
@@ -415,10 +469,13 @@ def read_record(
     temp_field: str | None = None,
     time_source: str = 'header',
     quiet: bool = True,
+    strict: bool = False,
+    on_salvage: Callable[[Salvage], None] | None = None,
 ) -> ChamberRecord:
     """Read the gyro and temperature streams of a bag into arrays (sorted by stamp).
 
-    See :class:`fog_temp_comp.bag.stream.BagStream` for the options.
+    See :class:`fog_temp_comp.bag.stream.BagStream` for the options; ``on_salvage`` is called
+    with the :class:`~fog_temp_comp.bag.salvage.Salvage` of a damaged bag after reading it.
     """
     path = Path(path)
     progress = Progress(path.name, quiet=quiet)
@@ -430,10 +487,13 @@ def read_record(
         temp_field=temp_field,
         time_source=time_source,
         progress=progress,
+        strict=strict,
     ) as stream:
         for chunk in stream.chunks():
             parts[chunk.kind].append(chunk)
         progress.close()
+        if stream.salvage.recovered and on_salvage is not None:
+            on_salvage(stream.salvage)
         for kind, topic in (('imu', stream.imu_topic), ('temperature', stream.temp_topic)):
             if not parts[kind]:
                 raise BagError(f'{path}: topic {topic} has no messages')

@@ -35,6 +35,15 @@ def _add_topics(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_strict(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    parser.add_argument(
+        '--strict',
+        action='store_true',
+        help='refuse a damaged bag (cut, no footer or metadata, damaged chunk) instead of '
+        'reading it as far as it is intact with a warning',
+    )
+
+
 def _add_guard(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     parser.add_argument(
         '--clamp-tdot',
@@ -123,6 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
         help='align gyro and temperature by header stamp (default) or receive time',
     )
     g.add_argument('--quiet', action='store_true', help='no progress line on stderr')
+    _add_strict(g)
     g.add_argument(
         '--latitude-deg',
         type=float,
@@ -224,6 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_topics(p)
     _add_denoise(p, None)
     _add_guard(p)
+    _add_strict(p)
 
     p = sub.add_parser('demo', help="the paper's experiment on sample or simulated bags")
     p.add_argument(
@@ -272,6 +283,7 @@ def run(args: argparse.Namespace) -> int:
             report_dir=args.report,
             clamp_tdot=_guard(args).clamp_tdot,
             quiet=args.quiet,
+            strict=args.strict,
         )
         return commands.calibrate_command(args.bags, args.output, options=options)
     if args.command == 'compensate':
@@ -293,6 +305,7 @@ def run(args: argparse.Namespace) -> int:
             temp_topic=args.temp_topic,
             denoise_method=args.denoise,
             guard=_guard(args),
+            strict=args.strict,
         )
     from fog_temp_comp.tools.demo import demo_command
 

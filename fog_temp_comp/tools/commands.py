@@ -16,6 +16,7 @@ import yaml
 from fog_temp_comp.bag import bagio, cdr
 from fog_temp_comp.bag.bagio import BagError, BagWriter
 from fog_temp_comp.bag.reduce import reduce_record
+from fog_temp_comp.bag.salvage import Salvage, split_at_gaps
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.calibration import CalibrationError, calibrate_detailed
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load, save
@@ -33,6 +34,27 @@ from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan
 
 #: errors that end a command with one ``ERROR:`` line and exit code 1
 USER_ERRORS = (BagError, CalibrationError, CoefficientsError, FileExistsError, ValueError)
+
+
+class Salvaged:
+    """What the readers recovered from damaged input bags: warns on stderr, feeds provenance."""
+
+    def __init__(self, stderr: TextIO | None = None) -> None:
+        self.stderr = stderr
+        self.found: dict[Path, Salvage] = {}
+
+    def add(self, salvage: Salvage) -> None:
+        """Called by the readers for a damaged bag (read as far as intact)."""
+        self.found[salvage.path] = salvage
+        print(f'WARNING: {salvage.summary()}', file=self.stderr or sys.stderr)
+
+    def split(self, record: ChamberRecord) -> list[ChamberRecord]:
+        """``record`` cut at the chunks skipped inside it (no fit bridges them)."""
+        return split_at_gaps(record, self.found.get(Path(record.path)))
+
+    def provenance(self) -> list[dict[str, Any]]:
+        """Per recovered bag: what was wrong and what was lost."""
+        return [s.provenance() for s in self.found.values()]
 
 
 def bag_name(name: str, fmt: str) -> str:
@@ -141,6 +163,8 @@ class CalibrateOptions:
     report_dir: Path | None = None
     clamp_tdot: bool = False
     quiet: bool = True
+    #: refuse damaged bags instead of reading them as far as they are intact
+    strict: bool = False
 
 
 def calibrate_command(
@@ -186,16 +210,25 @@ def _calibrate(
         temp_topic=temp_topic or opt.temp_topic,
     )
     guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
+    salvaged = Salvaged()
     read = dict(
         gyro_topic=opt.gyro_topic,
         temp_topic=opt.temp_topic,
         temp_field=opt.temp_field,
         time_source=opt.time_source,
         quiet=opt.quiet,
+        strict=opt.strict,
+        on_salvage=salvaged.add,
     )
     earth, provenance = _earth_correction(opt)
     period = opt.settings.tdot_period_s
-    records = [earth(reduce_record(b, period, **read)) for b in bags]  # type: ignore[arg-type]
+    records = [
+        earth(piece)
+        for b in bags
+        for piece in salvaged.split(reduce_record(b, period, **read))  # type: ignore[arg-type]
+    ]
+    if salvaged.found:
+        provenance = {**provenance, 'recovered_inputs': salvaged.provenance()}
     automatic = (
         opt.terms is None
         and not opt.fit_coil_lag
@@ -544,6 +577,7 @@ def evaluate_command(
     temp_topic: str | None = None,
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
+    strict: bool = False,
     stdout: TextIO | None = None,
 ) -> int:
     """Print stability and range before/after compensation for each bag and axis."""
@@ -551,8 +585,15 @@ def evaluate_command(
     coeffs = load(coeffs_path)
     scores = []
     notes = []
+    salvaged = Salvaged()
     for bag in bags:
-        record = read_record(bag, gyro_topic=gyro_topic, temp_topic=temp_topic)
+        record = read_record(
+            bag,
+            gyro_topic=gyro_topic,
+            temp_topic=temp_topic,
+            strict=strict,
+            on_salvage=salvaged.add,
+        )
         corrected, status = replay_record(
             record, coeffs, effective_settings(coeffs, denoise_method), guard
         )
