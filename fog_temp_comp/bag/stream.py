@@ -249,10 +249,15 @@ class BagStream:
         if self.path.suffix != '.bag' or not self.path.is_file():
             return None
         try:
-            bag = Ros1Bag(self.path)
+            bag = Ros1Bag(self.path, salvage=self.salvage)
         except (Ros1FormatError, KeyError, OSError):
             return None
         topics = bag.topics()
+        if bag.walked and not topics:
+            raise BagError(
+                f'{self.path}: damaged bag: no connection record is readable '
+                '(the file ends inside its first, compressed chunk)'
+            )
         self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
         self.temp_topic = resolve_topic_in(
             topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
@@ -353,7 +358,7 @@ class BagStream:
                 yield from self._from_spans(batches, by_topic)
         except RecoveryError:
             raise
-        except (ValueError, struct.error) as err:
+        except (ValueError, struct.error, RuntimeError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def _kinds(self) -> dict[str, str]:
@@ -383,7 +388,9 @@ class BagStream:
         }
         try:
             yield from self._from_spans(bag.scan(set(decoders)), decoders)
-        except (ValueError, KeyError, OSError, struct.error) as err:
+        except RecoveryError:
+            raise
+        except (ValueError, KeyError, OSError, struct.error, RuntimeError, EOFError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def _scan_sqlite(self, files: list[Path]) -> Iterator[Chunk]:
