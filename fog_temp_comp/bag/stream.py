@@ -42,7 +42,19 @@ from fog_temp_comp.bag.mcapscan import mcap_topics, scan_mcap
 from fog_temp_comp.bag.names import TIME_SOURCES
 from fog_temp_comp.bag.ros1scan import Ros1Bag, Ros1FormatError
 from fog_temp_comp.bag.salvage import RecoveryError, Salvage
-from fog_temp_comp.bag.sqlitescan import plain_sqlite_files, scan_sqlite, topic_types
+from fog_temp_comp.bag.sqlitesalvage import (
+    SqliteDamage,
+    expected_pages,
+    salvage_rows,
+    salvage_topics,
+)
+from fog_temp_comp.bag.sqlitescan import (
+    loose_sqlite_files,
+    metadata_counts,
+    plain_sqlite_files,
+    scan_sqlite,
+    topic_types,
+)
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.units import NS_PER_S
 
@@ -176,12 +188,19 @@ class BagStream:
     def __enter__(self) -> BagStream:
         if not self.path.exists():
             raise BagError(f'{self.path}: no such bag')
-        self._sqlite_files = plain_sqlite_files(self.path) if self.temp_field is None else None
+        self._sqlite_files = None
+        if self.temp_field is None:
+            loose = loose_sqlite_files(self.path)
+            if loose is not None:
+                self.salvage.damage(loose[1])
+            self._sqlite_files = loose[0] if loose else plain_sqlite_files(self.path)
         if self._sqlite_files:  # read without rosbags: its open counts every row first
             try:
                 topics = topic_types(self._sqlite_files)
             except apsw.Error as err:
-                raise BagError(f'{self.path}: cannot open bag: {err}') from err
+                topics = self._salvage_topics(self._sqlite_files)
+                if not topics:
+                    raise BagError(f'{self.path}: cannot open bag: {err}') from err
             self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
             self.temp_topic = resolve_topic_in(
                 topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
@@ -214,6 +233,14 @@ class BagStream:
         self.reader = reader
         self._open = True
         return self
+
+    def _salvage_topics(self, files: list[Path]) -> dict[str, str]:
+        """Topics of damaged sqlite3 files, from the ``topics`` rows left in their pages."""
+        topics: dict[str, str] = {}
+        for file in files:
+            for name, msgtype in salvage_topics(file).values():
+                topics.setdefault(name, msgtype)
+        return topics
 
     def _open_damaged_mcap(self, err: BagError) -> bool:
         """After rosbags failed: read MCAP files on our own (cut, no summary, no metadata)."""
@@ -394,27 +421,99 @@ class BagStream:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def _scan_sqlite(self, files: list[Path]) -> Iterator[Chunk]:
-        """Read sqlite3 databases with :func:`fog_temp_comp.bag.sqlitescan.scan_sqlite`."""
+        """Read sqlite3 databases with :func:`fog_temp_comp.bag.sqlitescan.scan_sqlite`.
+
+        A file cut short, or one SQLite reports damaged, is read page by page from there on
+        (:func:`fog_temp_comp.bag.sqlitesalvage.salvage_rows`), without repeating the rows
+        already read; the damage goes to :attr:`salvage`.
+        """
         kind_of = self._kinds()
         topics = {self.imu_topic: IMU_TYPE, self.temp_topic: TEMPERATURE_TYPE}
         decoders = {
             self.imu_topic: cdr.decode_imu_rates_cdr,
             self.temp_topic: cdr.decode_temperature_cdr,
         }
-        receive = self.time_source == 'receive'
+        counts = dict.fromkeys(topics, 0)
         try:
             for file in files:
-                batches = scan_sqlite(file, topics, log_times=receive, batch_size=self.chunk_size)
-                for topic, log_ns, raws in batches:
-                    chunk = self._flush(kind_of[topic], (raws, log_ns, [topic]), decoders)
-                    if self.progress is not None:
-                        newest, oldest = chunk.stamps_s.max(), chunk.stamps_s.min()
-                        self.progress.update(
-                            len(raws), int(newest * NS_PER_S), int(oldest * NS_PER_S)
-                        )
-                    yield chunk
+                page_size, pages = expected_pages(file)
+                cut = page_size > 0 and file.stat().st_size < page_size * pages
+                done: dict[str, int | None] = {}  # topic -> newest log time read (None: all)
+                batches: Iterator[tuple[str, Any, list[bytes]]]
+                if cut:
+                    batches = iter(())
+                else:
+                    batches = scan_sqlite(file, topics, log_times=True, batch_size=self.chunk_size)
+                try:
+                    for topic, log_ns, raws in batches:
+                        assert log_ns is not None
+                        for other in done:
+                            done[other] = None if other != topic else done[other]
+                        done[topic] = int(log_ns.max())
+                        counts[topic] += len(raws)
+                        yield self._sqlite_chunk(kind_of[topic], topic, log_ns, raws, decoders)
+                    if not cut:
+                        continue
+                except apsw.Error as err:
+                    self.salvage.damage(f'{file.name}: damaged database ({err})')
+                yield from self._salvage_sqlite(file, done, counts, decoders, cut)
         except (apsw.Error, ValueError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
+        if self.salvage.recovered and self.path.is_dir():
+            expected = metadata_counts(self.path)
+            lost = sum(max(expected[t] - n, 0) for t, n in counts.items() if t in expected)
+            if lost:
+                self.salvage.lost_messages = (self.salvage.lost_messages or 0) + lost
+
+    def _salvage_sqlite(
+        self,
+        file: Path,
+        done: dict[str, int | None],
+        counts: dict[str, int],
+        decoders: dict[Any, Any],
+        cut: bool,
+    ) -> Iterator[Chunk]:
+        """The rows of a damaged database page by page, skipping those ``done`` already."""
+        ids = {i: name for i, (name, _) in salvage_topics(file).items()}
+        ids = {i: name for i, name in ids.items() if name in counts}
+        damage = SqliteDamage()
+        kind_of = self._kinds()
+        newest = 0
+        for topic, log_ns, raws in salvage_rows(
+            file, ids, batch_size=self.chunk_size, damage=damage
+        ):
+            if topic in done:
+                last = done[topic]
+                if last is None:
+                    continue
+                keep = log_ns > last
+                log_ns = log_ns[keep]
+                raws = [r for r, k in zip(raws, keep.tolist(), strict=True) if k]
+            if not raws:
+                continue
+            counts[topic] += len(raws)
+            newest = max(newest, int(log_ns.max()))
+            yield self._sqlite_chunk(kind_of[topic], topic, log_ns, raws, decoders)
+        missing = damage.pages_expected - damage.pages_present
+        if cut:
+            self.salvage.damage(
+                f'{file.name}: cut: {damage.pages_present} of {damage.pages_expected} pages '
+                'present (recorder killed or copy cut short?)',
+                skipped_bytes=file.stat().st_size % max(expected_pages(file)[0], 1)
+                + missing * expected_pages(file)[0],
+                gap_ns=(newest, None),
+            )
+        if damage.dropped_rows:
+            self.salvage.lost_messages = (self.salvage.lost_messages or 0) + damage.dropped_rows
+
+    def _sqlite_chunk(
+        self, kind: str, topic: str, log_ns: Any, raws: list[bytes], decoders: dict[Any, Any]
+    ) -> Chunk:
+        chunk = self._flush(kind, (raws, log_ns, [topic]), decoders)
+        if self.progress is not None:
+            newest, oldest = chunk.stamps_s.max(), chunk.stamps_s.min()
+            self.progress.update(len(raws), int(newest * NS_PER_S), int(oldest * NS_PER_S))
+        return chunk
 
     def _flush(
         self,
