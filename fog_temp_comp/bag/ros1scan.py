@@ -419,8 +419,18 @@ class Ros1Bag:
         if not indexes and self.walked:
             yield from self._walk_messages(records, conns)
             return
-        for conn, entries in indexes.items():
-            yield from self._messages(records, conns[conn], conn, entries)
+        try:
+            batches = [
+                batch
+                for conn, entries in indexes.items()
+                for batch in self._messages(records, conns[conn], conn, entries)
+            ]
+        except Ros1FormatError as err:
+            if self.salvage is None:
+                raise
+            self.salvage.damage(f'chunk at byte {position}: damaged index ({err}); walked')
+            batches = list(self._walk_messages(records, conns))
+        yield from batches
 
     def _walk_messages(
         self, records: bytes, conns: dict[int, str]
