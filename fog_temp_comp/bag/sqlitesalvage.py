@@ -102,10 +102,11 @@ class _Pages:
         self.size = 65536 if size == 1 else size
         self.usable = self.size - data[20]
         self.data = data
-        self.count = len(data) // self.size
+        self.whole = len(data) // self.size  # whole pages
+        self.count = -(-len(data) // self.size)  # and the cut one, if any
 
     def page(self, number: int) -> bytes | None:
-        """Page ``number`` (1-based), or None past the end of the file."""
+        """Page ``number`` (1-based; the last may be cut short), or None past the end."""
         if not 1 <= number <= self.count:
             return None
         return self.data[(number - 1) * self.size : number * self.size]
@@ -125,7 +126,7 @@ class _Pages:
                 at = struct.unpack_from('>H', page, base + 8 + 2 * k)[0]
                 size, pos = _varint(page, at)
                 rowid, pos = _varint(page, pos)
-                if size <= x:
+                if size <= x:  # (a cell of a cut page may lie before the cut)
                     payload = page[pos : pos + size]
                     yield (rowid, payload) if len(payload) == size else None
                     continue
@@ -214,7 +215,7 @@ def salvage_rows(
     if not data.startswith(_MAGIC) or len(data) < 100:
         return
     pages = _Pages(data)
-    damage.pages_present = pages.count
+    damage.pages_present = pages.whole
     damage.pages_expected = max(struct.unpack_from('>I', data, 28)[0], pages.count)
     pending: dict[str, tuple[list[int], list[bytes]]] = {}
     seen: set[int] = set()

@@ -184,6 +184,7 @@ class BagStream:
         #: damage found so far (filled while reading; complete after :meth:`chunks`)
         self.salvage = Salvage(self.path, strict=strict)
         self._salvage_mcap: list[Path] = []  # MCAP files rosbags cannot open
+        self._dropped_rows = 0  # sqlite3 rows found but unreadable
 
     def __enter__(self) -> BagStream:
         if not self.path.exists():
@@ -459,9 +460,10 @@ class BagStream:
                 yield from self._salvage_sqlite(file, done, counts, decoders, cut)
         except (apsw.Error, ValueError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
-        if self.salvage.recovered and self.path.is_dir():
-            expected = metadata_counts(self.path)
+        if self.salvage.recovered:  # lost: from metadata.yaml's counts, else rows unreadable
+            expected = metadata_counts(self.path) if self.path.is_dir() else {}
             lost = sum(max(expected[t] - n, 0) for t, n in counts.items() if t in expected)
+            lost = lost if expected else self._dropped_rows
             if lost:
                 self.salvage.lost_messages = (self.salvage.lost_messages or 0) + lost
 
@@ -494,17 +496,15 @@ class BagStream:
             counts[topic] += len(raws)
             newest = max(newest, int(log_ns.max()))
             yield self._sqlite_chunk(kind_of[topic], topic, log_ns, raws, decoders)
-        missing = damage.pages_expected - damage.pages_present
         if cut:
+            page_size, pages = expected_pages(file)
             self.salvage.damage(
                 f'{file.name}: cut: {damage.pages_present} of {damage.pages_expected} pages '
                 'present (recorder killed or copy cut short?)',
-                skipped_bytes=file.stat().st_size % max(expected_pages(file)[0], 1)
-                + missing * expected_pages(file)[0],
+                skipped_bytes=page_size * pages - file.stat().st_size,
                 gap_ns=(newest, None),
             )
-        if damage.dropped_rows:
-            self.salvage.lost_messages = (self.salvage.lost_messages or 0) + damage.dropped_rows
+        self._dropped_rows += damage.dropped_rows
 
     def _sqlite_chunk(
         self, kind: str, topic: str, log_ns: Any, raws: list[bytes], decoders: dict[Any, Any]
