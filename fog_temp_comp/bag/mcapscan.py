@@ -660,6 +660,9 @@ def mcap_topics(path: str | Path) -> dict[str, str]:
             try:
                 op, length = reader.header(pos)
             except _DamagedError:
+                cut = reader.cut_chunk(pos)
+                if cut is not None:
+                    _definitions(cut, schemas, channels)
                 pos = reader.skip_to_next_chunk(pos, 0)
                 if pos < 0:
                     break

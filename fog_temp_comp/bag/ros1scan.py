@@ -403,12 +403,15 @@ class Ros1Bag:
         records = _decompressor(fields['compression'].decode())(file.read(data_len))
         indexes: dict[int, NDArray[np.void]] = {}
         pos = data_at + data_len
+        cut_index = False  # an IDXDATA record the file ends in: walk the chunk instead
         while True:
             head = self._head(file, pos, size)
             if head is None or head[0].get('op') != bytes([_OP_INDEX_DATA]):
+                cut_index = head is None and self.walked and pos < size
                 break
             ifields, body_at, body_len = head
             if body_at + body_len > size:
+                cut_index = True
                 break
             file.seek(body_at)
             body = file.read(body_len)
@@ -416,7 +419,7 @@ class Ros1Bag:
             if conn in conns:
                 indexes[conn] = np.frombuffer(body, dtype=_INDEX_ENTRY)
             pos = body_at + body_len
-        if not indexes and self.walked:
+        if self.salvage is not None and (cut_index or (not indexes and self.walked)):
             yield from self._walk_messages(records, conns)
             return
         try:

@@ -33,6 +33,8 @@ class SqliteDamage:
     pages_present: int = 0
     pages_expected: int = 0
     dropped_rows: int = 0
+    #: newest timestamp (ns) of the rows on whole pages: rows lost from a cut page are newer
+    newest_whole_ns: int = 0
 
 
 def expected_pages(db: str | Path) -> tuple[int, int]:
@@ -239,6 +241,8 @@ def salvage_rows(
             if topic is None or rowid in seen:
                 continue
             seen.add(rowid)
+            if number <= pages.whole:
+                damage.newest_whole_ns = max(damage.newest_whole_ns, values[2])
             times, raws = pending.setdefault(topic, ([], []))
             times.append(values[2])
             raws.append(values[3])

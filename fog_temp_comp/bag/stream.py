@@ -502,7 +502,7 @@ class BagStream:
                 f'{file.name}: cut: {damage.pages_present} of {damage.pages_expected} pages '
                 'present (recorder killed or copy cut short?)',
                 skipped_bytes=page_size * pages - file.stat().st_size,
-                gap_ns=(newest, None),
+                gap_ns=(min(newest, damage.newest_whole_ns), None),
             )
         self._dropped_rows += damage.dropped_rows
 
