@@ -200,7 +200,7 @@ def test_a_bag_directory_without_or_with_stale_metadata_is_read_whole(
     record = read_record(bare, on_salvage=found.append)
     assert 'no metadata.yaml' in found[0].summary()
     assert_array_equal(record.imu_stamps_s, whole.imu_stamps_s)
-    with pytest.raises(BagError, match='no metadata.yaml'):
+    with pytest.raises(BagError, match=r'no metadata\.yaml'):
         read_record(bare, strict=True)
     stale = tmp_path / 'stale'
     shutil.copytree(path, stale)
