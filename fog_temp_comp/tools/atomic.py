@@ -16,11 +16,13 @@ import shutil
 import signal
 import sys
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from types import FrameType, TracebackType
 from typing import Any, TextIO
 
-__all__ = ['AtomicOutputs', 'Terminated', 'partial_dir']
+__all__ = ['AtomicOutputs', 'Terminated', 'partial_dir', 'terminating_on_signals']
 
 
 class Terminated(BaseException):
@@ -34,6 +36,20 @@ class Terminated(BaseException):
     def exit_code(self) -> int:
         """The shell's code for death by this signal (128 + number)."""
         return 128 + self.signum
+
+
+@contextmanager
+def terminating_on_signals() -> Iterator[None]:
+    """Inside, SIGTERM and SIGHUP raise :class:`Terminated` in the main thread."""
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for signum in AtomicOutputs._SIGNALS:
+            old[signum] = signal.signal(signum, AtomicOutputs._terminate)
+    try:
+        yield
+    finally:
+        for signum, handler in old.items():
+            signal.signal(signum, handler)
 
 
 def partial_dir(target: Path) -> Path:
@@ -53,6 +69,8 @@ class AtomicOutputs:
 
     Parameters
     ----------
+    *announce : Path or None
+        Outputs the command will write, named on stderr if it stops before it asked for them.
     stderr : text stream, optional
         Where to say that nothing was written (default ``sys.stderr``).
 
@@ -65,7 +83,8 @@ class AtomicOutputs:
 
     _SIGNALS = tuple(s for s in (signal.SIGTERM, getattr(signal, 'SIGHUP', None)) if s)
 
-    def __init__(self, *, stderr: TextIO | None = None) -> None:
+    def __init__(self, *announce: Path | None, stderr: TextIO | None = None) -> None:
+        self._announce = [Path(a) for a in announce if a is not None]
         self._stderr = stderr
         # (target, temporary, mode): mode '' (new), 'merge' (into a directory), 'replace'
         self._targets: list[tuple[Path, Path, str]] = []
@@ -135,6 +154,12 @@ class AtomicOutputs:
         return wanted
 
     def _commit(self) -> None:
+        for target, _, mode in self._targets:  # check all before renaming any
+            taken = target.exists() or target.is_symlink()
+            if taken and not (mode == 'merge' and target.is_dir()) and mode != 'replace':
+                raise FileExistsError(f'{target}: exists already, not overwriting')
+            if mode == 'replace' and target.is_dir():
+                raise IsADirectoryError(f'{target}: is a directory')
         for target, temporary, mode in self._targets:
             if mode == 'merge' and target.is_dir():
                 for item in sorted(temporary.iterdir()) if temporary.is_dir() else ():
@@ -142,11 +167,9 @@ class AtomicOutputs:
                     if dest.is_dir() and not item.is_dir():
                         raise FileExistsError(f'{dest}: is a directory')
                     os.replace(item, dest)
-            elif mode == 'replace' and temporary.exists() and not target.is_dir():
+            elif mode == 'replace' and temporary.exists():
                 os.replace(temporary, target)
             elif temporary.exists():
-                if target.exists() or target.is_symlink():
-                    raise FileExistsError(f'{target}: exists already, not overwriting')
                 os.rename(temporary, target)
         for target, _, _ in self._targets:
             _remove(partial_dir(target))
@@ -155,10 +178,12 @@ class AtomicOutputs:
     def _abort(self, exc: BaseException) -> None:
         for target, _, _ in self._targets:
             _remove(partial_dir(target))
-        if self._targets:
-            names = ', '.join(str(t) for t, _, _ in self._targets)
+        targets = list(dict.fromkeys([*self._announce, *(t for t, _, _ in self._targets)]))
+        if targets:
+            names = ', '.join(str(t) for t in targets)
             why = 'interrupted' if isinstance(exc, (KeyboardInterrupt, Terminated)) else 'failed'
             stderr = self._stderr or sys.stderr
             print(f'{why}: nothing written to {names} (partial output removed)', file=stderr)
             stderr.flush()
+            exc.outputs_reported = True  # type: ignore[attr-defined]  # the CLI says no more
         self._targets.clear()

@@ -315,21 +315,35 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fog-temp-comp`` console script."""
     args = build_parser().parse_args(argv)
-    from fog_temp_comp.tools import commands
-    from fog_temp_comp.tools.atomic import Terminated
+    from fog_temp_comp.tools.atomic import Terminated, terminating_on_signals
 
+    try:  # SIGTERM, SIGHUP: unwind (partial outputs removed) and exit 128 + n, as SIGINT
+        with terminating_on_signals():
+            from fog_temp_comp.tools import commands
+
+            return _run_reporting_errors(args, commands.USER_ERRORS)
+    except (KeyboardInterrupt, Terminated) as err:
+        if not getattr(err, 'outputs_reported', False):
+            outputs = [getattr(args, name, None) for name in ('output', 'report')]
+            names = ', '.join(str(o) for o in outputs if o is not None)
+            print(
+                f'interrupted: nothing written{" to " + names if names else ""}', file=sys.stderr
+            )
+        return err.exit_code if isinstance(err, Terminated) else 130
+
+
+def _run_reporting_errors(
+    args: argparse.Namespace, user_errors: tuple[type[BaseException], ...]
+) -> int:
+    """:func:`run`; a user error or an OS error becomes one ``ERROR:`` line and exit code 1."""
     try:
         return run(args)
-    except commands.USER_ERRORS as err:
+    except user_errors as err:
         print(f'ERROR: {err}', file=sys.stderr)
         return 1
     except OSError as err:  # unwritable output, disk full, permissions
         print(f'ERROR: {err.filename or ""}: {err.strerror or err}', file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        return 130
-    except Terminated as err:  # SIGTERM, SIGHUP during a command that writes
-        return err.exit_code
 
 
 if __name__ == '__main__':

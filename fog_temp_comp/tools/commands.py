@@ -185,7 +185,8 @@ def calibrate_command(
     stdout = stdout or sys.stdout
     if not output.parent.is_dir():
         raise ValueError(f'-o {output}: directory {output.parent} does not exist')
-    with AtomicOutputs() as outputs:  # -o and --report appear together, complete, or not at all
+    report = options.report_dir if options else None
+    with AtomicOutputs(output, report) as outputs:  # -o, --report: complete, or not at all
         return _calibrate(bags, output, outputs, options, settings, gyro_topic, temp_topic, stdout)
 
 
@@ -436,7 +437,7 @@ def compensate_command(
         if output_topic in reader.topics:
             raise BagError(f'--output-topic {output_topic}: already in {in_bag}; choose another')
         try:
-            with AtomicOutputs() as outputs, BagWriter(outputs.path(out_bag), fmt) as writer:
+            with AtomicOutputs(out_bag) as out, BagWriter(out.path(out_bag), fmt) as writer:
                 for conn in reader.connections:
                     if conn.topic not in writer.topics:
                         writer.add_topic(conn.topic, conn.msgtype, like=conn)
