@@ -21,7 +21,7 @@ from fog_temp_comp.bag.bagio import BagError
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.units import NS_PER_S
 
-__all__ = ['RecoveryError', 'Salvage', 'split_at_gaps']
+__all__ = ['RecoveryError', 'Salvage', 'finite_only', 'split_at_gaps']
 
 
 class RecoveryError(BagError):
@@ -133,3 +133,23 @@ def split_at_gaps(record: ChamberRecord, salvage: Salvage | None) -> list[Chambe
             )
         low = end
     return pieces
+
+
+def finite_only(record: ChamberRecord) -> tuple[ChamberRecord, int, int]:
+    """The record without its non-finite samples (NaN, inf in stamp or value).
+
+    Returns the record and the numbers of gyro and temperature samples dropped.
+    """
+    imu = np.isfinite(record.imu_stamps_s) & np.isfinite(record.rates_rad_s).all(axis=1)
+    temp = np.isfinite(record.temp_stamps_s) & np.isfinite(record.temperature_degC)
+    dropped_imu, dropped_temp = int((~imu).sum()), int((~temp).sum())
+    if not dropped_imu and not dropped_temp:
+        return record, 0, 0
+    clean = dataclasses.replace(
+        record,
+        imu_stamps_s=record.imu_stamps_s[imu],
+        rates_rad_s=record.rates_rad_s[imu],
+        temp_stamps_s=record.temp_stamps_s[temp],
+        temperature_degC=record.temperature_degC[temp],
+    )
+    return clean, dropped_imu, dropped_temp

@@ -176,12 +176,15 @@ class AtomicOutputs:
         self._targets.clear()
 
     def _abort(self, exc: BaseException) -> None:
-        for target, _, _ in self._targets:
+        started = False  # whether any partial output was there to remove
+        for target, temporary, _ in self._targets:
+            started = started or temporary.exists()
             _remove(partial_dir(target))
         targets = list(dict.fromkeys([*self._announce, *(t for t, _, _ in self._targets)]))
-        if targets:
+        interrupted = isinstance(exc, (KeyboardInterrupt, Terminated))
+        if targets and (interrupted or started):  # (an error before any output: its message)
             names = ', '.join(str(t) for t in targets)
-            why = 'interrupted' if isinstance(exc, (KeyboardInterrupt, Terminated)) else 'failed'
+            why = 'interrupted' if interrupted else 'failed'
             stderr = self._stderr or sys.stderr
             print(f'{why}: nothing written to {names} (partial output removed)', file=stderr)
             stderr.flush()

@@ -16,7 +16,7 @@ import yaml
 from fog_temp_comp.bag import bagio, cdr
 from fog_temp_comp.bag.bagio import BagError, BagWriter
 from fog_temp_comp.bag.reduce import reduce_record
-from fog_temp_comp.bag.salvage import Salvage, split_at_gaps
+from fog_temp_comp.bag.salvage import Salvage, finite_only, split_at_gaps
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.calibration import CalibrationError, calibrate_detailed
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load, save
@@ -42,6 +42,7 @@ class Salvaged:
     def __init__(self, stderr: TextIO | None = None) -> None:
         self.stderr = stderr
         self.found: dict[Path, Salvage] = {}
+        self.non_finite: dict[str, dict[str, int]] = {}  # bag -> samples dropped per stream
 
     def add(self, salvage: Salvage) -> None:
         """Called by the readers for a damaged bag (read as far as intact)."""
@@ -49,12 +50,25 @@ class Salvaged:
         print(f'WARNING: {salvage.summary()}', file=self.stderr or sys.stderr)
 
     def split(self, record: ChamberRecord) -> list[ChamberRecord]:
-        """``record`` cut at the chunks skipped inside it (no fit bridges them)."""
+        """``record`` without non-finite samples, cut at the chunks skipped inside it."""
+        record, imu, temp = finite_only(record)
+        if imu or temp:
+            self.non_finite[str(record.path)] = {'gyro': imu, 'temperature': temp}
+            print(
+                f'WARNING: {record.path}: dropped {imu} gyro and {temp} temperature values '
+                'that are not finite (NaN or inf)',
+                file=self.stderr or sys.stderr,
+            )
         return split_at_gaps(record, self.found.get(Path(record.path)))
 
-    def provenance(self) -> list[dict[str, Any]]:
-        """Per recovered bag: what was wrong and what was lost."""
-        return [s.provenance() for s in self.found.values()]
+    def provenance(self) -> dict[str, Any]:
+        """Per recovered bag: what was wrong and what was lost; non-finite samples dropped."""
+        out: dict[str, Any] = {}
+        if self.found:
+            out['recovered_inputs'] = [s.provenance() for s in self.found.values()]
+        if self.non_finite:
+            out['non_finite_dropped'] = dict(self.non_finite)
+        return out
 
 
 def bag_name(name: str, fmt: str) -> str:
@@ -228,8 +242,7 @@ def _calibrate(
         for b in bags
         for piece in salvaged.split(reduce_record(b, period, **read))  # type: ignore[arg-type]
     ]
-    if salvaged.found:
-        provenance = {**provenance, 'recovered_inputs': salvaged.provenance()}
+    provenance = {**provenance, **salvaged.provenance()}
     automatic = (
         opt.terms is None
         and not opt.fit_coil_lag
