@@ -117,7 +117,7 @@ class _Pages:
         """(rowid, payload) of the cells of a table-leaf page (None for an unreadable cell)."""
         page = self.page(number)
         base = 100 if number == 1 else 0
-        if page is None or page[base] != _LEAF_TABLE:
+        if page is None or len(page) < base + 8 or page[base] != _LEAF_TABLE:
             return
         ncells = struct.unpack_from('>H', page, base + 3)[0]
         usable = self.usable

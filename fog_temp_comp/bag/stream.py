@@ -396,15 +396,46 @@ class BagStream:
     def _from_spans(
         self, batches: Iterable[tuple[str, NDArray[np.int64], cdr.Spans]], decoders: dict[str, Any]
     ) -> Iterator[Chunk]:
-        """Chunks of at most ``chunk_size`` from the fast readers' (topic, log ns, spans)."""
+        """Chunks of at most ``chunk_size`` from the fast readers' (topic, log ns, spans).
+
+        The batches of one bag chunk (one buffer) are decoded before any is yielded: if one
+        does not decode (damage the chunk's framing did not reveal), the whole chunk is
+        skipped and recorded in :attr:`salvage`, as its other messages may be damaged too.
+        """
+        group: list[tuple[str, NDArray[np.int64], cdr.Spans]] = []
+        for item in batches:
+            if group and item[2].buffer is not group[0][2].buffer:
+                yield from self._decode_group(group, decoders)
+                group = []
+            group.append(item)
+        yield from self._decode_group(group, decoders)
+
+    def _decode_group(
+        self, group: list[tuple[str, NDArray[np.int64], cdr.Spans]], decoders: dict[str, Any]
+    ) -> list[Chunk]:
+        """Decoded chunks of the batches of one bag chunk, or [] (recorded) if one fails."""
         kind_of = self._kinds()
-        for topic, log_ns, spans in batches:
+        out = []
+        try:
+            for topic, log_ns, spans in group:
+                for start in range(0, len(spans), self.chunk_size):
+                    part = slice(start, start + self.chunk_size)
+                    batch = (spans[part], log_ns[part], [topic])
+                    out.append(self._flush(kind_of[topic], batch, decoders))
+        except ValueError as err:
+            first = min(int(t.min()) for _, t, _ in group)
+            last = max(int(t.max()) for _, t, _ in group)
+            self.salvage.damage(
+                f'undecodable messages in a chunk ({err})',
+                chunks=1,
+                gap_ns=(first, last),
+                lost_messages=sum(t.size for _, t, _ in group),
+            )
+            return []
+        for _, log_ns, spans in group:
             if self.progress is not None:
                 self.progress.update(len(spans), int(log_ns.max()), int(log_ns.min()))
-            for start in range(0, len(spans), self.chunk_size):
-                part = slice(start, start + self.chunk_size)
-                batch = (spans[part], log_ns[part], [topic])
-                yield self._flush(kind_of[topic], batch, decoders)
+        return out
 
     def _scan_ros1(self, bag: Ros1Bag) -> Iterator[Chunk]:
         """Read an indexed ROS 1 bag with :class:`fog_temp_comp.bag.ros1scan.Ros1Bag`."""

@@ -164,7 +164,8 @@ def load(path: str | Path) -> Coefficients:
     try:
         data = yaml.load(text, Loader=_Loader)
     except yaml.YAMLError as err:
-        raise CoefficientsError(f'{path}: not valid YAML: {err}') from err
+        where = ' '.join(str(err).split())  # one line
+        raise CoefficientsError(f'{path}: not valid YAML: {where}') from err
     try:
         return from_dict(data)
     except CoefficientsError as err:
