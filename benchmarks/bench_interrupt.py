@@ -12,8 +12,9 @@ nothing at all. A trial passes when no partial directory is left and no tracebac
 and either all its outputs are there and complete (every Imu corrected; the YAML loads and the
 report has its index: the command finished, the signal came after the rename or not at all),
 or none is and the exit code is non-zero with ``interrupted: nothing written`` on stderr (or
-the signal's default action killed Python before the handlers were installed). Exit code 1 if
-any trial failed.
+the signal's default action killed Python before the handlers were installed). A SIGINT caught
+during an import may still end the process by SIGINT (exit -2, the shell's 130) after the
+message. Exit code 1 if any trial failed.
 """
 
 from __future__ import annotations
@@ -100,11 +101,10 @@ def _verdict(kind: str, trial: Trial, outputs: list[Path]) -> str:
         return 'complete' if trial.returncode == 0 else 'complete, signal after the rename'
     if trial.returncode == 0:
         return 'EXIT 0 WITHOUT OUTPUT'
-    if trial.returncode < 0:  # the default action: before Python installed the handlers
+    said = 'interrupted: nothing written' in trial.stderr
+    if trial.returncode < 0 and not said:  # the default action, before Python ran our code
         return 'nothing left, killed during start-up'
-    if 'interrupted: nothing written' not in trial.stderr:
-        return 'SILENT'
-    return 'nothing left'
+    return 'nothing left' if said else 'SILENT'
 
 
 #: verdicts of a passing trial: a whole output, or none and (once Python runs) a message
