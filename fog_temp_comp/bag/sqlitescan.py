@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 __all__ = [
     'loose_sqlite_files',
     'metadata_counts',
+    'nth_log_time',
     'plain_sqlite_files',
     'scan_sqlite',
     'topic_types',
@@ -199,6 +200,28 @@ def scan_sqlite(
                 yield topic, times, payloads
     finally:
         connection.close()
+
+
+def nth_log_time(db: str | Path, topic: str, msgtype: str, n: int) -> int | None:
+    """Log time (ns) of a topic's ``n``-th message (1-based, by log time); None if unreadable.
+
+    Where :func:`scan_sqlite` stopped on a damaged file: rows up to this time were read.
+    """
+    try:
+        connection = _connect(db)
+        try:
+            rows = list(
+                connection.execute(
+                    'SELECT m.timestamp FROM messages m JOIN topics t ON m.topic_id = t.id '
+                    'WHERE t.name = ? AND t.type = ? ORDER BY m.timestamp LIMIT 1 OFFSET ?',
+                    (topic, msgtype, n - 1),
+                )
+            )
+        finally:
+            connection.close()
+    except apsw.Error:
+        return None
+    return int(rows[0][0]) if rows and n > 0 else None
 
 
 def _fetch(

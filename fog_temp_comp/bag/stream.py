@@ -51,6 +51,7 @@ from fog_temp_comp.bag.sqlitesalvage import (
 from fog_temp_comp.bag.sqlitescan import (
     loose_sqlite_files,
     metadata_counts,
+    nth_log_time,
     plain_sqlite_files,
     scan_sqlite,
     topic_types,
@@ -466,28 +467,34 @@ class BagStream:
             self.temp_topic: cdr.decode_temperature_cdr,
         }
         counts = dict.fromkeys(topics, 0)
+        receive = self.time_source == 'receive'
         try:
             for file in files:
                 page_size, pages = expected_pages(file)
                 cut = page_size > 0 and file.stat().st_size < page_size * pages
                 done: dict[str, int | None] = {}  # topic -> newest log time read (None: all)
-                batches: Iterator[tuple[str, Any, list[bytes]]]
-                if cut:
-                    batches = iter(())
-                else:
-                    batches = scan_sqlite(file, topics, log_times=True, batch_size=self.chunk_size)
+                read = dict.fromkeys(topics, 0)  # rows of this file read per topic
+                batches: Iterator[tuple[str, Any, list[bytes]]] = iter(())
+                if not cut:
+                    batches = scan_sqlite(
+                        file, topics, log_times=receive, batch_size=self.chunk_size
+                    )
                 try:
                     for topic, log_ns, raws in batches:
-                        assert log_ns is not None
                         for other in done:
                             done[other] = None if other != topic else done[other]
-                        done[topic] = int(log_ns.max())
+                        done[topic] = -1  # in progress: resolved if reading fails
+                        read[topic] += len(raws)
                         counts[topic] += len(raws)
                         yield self._sqlite_chunk(kind_of[topic], topic, log_ns, raws, decoders)
                     if not cut:
                         continue
                 except apsw.Error as err:
                     self.salvage.damage(f'{file.name}: damaged database ({err})')
+                    for topic, last in done.items():
+                        if last == -1:  # the newest log time read, or skip the rest (unknown)
+                            newest = nth_log_time(file, topic, topics[topic], read[topic])
+                            done[topic] = None if newest is None else newest
                 yield from self._salvage_sqlite(file, done, counts, decoders, cut)
         except (apsw.Error, ValueError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
@@ -540,6 +547,7 @@ class BagStream:
     def _sqlite_chunk(
         self, kind: str, topic: str, log_ns: Any, raws: list[bytes], decoders: dict[Any, Any]
     ) -> Chunk:
+        log_ns = None if self.time_source != 'receive' else log_ns
         chunk = self._flush(kind, (raws, log_ns, [topic]), decoders)
         if self.progress is not None:
             newest, oldest = chunk.stamps_s.max(), chunk.stamps_s.min()
