@@ -12,8 +12,11 @@ each batch sorted by timestamp.
 
 from __future__ import annotations
 
+import mmap
+import os
 import struct
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,6 +26,7 @@ from numpy.typing import NDArray
 __all__ = ['SqliteDamage', 'expected_pages', 'salvage_rows', 'salvage_topics']
 
 _LEAF_TABLE = 0x0D
+_INTERIOR_TABLE = 0x05
 _MAGIC = b'SQLite format 3\x00'
 
 
@@ -99,7 +103,7 @@ def _record(payload: bytes) -> list[object] | None:
 class _Pages:
     """The pages of a (possibly cut) SQLite file."""
 
-    def __init__(self, data: bytes) -> None:
+    def __init__(self, data: bytes | mmap.mmap) -> None:
         size = struct.unpack_from('>H', data, 16)[0]
         self.size = 65536 if size == 1 else size
         self.usable = self.size - data[20]
@@ -150,14 +154,68 @@ class _Pages:
                 yield None
 
 
+@contextmanager
+def _mapped(db: str | Path) -> Iterator[bytes | mmap.mmap]:
+    """The file's bytes, memory-mapped (a 24 h bag is gigabytes); b'' if empty."""
+    with Path(db).open('rb') as file:
+        if not os.fstat(file.fileno()).st_size:
+            yield b''
+            return
+        with mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            yield data
+
+
 def salvage_topics(db: str | Path) -> dict[int, tuple[str, str]]:
-    """``{topic id: (name, type)}`` from the ``topics`` rows still in the file."""
-    data = Path(db).read_bytes()
-    if not data.startswith(_MAGIC) or len(data) < 100:
-        return {}
-    pages = _Pages(data)
+    """``{topic id: (name, type)}`` from the ``topics`` rows still in the file.
+
+    The ``topics`` table is found through the schema on page 1 (a page or two); if that is
+    unreadable, every page is searched.
+    """
+    with _mapped(db) as data:
+        if len(data) < 100 or data[:16] != _MAGIC:
+            return {}
+        pages = _Pages(data)
+        root = _root_page(pages, b'topics')
+        found = _topic_rows(pages, _table_pages(pages, root)) if root else {}
+        return found or _topic_rows(pages, range(1, pages.count + 1))
+
+
+def _root_page(pages: _Pages, table: bytes) -> int | None:
+    """Root page of ``table`` from ``sqlite_master`` (page 1, if it is a leaf), or None."""
+    for cell in pages.cells(1):
+        values = _record(cell[1]) if cell is not None else None
+        if values and len(values) >= 4 and values[0] == b'table' and values[1] == table:
+            root = values[3]
+            return root if isinstance(root, int) and root > 0 else None
+    return None
+
+
+def _table_pages(pages: _Pages, root: int) -> list[int]:
+    """The leaf pages of the table b-tree at ``root`` that are in the file."""
+    leaves, todo, seen = [], [root], set()
+    while todo:
+        number = todo.pop()
+        page = pages.page(number)
+        if number in seen or page is None or len(page) < 12:
+            continue
+        seen.add(number)
+        if page[0] == _LEAF_TABLE:
+            leaves.append(number)
+        elif page[0] == _INTERIOR_TABLE:
+            ncells = struct.unpack_from('>H', page, 3)[0]
+            todo.append(struct.unpack_from('>I', page, 8)[0])
+            for k in range(ncells):
+                if 12 + 2 * k + 2 > len(page):
+                    break
+                at = struct.unpack_from('>H', page, 12 + 2 * k)[0]
+                if at + 4 <= len(page):
+                    todo.append(struct.unpack_from('>I', page, at)[0])
+    return sorted(leaves)
+
+
+def _topic_rows(pages: _Pages, numbers: Iterable[int]) -> dict[int, tuple[str, str]]:
     topics: dict[int, tuple[str, str]] = {}
-    for number in range(1, pages.count + 1):
+    for number in numbers:
         for cell in pages.cells(number):
             if cell is None:
                 continue
@@ -212,11 +270,17 @@ def salvage_rows(
         Raw CDR messages.
 
     """
-    data = Path(db).read_bytes()
     damage = damage if damage is not None else SqliteDamage()
-    if not data.startswith(_MAGIC) or len(data) < 100:
-        return
-    pages = _Pages(data)
+    with _mapped(db) as data:
+        if len(data) >= 100 and data[:16] == _MAGIC:
+            yield from _rows(_Pages(data), topic_ids, batch_size, damage)
+
+
+def _rows(
+    pages: _Pages, topic_ids: dict[int, str], batch_size: int, damage: SqliteDamage
+) -> Iterator[tuple[str, NDArray[np.int64], list[bytes]]]:
+    """:func:`salvage_rows` on the pages of an open file."""
+    data = pages.data
     damage.pages_present = pages.whole
     damage.pages_expected = max(struct.unpack_from('>I', data, 28)[0], pages.count)
     pending: dict[str, tuple[list[int], list[bytes]]] = {}
