@@ -430,3 +430,34 @@ def test_bad_coefficients_yaml(
 
 def test_the_matrix_has_at_least_40_cases() -> None:
     assert len(CASES) + len(DATA) + len(YAML) >= 40
+
+
+@pytest.mark.parametrize(
+    ('key', 'args', 'expect'),
+    [('mcap', (), 'recovered'), ('ros1', (), 'recovered'), ('sqlite3', ('--strict',), 'error')],
+)
+def test_evaluate_reads_a_cut_bag_with_a_warning_or_refuses_it_strictly(
+    key: str, args: tuple[str, ...], expect: str, bases: dict[str, Path], tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    bag = edit(copy(bases, key, tmp_path), cut_fraction(0.6))
+    code = cli.main(['evaluate', str(bag), '--coeffs', str(bases['coeffs']), *args])
+    err = capsys.readouterr().err
+    assert 'Traceback' not in err
+    if expect == 'error':
+        assert code == 1 and err.startswith('ERROR: ') and len(err.strip().splitlines()) == 1
+    else:
+        assert code == 0 and err.startswith('WARNING: ') and 'recovered (' in err
+
+
+@pytest.mark.parametrize('key', ['mcap', 'sqlite3', 'ros1'])
+def test_compensate_refuses_a_cut_bag_with_one_line_and_writes_nothing(
+    key: str, bases: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Compensate reads through rosbags: a damaged input is refused, never half-written."""
+    bag = edit(copy(bases, key, tmp_path), cut_fraction(0.6))
+    out = tmp_path / ('out.bag' if key == 'ros1' else 'out')
+    code = cli.main(['compensate', str(bag), '--coeffs', str(bases['coeffs']), '-o', str(out)])
+    err = capsys.readouterr().err
+    assert code == 1 and err.startswith('ERROR: ') and 'Traceback' not in err, err
+    assert not out.exists() and not partial_dir(out).exists()

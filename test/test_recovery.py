@@ -19,7 +19,7 @@ from rosbags.highlevel import AnyReader
 
 from fog_temp_comp.bag import bagio
 from fog_temp_comp.bag.bagio import BagError
-from fog_temp_comp.bag.salvage import Salvage
+from fog_temp_comp.bag.salvage import Salvage, split_at_gaps
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.tools.commands import CalibrateOptions, calibrate_command
@@ -177,6 +177,9 @@ def test_a_skipped_chunk_splits_the_run_and_is_reported_with_its_time_span(
     assert record.imu_stamps_s.size == short_cycle.imu_stamps_s.size - inside.sum()
     assert not ((record.imu_stamps_s >= start) & (record.imu_stamps_s <= end)).any()
     assert salvage.lost_messages is not None and salvage.lost_messages >= inside.sum()
+    before, after = split_at_gaps(record, salvage)  # the runs calibrate fits apart
+    assert before.imu_stamps_s.max() < start and after.imu_stamps_s.min() > end
+    assert before.imu_stamps_s.size + after.imu_stamps_s.size == record.imu_stamps_s.size
     out = tmp_path / 'c.yaml'
     options = CalibrateOptions(terms=('const', 'T', 'Tdot'))
     assert calibrate_command([path], out, options=options) == 0
