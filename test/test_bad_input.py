@@ -20,6 +20,7 @@ import yaml
 
 from fog_temp_comp.bag.bagio import write_chamber_bag
 from fog_temp_comp.bag.ros1scan import Ros1Bag
+from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.tools import cli
 from fog_temp_comp.tools.atomic import partial_dir
 from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig, simulate_run
@@ -450,11 +451,36 @@ def test_evaluate_reads_a_cut_bag_with_a_warning_or_refuses_it_strictly(
         assert code == 0 and err.startswith('WARNING: ') and 'recovered (' in err
 
 
-@pytest.mark.parametrize('key', ['mcap', 'sqlite3', 'ros1'])
+@pytest.mark.parametrize(('key', 'cut'), [('mcap_z', 0.1), ('mcap', 0.6), ('mcap', 1.0)])
+def test_compensate_copies_what_a_killed_mcap_recorder_left(
+    key: str, cut: float, bases: dict[str, Path], tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    """A cut MCAP file, or (cut 1.0) a bag without metadata.yaml: all it holds, corrected."""
+    bag = edit(copy(bases, key, tmp_path), cut_fraction(cut))
+    if cut == 1.0:
+        no_metadata(bag)
+    intact = read_record(bag)
+    out = tmp_path / 'out'
+    argv = ['compensate', str(bag), '--coeffs', str(bases['coeffs']), '-o', str(out)]
+    assert cli.main([*argv, '--strict']) == 1
+    assert not out.exists()
+    assert cli.main(argv) == 0
+    err = capsys.readouterr().err
+    assert 'recovered (' in err and 'Traceback' not in err
+    corrected = read_record(out, gyro_topic='/imu/data')
+    copied = read_record(out, gyro_topic=IMU)
+    assert corrected.imu_stamps_s.size == intact.imu_stamps_s.size > 0
+    np.testing.assert_array_equal(copied.rates_rad_s, intact.rates_rad_s)
+    np.testing.assert_array_equal(copied.temperature_degC, intact.temperature_degC)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith('.')]
+
+
+@pytest.mark.parametrize('key', ['sqlite3', 'ros1'])
 def test_compensate_refuses_a_cut_bag_with_one_line_and_writes_nothing(
     key: str, bases: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """Compensate reads through rosbags: a damaged input is refused, never half-written."""
+    """Compensate reads these through rosbags: refused whole, never half-written."""
     bag = edit(copy(bases, key, tmp_path), cut_fraction(0.6))
     out = tmp_path / ('out.bag' if key == 'ros1' else 'out')
     code = cli.main(['compensate', str(bag), '--coeffs', str(bases['coeffs']), '-o', str(out)])

@@ -227,6 +227,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_denoise(p, None)
     _add_guard(p)
+    _add_strict(p)
 
     p = sub.add_parser('evaluate', help='bias stability and range before/after compensation')
     p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
@@ -296,6 +297,7 @@ def run(args: argparse.Namespace) -> int:
             output_topic=args.output_topic,
             denoise_method=args.denoise,
             guard=_guard(args),
+            strict=args.strict,
         )
     if args.command == 'evaluate':
         return commands.evaluate_command(

@@ -5,7 +5,9 @@ from __future__ import annotations
 import dataclasses
 import shutil
 import sys
+import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
@@ -429,6 +431,7 @@ def compensate_command(
     output_topic: str = '/imu/data',
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
+    strict: bool = False,
     stdout: TextIO | None = None,
 ) -> int:
     """Replay ``in_bag`` through a :class:`Compensator`; write all inputs plus corrected Imu.
@@ -444,7 +447,10 @@ def compensate_command(
     if output_topic and not output_topic.startswith('/'):
         output_topic = '/' + output_topic
     n_out = 0
-    with bagio.open_bag(in_bag) as reader:
+    with (
+        readable_bag(in_bag, out_bag.parent, strict=strict) as source,
+        bagio.open_bag(source) as reader,
+    ):
         imu_name = bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic')
         temp_name = bagio.resolve_topic(reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic')
         if output_topic in reader.topics:
@@ -476,6 +482,41 @@ def compensate_command(
         file=stdout,
     )
     return 0
+
+
+@contextmanager
+def readable_bag(path: Path, scratch: Path, *, strict: bool) -> Iterator[Path]:
+    """``path``, or a repaired copy (in ``scratch``) of an MCAP bag a killed recorder left.
+
+    A cut MCAP file (no trailing magic) or an MCAP bag directory without ``metadata.yaml`` is
+    copied with :func:`fog_temp_comp.bag.repair.repair_mcap` (what is intact, all topics), with
+    a warning on stderr; with ``strict`` it is refused. Other bags are read as they are.
+    """
+    files = [path] if path.suffix == '.mcap' else sorted(path.glob('*.mcap'))
+    cut = [f for f in files if f.is_file() and not _ends_with_magic(f)]
+    bare = path.is_dir() and bool(files) and not (path / 'metadata.yaml').is_file()
+    if not (cut or bare):
+        yield path
+        return
+    from fog_temp_comp.bag.repair import repair_mcap
+
+    salvage = Salvage(path, strict=strict)
+    if bare:
+        salvage.damage('no metadata.yaml (recorder killed?): read the .mcap files')
+    with tempfile.TemporaryDirectory(dir=scratch, prefix=f'.{path.name}.repaired-') as tmp:
+        repaired = repair_mcap(files, Path(tmp) / path.stem, salvage)
+        Salvaged().add(salvage)
+        yield repaired
+
+
+def _ends_with_magic(file: Path) -> bool:
+    """Whether an MCAP file has its trailing magic (a recorder that closed it)."""
+    from fog_temp_comp.bag.mcapscan import MAGIC
+
+    with file.open('rb') as handle:
+        size = handle.seek(0, 2)
+        handle.seek(max(size - len(MAGIC), 0))
+        return size >= 2 * len(MAGIC) and handle.read() == MAGIC
 
 
 def effective_settings(coeffs: Coefficients, denoise_method: str | None) -> DenoiseSettings:
