@@ -7,7 +7,9 @@ at random moments are in ``benchmarks/bench_interrupt.py``.
 from __future__ import annotations
 
 import io
+import os
 import signal
+import time
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +18,7 @@ from interrupting import interrupt
 
 from fog_temp_comp.bag.bagio import write_chamber_bag
 from fog_temp_comp.bag.stream import read_record
-from fog_temp_comp.tools.atomic import AtomicOutputs, partial_dir
+from fog_temp_comp.tools.atomic import AtomicOutputs, Terminated, partial_dir
 from fog_temp_comp.tools.commands import CalibrateOptions, calibrate_command
 from fog_temp_comp.tools.simulate import SimulatedRun
 
@@ -134,3 +136,18 @@ def test_compensate_left_alone_writes_a_complete_bag(
         read_record(inputs['cal']).imu_stamps_s.size
     )
     assert not list(tmp_path.glob('.out.partial-*'))
+
+
+def test_a_signal_swallowed_inside_still_stops_the_commit(tmp_path: Path) -> None:
+    """A SIGTERM whose exception some library code swallowed (a ``__del__``): no output."""
+    target = tmp_path / 'c.yaml'
+    stderr = io.StringIO()
+    with pytest.raises(Terminated), AtomicOutputs(stderr=stderr) as outputs:
+        outputs.path(target).write_text('x: 1\n')
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(1.0)  # the handler runs here
+        except Terminated:
+            pass  # swallowed
+    assert not target.exists() and not partial_dir(target).exists()
+    assert 'interrupted: nothing written' in stderr.getvalue()

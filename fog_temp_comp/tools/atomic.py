@@ -40,14 +40,26 @@ class Terminated(BaseException):
 
 @contextmanager
 def terminating_on_signals() -> Iterator[None]:
-    """Inside, SIGTERM and SIGHUP raise :class:`Terminated` in the main thread."""
+    """Inside, SIGTERM and SIGHUP raise :class:`Terminated` in the main thread.
+
+    An interrupt raised where Python cannot propagate it (a ``__del__``, a weakref callback)
+    prints no traceback: :class:`AtomicOutputs` still refuses to commit after it.
+    """
     old = {}
     if threading.current_thread() is threading.main_thread():
         for signum in AtomicOutputs._SIGNALS:
             old[signum] = signal.signal(signum, AtomicOutputs._terminate)
+    hook = sys.unraisablehook
+
+    def quiet(unraisable: Any) -> None:
+        if not isinstance(unraisable.exc_value, (KeyboardInterrupt, Terminated)):
+            hook(unraisable)
+
+    sys.unraisablehook = quiet
     try:
         yield
     finally:
+        sys.unraisablehook = hook
         for signum, handler in old.items():
             signal.signal(signum, handler)
 
@@ -112,10 +124,21 @@ class AtomicOutputs:
         return temporary
 
     def __enter__(self) -> AtomicOutputs:
+        self._received: int | None = None
         if threading.current_thread() is threading.main_thread():
-            for signum in self._SIGNALS:
-                self._old[signum] = signal.signal(signum, self._terminate)
+            for signum in (signal.SIGINT, *self._SIGNALS):
+                self._old[signum] = signal.signal(signum, self._interrupt)
         return self
+
+    def _interrupt(self, signum: int, frame: FrameType | None) -> None:
+        """Remember the signal, then raise it (KeyboardInterrupt or :class:`Terminated`).
+
+        Raised where Python swallows exceptions (a ``__del__``), it must still stop the commit.
+        """
+        self._received = signum
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        self._terminate(signum, frame)
 
     @staticmethod
     def _terminate(signum: int, _frame: FrameType | None) -> None:
@@ -131,6 +154,13 @@ class AtomicOutputs:
             if exc is None:
                 blocked = self._block()
                 try:
+                    if self._received is not None:  # raised where it was swallowed
+                        received = self._received
+                        raise (
+                            KeyboardInterrupt
+                            if received == signal.SIGINT
+                            else Terminated(received)
+                        )
                     self._commit()
                 except BaseException as err:
                     self._abort(err)
