@@ -394,9 +394,17 @@ def test_truncated_bag(tmp_path: Path, tiny_run: SimulatedRun, fmt: str, compres
     file = storage_file(path, fmt)
     os.truncate(file, file.stat().st_size // 2)
     for target in (path, file):
-        with pytest.raises(BagError) as info:
-            read_record(target)
+        with pytest.raises(BagError) as info:  # --strict: refused, naming the bag
+            read_record(target, strict=True)
         assert str(target) in str(info.value)
+        found: list[object] = []
+        try:  # by default: the intact part with a warning, or a clean error if nothing is
+            record = read_record(target, on_salvage=found.append)
+        except BagError as err:
+            assert str(target) in str(err)
+        else:
+            assert len(found) == 1
+            assert record.imu_stamps_s.size < tiny_run.imu_stamps_s.size
 
 
 def test_garbage_file_with_bag_suffix(tmp_path: Path) -> None:

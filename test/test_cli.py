@@ -661,8 +661,10 @@ def test_compensate_truncated_input(
     file = bag if fmt == 'ros1' else next(bag.glob('*.mcap'))
     os.truncate(file, file.stat().st_size // 2)
     out = bag_path(tmp_path, 'out', fmt)
-    assert cli.main(['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(out)]) == 1
+    argv = ['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(out)]
+    assert cli.main([*argv, '--strict']) == 1  # (without: MCAP is copied as far as intact)
     assert str(bag) in error_line(capsys)
+    assert not out.exists()
 
 
 # --------------------------------------------------------------------------------------------

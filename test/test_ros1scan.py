@@ -149,8 +149,8 @@ def test_not_a_ros1_bag_or_not_indexed(tmp_path: Path) -> None:
         Ros1Bag(unindexed)
 
 
-def test_index_entry_not_matching_its_record_is_a_bag_error(tmp_path: Path) -> None:
-    """A damaged IDXDATA offset fails loudly with the bag's name; the valid bag reads fully."""
+def test_index_entry_not_matching_its_record_is_walked_or_refused(tmp_path: Path) -> None:
+    """A damaged IDXDATA offset: the chunk is walked (warning) or refused with strict."""
     path = write_bag(tmp_path / 'run.bag', n_imu=500)
     bag = Ros1Bag(path)
     data = bytearray(path.read_bytes())
@@ -165,10 +165,15 @@ def test_index_entry_not_matching_its_record_is_a_bag_error(tmp_path: Path) -> N
     data[entry + 8 : entry + 12] = (offset + 1).to_bytes(4, 'little')
     broken = tmp_path / 'broken.bag'
     broken.write_bytes(bytes(data))
-    with pytest.raises(bagio.BagError, match=r'broken\.bag: cannot read messages'):
-        stream.read_record(broken)
+    with pytest.raises(bagio.BagError, match=r'broken\.bag: chunk at byte .*damaged index'):
+        stream.read_record(broken, strict=True)
+    found: list[object] = []
+    walked = stream.read_record(broken, on_salvage=found.append)
     record = stream.read_record(path)
     assert record.imu_stamps_s.size == 500 and record.temp_stamps_s.size == 50
+    assert len(found) == 1
+    np.testing.assert_array_equal(walked.imu_stamps_s, record.imu_stamps_s)
+    np.testing.assert_array_equal(walked.rates_rad_s, record.rates_rad_s)
 
 
 def test_truncated_inside_the_chunks_is_a_bag_error(tmp_path: Path) -> None:

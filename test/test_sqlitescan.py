@@ -148,14 +148,20 @@ def test_bag_stream_reads_sqlite_like_rosbags(tmp_path: Path, time_source: str) 
     assert_array_equal(rates, w)
 
 
-def test_damaged_database_gives_bag_error(tmp_path: Path) -> None:
+def test_damaged_database_is_read_as_far_as_intact_or_refused_strictly(tmp_path: Path) -> None:
     bag = write_bag(tmp_path / 'bag', n_imu=20000)
     (db,) = plain_sqlite_files(bag) or []
     data = bytearray(db.read_bytes())
     data[len(data) // 2 :] = b'\xa5' * (len(data) - len(data) // 2)  # garbage second half
     db.write_bytes(bytes(data))
-    with pytest.raises(BagError, match='cannot'):
-        stream.read_record(bag)
+    with pytest.raises(BagError, match=r'damaged database.*--strict'):
+        stream.read_record(bag, strict=True)
+    found = []
+    record = stream.read_record(bag, on_salvage=found.append)
+    assert len(found) == 1 and found[0].recovered
+    assert 0 < record.imu_stamps_s.size < 20000
+    total = 20000 + 2000  # metadata.yaml counts what was lost
+    assert found[0].lost_messages == total - record.imu_stamps_s.size - record.temp_stamps_s.size
 
 
 def test_not_a_database_gives_bag_error(tmp_path: Path) -> None:

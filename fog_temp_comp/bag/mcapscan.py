@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import struct
 import sys
+import zlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fog_temp_comp.bag.cdr import Spans
+from fog_temp_comp.bag.salvage import Salvage
 
 if sys.version_info >= (3, 14):
     from compression import zstd
@@ -43,11 +45,12 @@ try:
 except ImportError:  # pragma: no cover
     _lz4_decompress = None
 
-__all__ = ['MAGIC', 'ScanStats', 'Spans', 'scan_mcap']
+__all__ = ['MAGIC', 'ScanStats', 'Spans', 'mcap_topics', 'scan_mcap']
 
 MAGIC = b'\x89MCAP0\r\n'
 
 _OP_FOOTER = 0x02
+_OP_SCHEMA = 0x03
 _OP_CHANNEL = 0x04
 _OP_MESSAGE = 0x05
 _OP_CHUNK = 0x06
@@ -117,6 +120,15 @@ class _Scanner:
         ] = []
         self.channel_counts: dict[int, int] | None = None  # from the Statistics record
         self.yielded: dict[str, int] = {}  # messages yielded per topic
+        self.last_log_ns = 0  # newest log time yielded so far
+
+    def discard(self) -> None:
+        """Forget the current batch (its chunk turned out damaged)."""
+        self.pending = []
+        for times, starts, lengths in self.collect.values():
+            times.clear()
+            starts.clear()
+            lengths.clear()
 
     def _error(self, what: str) -> ValueError:
         return ValueError(f'{self.path}: {what}')
@@ -155,10 +167,11 @@ class _Scanner:
                     )
             pos = nxt
 
-    def check_counts(self) -> None:
+    def check_counts(self, salvage: Salvage | None = None) -> None:
         """At the end: the messages yielded per topic match the file's Statistics record.
 
-        A Message Index that leaves out messages would otherwise lose them silently.
+        A Message Index that leaves out messages would otherwise lose them silently. With
+        ``salvage`` (a damaged file), a shortfall is recorded there instead of raised.
         """
         if self.channel_counts is None:
             return
@@ -169,6 +182,10 @@ class _Scanner:
                 expected[topic] = expected.get(topic, 0) + count
         for topic, count in expected.items():
             got = self.yielded.get(topic, 0)
+            if got != count and salvage is not None and salvage.recovered:
+                if got < count:
+                    salvage.lost_messages = (salvage.lost_messages or 0) + count - got
+                continue
             if got != count:
                 raise self._error(
                     f'{got} messages found on {topic}, but the file statistics count {count} '
@@ -215,7 +232,7 @@ class _Scanner:
         buf = memoryview(body)
         if len(buf) < 32:
             raise self._error(f'MCAP chunk record too short at byte {pos}')
-        usize, _crc, clen = _CHUNK.unpack_from(buf, 0)
+        usize, crc, clen = _CHUNK.unpack_from(buf, 0)
         rpos = 32 + clen
         if rpos + 8 > len(buf):
             raise self._error(f'MCAP chunk record too short at byte {pos}')
@@ -226,6 +243,10 @@ class _Scanner:
         data = buf[rpos + 8 : rpos + 8 + rlen]
         if compression:
             data = memoryview(_decompress(compression, data, usize))
+        elif len(data) != usize:
+            raise self._error(f'MCAP chunk at byte {pos}: {len(data)} bytes, expected {usize}')
+        if crc and zlib.crc32(data) != crc:
+            raise self._error(f'MCAP chunk at byte {pos}: CRC mismatch')
         return data
 
     def indexed(self, records: memoryview, indexes: dict[int, NDArray[np.void]]) -> bool:
@@ -296,6 +317,8 @@ class _Scanner:
             if not bool((order[1:] > order[:-1]).all()):
                 t, start, length = t[order], start[order], length[order]
             self.yielded[topic] = self.yielded.get(topic, 0) + t.size
+            if t.size:
+                self.last_log_ns = max(self.last_log_ns, int(t.max()))
             yield topic, t, Spans(buffer, start, length)
 
 
@@ -306,6 +329,7 @@ def scan_mcap(
     sort_by_time: bool = True,
     use_index: bool = True,
     stats: ScanStats | None = None,
+    salvage: Salvage | None = None,
 ) -> Iterator[Batch]:
     """Scan an MCAP file for the raw messages of some topics.
 
@@ -322,6 +346,10 @@ def scan_mcap(
         (default); if false, always walk the records (the reference the tests compare with).
     stats : ScanStats, optional
         Counts the chunks read each way.
+    salvage : Salvage, optional
+        Read a damaged file as far as it is intact (a file cut anywhere, without footer or
+        summary; a damaged chunk is skipped) and record in ``salvage`` what was skipped.
+        Without it, damage raises ``ValueError``.
 
     Yields
     ------
@@ -349,7 +377,7 @@ def scan_mcap(
     path = Path(path)
     scanner = _Scanner(path, set(topics), sort_by_time)
     with path.open('rb') as file:
-        reader = _RecordReader(file, path)
+        reader = _RecordReader(file, path, salvage)
         if use_index:
             summary = reader.summary()
             if summary:
@@ -357,28 +385,53 @@ def scan_mcap(
         loose = bytearray()  # unchunked Channel and Message records, walked in batches
         pos = len(MAGIC)
         while True:
-            op, length = reader.header(pos)
+            try:
+                op, length = reader.header(pos)
+            except _DamagedError:
+                yield from _walk_loose(scanner, loose)
+                assert salvage is not None
+                cut = reader.cut_chunk(pos)  # the intact records of a chunk the file ends in
+                if cut is not None:
+                    scanner.records(cut, 0, len(cut))
+                    yield from scanner.flush(cut)
+                pos = reader.skip_to_next_chunk(pos, scanner.last_log_ns)
+                if pos < 0:  # the file ends here (cut)
+                    scanner.check_counts(salvage)
+                    return
+                continue
             body_pos = pos + 9
             pos = body_pos + length
             if op in (_OP_CHUNK, _OP_FOOTER) or len(loose) > _LOOSE_BATCH:
                 yield from _walk_loose(scanner, loose)
             if op == _OP_FOOTER:
-                scanner.check_counts()
+                scanner.check_counts(salvage)
                 return
             if op == _OP_CHUNK:
-                records = scanner.chunk(reader.read(body_pos, length), body_pos - 9)
-                indexes, pos = reader.message_indexes(pos)
-                if use_index and indexes and scanner.indexed(records, indexes):
-                    if stats is not None:
-                        stats.indexed_chunks += 1
-                else:
-                    scanner.records(records, 0, len(records))
-                    if stats is not None:
-                        stats.walked_chunks += 1
+                body = reader.read(body_pos, length)
+                try:
+                    records = scanner.chunk(body, body_pos - 9)
+                    indexes, pos = reader.message_indexes(pos)
+                    if use_index and indexes and scanner.indexed(records, indexes):
+                        if stats is not None:
+                            stats.indexed_chunks += 1
+                    else:
+                        scanner.records(records, 0, len(records))
+                        if stats is not None:
+                            stats.walked_chunks += 1
+                except (ValueError, UnicodeDecodeError, zstd.ZstdError, RuntimeError) as err:
+                    if salvage is None:
+                        raise
+                    scanner.discard()
+                    pos = reader.skip_chunk(body_pos - 9, body, pos, err)
+                    continue
                 yield from scanner.flush(records)
             elif op in (_OP_MESSAGE, _OP_CHANNEL):
                 loose += reader.read(body_pos - 9, length + 9)
             # other records (header, schemas, attachments, metadata, indexes) are skipped
+
+
+class _DamagedError(Exception):
+    """A record header that runs past the end of the file (or is not one)."""
 
 
 #: unchunked records are walked once this many bytes have gathered
@@ -396,19 +449,27 @@ def _walk_loose(scanner: _Scanner, loose: bytearray) -> Iterator[Batch]:
 
 
 class _RecordReader:
-    """Reads an MCAP file record by record (one chunk in memory at a time, not the file)."""
+    """Reads an MCAP file record by record (one chunk in memory at a time, not the file).
 
-    def __init__(self, file: BinaryIO, path: Path) -> None:
+    With a :class:`Salvage`, a file without trailing magic (cut) is read up to its end, and
+    damaged records raise :class:`_DamagedError` for the caller to skip (:meth:`skip_chunk`,
+    :meth:`skip_to_next_chunk`), which records the damage.
+    """
+
+    def __init__(self, file: BinaryIO, path: Path, salvage: Salvage | None = None) -> None:
         self.file = file
         self.path = path
+        self.salvage = salvage
         size = file.seek(0, 2)
         file.seek(0)
         if file.read(len(MAGIC)) != MAGIC:
             raise ValueError(f'{path}: not an MCAP file (bad magic)')
         file.seek(max(size - len(MAGIC), 0))
-        if size < 2 * len(MAGIC) or file.read(len(MAGIC)) != MAGIC:
+        self.cut = size < 2 * len(MAGIC) or file.read(len(MAGIC)) != MAGIC
+        if self.cut and salvage is None:
             raise ValueError(f'{path}: truncated MCAP file (no trailing magic)')
-        self.end = size - len(MAGIC)  # records lie in [len(MAGIC), end)
+        self.end = size if self.cut else size - len(MAGIC)  # records lie in [len(MAGIC), end)
+        self.read_to = 0  # file offset up to which :meth:`cut_chunk` read uncompressed records
 
     def read(self, pos: int, size: int) -> bytes:
         """``size`` bytes at ``pos`` (within the records)."""
@@ -421,9 +482,13 @@ class _RecordReader:
     def header(self, pos: int) -> tuple[int, int]:
         """(opcode, body length) of the record at ``pos``; raises if it runs past the end."""
         if pos + 9 > self.end:
+            if self.salvage is not None:
+                raise _DamagedError
             raise ValueError(f'{self.path}: truncated MCAP file (no footer record)')
         op, length = _HEADER.unpack(self.read(pos, 9))
-        if pos + 9 + length > self.end:
+        if pos + 9 + length > self.end or (self.salvage is not None and not 0 < op < 0x20):
+            if self.salvage is not None:
+                raise _DamagedError
             raise ValueError(
                 f'{self.path}: truncated MCAP record (opcode {op:#04x}) at byte {pos}'
             )
@@ -432,7 +497,7 @@ class _RecordReader:
     def summary(self) -> bytes:
         """The summary section the footer points to, or b'' (none, or not understood)."""
         footer = self.end - 29
-        if footer < len(MAGIC):
+        if self.cut or footer < len(MAGIC):
             return b''
         op, length, start, _offsets, _crc = _FOOTER.unpack(self.read(footer, 29))
         if op != _OP_FOOTER or length != 20 or not len(MAGIC) <= start < footer:
@@ -440,23 +505,208 @@ class _RecordReader:
         return self.read(start, footer - start)
 
     def message_indexes(self, pos: int) -> tuple[dict[int, NDArray[np.void]], int]:
-        """The Message Index records at ``pos`` (channel id -> entries) and the next offset."""
+        """The Message Index records at ``pos`` (channel id -> entries) and the next offset.
+
+        With a salvage, a malformed index ends the list (the chunk is then walked).
+        """
         indexes: dict[int, NDArray[np.void]] = {}
         while pos + 9 <= self.end:
             op, length = _HEADER.unpack(self.read(pos, 9))
             if op != _OP_MESSAGE_INDEX:
                 break
             if pos + 9 + length > self.end or length < _INDEX_HEAD.size:
+                if self.salvage is not None:
+                    return {}, pos
                 raise ValueError(f'{self.path}: malformed MCAP message index at byte {pos}')
             body = self.read(pos + 9, length)
             cid, nbytes = _INDEX_HEAD.unpack_from(body, 0)
             if nbytes % 16 or _INDEX_HEAD.size + nbytes > length:
+                if self.salvage is not None:
+                    return {}, pos
                 raise ValueError(f'{self.path}: malformed MCAP message index at byte {pos}')
             indexes[cid] = np.frombuffer(
                 body, dtype=_INDEX_ENTRY, count=nbytes // 16, offset=_INDEX_HEAD.size
             )
             pos += 9 + length
         return indexes, pos
+
+    def skip_chunk(self, chunk_pos: int, body: bytes, after: int, err: Exception) -> int:
+        """Record a damaged chunk as skipped; the offset after it and its message indexes."""
+        assert self.salvage is not None
+        pos = chunk_pos + 9 + len(body)
+        while pos + 9 <= self.end:  # its Message Index records, if they look whole
+            op, length = _HEADER.unpack(self.read(pos, 9))
+            if op != _OP_MESSAGE_INDEX or pos + 9 + length > self.end:
+                break
+            pos += 9 + length
+        pos = max(pos, after)
+        gap = struct.unpack_from('<QQ', body) if len(body) >= 16 else None
+        self.salvage.damage(
+            f'damaged chunk at byte {chunk_pos} ({err})',
+            skipped_bytes=pos - chunk_pos,
+            chunks=1,
+            gap_ns=(int(gap[0]), int(gap[1])) if gap and gap[0] <= gap[1] else None,
+        )
+        return pos
+
+    def cut_chunk(self, pos: int) -> memoryview | None:
+        """The whole records at the start of a Chunk record the file ends in, if it is one.
+
+        Uncompressed records are read up to the cut; zstd and lz4 frames are decompressed as
+        far as they go. None when ``pos`` is not a chunk that runs past the end of the file.
+        """
+        if not self.cut or pos + 9 + 40 > self.end:
+            return None
+        head = self.read(pos, 9 + 32)
+        op, length = _HEADER.unpack_from(head, 0)
+        clen = _U32.unpack_from(head, 9 + 28)[0]
+        if op != _OP_CHUNK or pos + 9 + length <= self.end or clen > 8:
+            return None
+        start = pos + 9 + 32
+        if start + clen + 8 > self.end:
+            return None
+        name = self.read(start, clen)
+        data = self.read(start + clen + 8, self.end - start - clen - 8)
+        try:
+            if name == b'zstd':
+                data = zstd.ZstdDecompressor().decompress(data)
+            elif name == b'lz4' and _lz4_decompress is not None:
+                from lz4.frame import LZ4FrameDecompressor
+
+                data = LZ4FrameDecompressor().decompress(data)
+            elif name != b'':
+                return None
+        except (zstd.ZstdError, RuntimeError, ValueError):
+            return None
+        whole = 0  # end of the last whole record
+        while whole + 9 <= len(data):
+            nxt = whole + 9 + _U64.unpack_from(data, whole + 1)[0]
+            if nxt > len(data):
+                break
+            whole = nxt
+        if name == b'':
+            self.read_to = start + clen + 8 + whole
+        return memoryview(data)[:whole]
+
+    def skip_to_next_chunk(self, pos: int, last_log_ns: int) -> int:
+        """Record unreadable bytes from ``pos`` on; the offset of the next whole chunk, or -1."""
+        assert self.salvage is not None
+        found = self._next_chunk(pos + 1) if pos + 9 <= self.end else None
+        if found is None:
+            size = self.end - max(pos, self.read_to)
+            if self.cut:
+                what = f'no footer or summary: the file ends at byte {self.end}'
+                what += f' inside a record at byte {pos}' if size > 0 else ''
+                self.salvage.damage(
+                    what + ' (recorder killed?)',
+                    skipped_bytes=max(size, 0),
+                    gap_ns=(last_log_ns, None) if size > 0 else None,
+                )
+            else:
+                self.salvage.damage(
+                    f'unreadable records from byte {pos} to the end', skipped_bytes=max(size, 0)
+                )
+            return -1
+        start_ns = struct.unpack('<Q', self.read(found + 9, 8))[0]
+        self.salvage.damage(
+            f'unreadable records at bytes {pos}-{found}',
+            skipped_bytes=found - pos,
+            gap_ns=(last_log_ns, int(start_ns)),
+        )
+        return found
+
+    def _next_chunk(self, pos: int) -> int | None:
+        """Offset of the next record from ``pos`` on that is a whole, consistent Chunk record."""
+        block = 4 << 20
+        while pos + 9 + 40 <= self.end:
+            self.file.seek(pos)
+            data = self.file.read(min(block + 64, self.end - pos))
+            at = data.find(b'\x06')
+            while 0 <= at < min(block, len(data)):
+                if self._is_chunk(pos + at):
+                    return pos + at
+                at = data.find(b'\x06', at + 1)
+            pos += block
+        return None
+
+    def _is_chunk(self, pos: int) -> bool:
+        if pos + 9 + 40 > self.end:
+            return False
+        head = self.read(pos, 9 + 32)
+        _op, length = _HEADER.unpack_from(head, 0)
+        start, stop, _usize, _crc, clen = struct.unpack_from('<QQQII', head, 9)
+        if start > stop or clen > 8 or pos + 9 + length > self.end or 40 + clen > length:
+            return False
+        tail = self.read(pos + 9 + 32, clen + 8)
+        name = tail[:clen]
+        rlen = _U64.unpack_from(tail, clen)[0]
+        return name in (b'', b'zstd', b'lz4') and length == 40 + clen + rlen
+
+
+def mcap_topics(path: str | Path) -> dict[str, str]:
+    """``{topic: message type}`` of an MCAP file, read from its records (damage skipped).
+
+    For files whose summary is missing: Schema and Channel records are collected from the
+    data section, chunks decompressed only while their Message Index names a channel not
+    seen yet (or has none).
+    """
+    path = Path(path)
+    schemas: dict[int, str] = {}
+    channels: dict[int, tuple[int, str]] = {}
+    with path.open('rb') as file:
+        reader = _RecordReader(file, path, Salvage(path))
+        pos = len(MAGIC)
+        while True:
+            try:
+                op, length = reader.header(pos)
+            except _DamagedError:
+                cut = reader.cut_chunk(pos)
+                if cut is not None:
+                    _definitions(cut, schemas, channels)
+                pos = reader.skip_to_next_chunk(pos, 0)
+                if pos < 0:
+                    break
+                continue
+            body_pos, pos = pos + 9, pos + 9 + length
+            if op == _OP_FOOTER:
+                break
+            if op in (_OP_SCHEMA, _OP_CHANNEL):
+                _definitions(reader.read(body_pos - 9, length + 9), schemas, channels)
+            elif op == _OP_CHUNK:
+                indexes, after = reader.message_indexes(pos)
+                if indexes and all(cid in channels for cid in indexes):
+                    pos = after
+                    continue
+                scanner = _Scanner(path, set(), True)
+                try:
+                    records = scanner.chunk(reader.read(body_pos, length), body_pos - 9)
+                except (ValueError, UnicodeDecodeError, zstd.ZstdError, RuntimeError):
+                    continue
+                _definitions(records, schemas, channels)
+    return {topic: schemas.get(sid, '') for sid, topic in channels.values()}
+
+
+def _definitions(
+    buf: bytes | memoryview, schemas: dict[int, str], channels: dict[int, tuple[int, str]]
+) -> None:
+    """Collect the Schema (id -> name) and Channel (id -> schema id, topic) records of ``buf``."""
+    pos = 0
+    view = memoryview(buf)
+    while pos + 9 <= len(view):
+        op, length = _HEADER.unpack_from(view, pos)
+        body, nxt = pos + 9, pos + 9 + length
+        if nxt > len(view):
+            return
+        try:
+            if op == _OP_SCHEMA and length >= 6:
+                sid, size = struct.unpack_from('<HI', view, body)
+                schemas[sid] = bytes(view[body + 6 : body + 6 + size]).decode()
+            elif op == _OP_CHANNEL and length >= 8:
+                cid, sid, size = _CHANNEL.unpack_from(view, body)
+                channels[cid] = (sid, bytes(view[body + 8 : body + 8 + size]).decode())
+        except (struct.error, UnicodeDecodeError):
+            pass
+        pos = nxt
 
 
 def _benchmark(path: str, topics: set[str]) -> None:  # pragma: no cover

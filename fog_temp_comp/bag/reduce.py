@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -9,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fog_temp_comp.bag.bagio import BagError
+from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.stream import BagStream, Progress
 from fog_temp_comp.core.grid import GridAccumulator, bin_means
 from fog_temp_comp.core.record import ChamberRecord
@@ -62,10 +64,13 @@ def reduce_bag(
     time_source: str = 'header',
     quiet: bool = True,
     keep_temperature: bool = False,
+    strict: bool = False,
+    on_salvage: Callable[[Salvage], None] | None = None,
 ) -> BinnedRecord:
     """Stream a bag and keep only its grid bins (memory grows with hours, not messages).
 
     With ``keep_temperature`` the temperature samples are kept too (sorted by stamp).
+    ``strict`` refuses a damaged bag; else ``on_salvage`` is called with what was skipped.
     """
     path = Path(path)
     gyro = GridAccumulator(period_s)
@@ -78,6 +83,7 @@ def reduce_bag(
         temp_field=temp_field,
         time_source=time_source,
         progress=progress,
+        strict=strict,
     ) as stream:
         kept: list[tuple[FloatArray, FloatArray]] = []
         for chunk in stream.chunks():
@@ -85,6 +91,8 @@ def reduce_bag(
             if keep_temperature and chunk.kind == 'temperature':
                 kept.append((chunk.stamps_s, chunk.values))
         progress.close()
+        if stream.salvage.recovered and on_salvage is not None:
+            on_salvage(stream.salvage)
         for acc, topic in ((gyro, stream.imu_topic), (temperature, stream.temp_topic)):
             if not acc.samples:
                 raise BagError(f'{path}: topic {topic} has no messages')
@@ -113,6 +121,8 @@ def reduce_record(
     temp_field: str | None = None,
     time_source: str = 'header',
     quiet: bool = True,
+    strict: bool = False,
+    on_salvage: Callable[[Salvage], None] | None = None,
 ) -> ChamberRecord:
     """A bag as a :class:`ChamberRecord` whose gyro stream is reduced to grid-bin means.
 
@@ -129,6 +139,8 @@ def reduce_record(
         time_source=time_source,
         quiet=quiet,
         keep_temperature=True,
+        strict=strict,
+        on_salvage=on_salvage,
     )
     assert binned.temperature_samples is not None
     temp_t, temps = binned.temperature_samples

@@ -28,7 +28,14 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-__all__ = ['plain_sqlite_files', 'scan_sqlite', 'topic_types']
+__all__ = [
+    'loose_sqlite_files',
+    'metadata_counts',
+    'nth_log_time',
+    'plain_sqlite_files',
+    'scan_sqlite',
+    'topic_types',
+]
 
 Batch = tuple[str, NDArray[np.int64] | None, list[bytes]]
 
@@ -55,6 +62,44 @@ def plain_sqlite_files(path: str | Path) -> list[Path] | None:
     if not files or not all(f.suffix == '.db3' and f.is_file() for f in files):
         return None
     return files
+
+
+def loose_sqlite_files(path: str | Path) -> tuple[list[Path], str] | None:
+    """The ``.db3`` files of a bag directory whose ``metadata.yaml`` is missing or stale.
+
+    Returns (files in name order, what is wrong with the metadata), or None when the
+    directory has no ``.db3`` files or its metadata lists exactly the files present.
+    """
+    path = Path(path)
+    if not path.is_dir():
+        return None
+    files = sorted(path.glob('*.db3'))
+    if not files:
+        return None
+    metadata = path / 'metadata.yaml'
+    if not metadata.is_file():
+        return files, 'no metadata.yaml (recorder killed?): read the .db3 files'
+    try:
+        info = yaml.safe_load(metadata.read_text())['rosbag2_bagfile_information']
+        listed = sorted(path / name for name in info['relative_file_paths'])
+    except (yaml.YAMLError, KeyError, TypeError, AttributeError, UnicodeDecodeError):
+        return files, 'unreadable metadata.yaml: read the .db3 files'
+    if listed == files:
+        return None
+    return files, 'stale metadata.yaml (lists other files): read the .db3 files present'
+
+
+def metadata_counts(path: str | Path) -> dict[str, int]:
+    """``{topic: message count}`` that a bag directory's ``metadata.yaml`` states ({} if none)."""
+    metadata = Path(path) / 'metadata.yaml'
+    try:
+        info = yaml.safe_load(metadata.read_text())['rosbag2_bagfile_information']
+        return {
+            str(t['topic_metadata']['name']): int(t['message_count'])
+            for t in info['topics_with_message_count']
+        }
+    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError, ValueError):
+        return {}
 
 
 def topic_types(files: list[Path]) -> dict[str, str]:
@@ -155,6 +200,28 @@ def scan_sqlite(
                 yield topic, times, payloads
     finally:
         connection.close()
+
+
+def nth_log_time(db: str | Path, topic: str, msgtype: str, n: int) -> int | None:
+    """Log time (ns) of a topic's ``n``-th message (1-based, by log time); None if unreadable.
+
+    Where :func:`scan_sqlite` stopped on a damaged file: rows up to this time were read.
+    """
+    try:
+        connection = _connect(db)
+        try:
+            rows = list(
+                connection.execute(
+                    'SELECT m.timestamp FROM messages m JOIN topics t ON m.topic_id = t.id '
+                    'WHERE t.name = ? AND t.type = ? ORDER BY m.timestamp LIMIT 1 OFFSET ?',
+                    (topic, msgtype, n - 1),
+                )
+            )
+        finally:
+            connection.close()
+    except apsw.Error:
+        return None
+    return int(rows[0][0]) if rows and n > 0 else None
 
 
 def _fetch(

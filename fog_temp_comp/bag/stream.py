@@ -17,7 +17,7 @@ from __future__ import annotations
 import struct
 import sys
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -38,10 +38,24 @@ from fog_temp_comp.bag.bagio import (
     resolve_topic_in,
     stamp_to_s,
 )
-from fog_temp_comp.bag.mcapscan import scan_mcap
+from fog_temp_comp.bag.mcapscan import mcap_topics, scan_mcap
 from fog_temp_comp.bag.names import TIME_SOURCES
 from fog_temp_comp.bag.ros1scan import Ros1Bag, Ros1FormatError
-from fog_temp_comp.bag.sqlitescan import plain_sqlite_files, scan_sqlite, topic_types
+from fog_temp_comp.bag.salvage import RecoveryError, Salvage
+from fog_temp_comp.bag.sqlitesalvage import (
+    SqliteDamage,
+    expected_pages,
+    salvage_rows,
+    salvage_topics,
+)
+from fog_temp_comp.bag.sqlitescan import (
+    loose_sqlite_files,
+    metadata_counts,
+    nth_log_time,
+    plain_sqlite_files,
+    scan_sqlite,
+    topic_types,
+)
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.units import NS_PER_S
 
@@ -137,6 +151,9 @@ class BagStream:
         Messages per chunk and stream.
     progress : Progress, optional
         Progress display to update.
+    strict : bool
+        Refuse a damaged bag (:class:`~fog_temp_comp.bag.salvage.RecoveryError`) instead of
+        reading it as far as it is intact; what was skipped is in :attr:`salvage` either way.
 
     """
 
@@ -150,6 +167,7 @@ class BagStream:
         time_source: str = 'header',
         chunk_size: int = 10_000,
         progress: Progress | None = None,
+        strict: bool = False,
     ) -> None:
         if time_source not in TIME_SOURCES:
             raise ValueError(f'time_source must be one of {TIME_SOURCES}, got {time_source!r}')
@@ -170,14 +188,27 @@ class BagStream:
         self.imu_topic = ''
         self.temp_topic = ''
         self.frame_id = ''
+        #: damage found so far (filled while reading; complete after :meth:`chunks`)
+        self.salvage = Salvage(self.path, strict=strict)
+        self._salvage_mcap: list[Path] = []  # MCAP files rosbags cannot open
+        self._dropped_rows = 0  # sqlite3 rows found but unreadable
 
     def __enter__(self) -> BagStream:
-        self._sqlite_files = plain_sqlite_files(self.path) if self.temp_field is None else None
+        if not self.path.exists():
+            raise BagError(f'{self.path}: no such bag')
+        self._sqlite_files = None
+        if self.temp_field is None:
+            loose = loose_sqlite_files(self.path)
+            if loose is not None:
+                self.salvage.damage(loose[1])
+            self._sqlite_files = loose[0] if loose else plain_sqlite_files(self.path)
         if self._sqlite_files:  # read without rosbags: its open counts every row first
             try:
                 topics = topic_types(self._sqlite_files)
             except apsw.Error as err:
-                raise BagError(f'{self.path}: cannot open bag: {err}') from err
+                topics = self._salvage_topics(self._sqlite_files)
+                if not topics:
+                    raise BagError(f'{self.path}: cannot open bag: {err}') from err
             self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
             self.temp_topic = resolve_topic_in(
                 topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
@@ -188,8 +219,13 @@ class BagStream:
         if self._ros1 is not None:
             self._open = True
             return self
-        self._context = open_bag(self.path)
-        reader = self._context.__enter__()
+        try:
+            self._context = open_bag(self.path)
+            reader = self._context.__enter__()
+        except BagError as err:
+            if not self._open_damaged_mcap(err):
+                raise
+            return self
         try:
             self.imu_topic = resolve_topic(reader, self._gyro_topic, IMU_TYPE, '--gyro-topic')
             if self.temp_field is None:
@@ -206,6 +242,40 @@ class BagStream:
         self._open = True
         return self
 
+    def _salvage_topics(self, files: list[Path]) -> dict[str, str]:
+        """Topics of damaged sqlite3 files, from the ``topics`` rows left in their pages."""
+        topics: dict[str, str] = {}
+        for file in files:
+            for name, msgtype in salvage_topics(file).values():
+                topics.setdefault(name, msgtype)
+        return topics
+
+    def _open_damaged_mcap(self, err: BagError) -> bool:
+        """After rosbags failed: read MCAP files on our own (cut, no summary, no metadata)."""
+        files = self._mcap_files()
+        if not files or self.temp_field is not None:
+            return False
+        if self.path.is_dir() and not (self.path / 'metadata.yaml').is_file():
+            self.salvage.damage('no metadata.yaml (recorder killed?): read the .mcap files')
+        topics: dict[str, str] = {}
+        try:
+            for file in files:
+                for name, msgtype in mcap_topics(file).items():
+                    topics.setdefault(name, msgtype)
+        except (ValueError, OSError, struct.error):
+            return False
+        if not topics:
+            return False
+        if (self.path / 'metadata.yaml').is_file() or not self.path.is_dir():
+            self.salvage.damage(f'cannot open as a whole bag ({err})')
+        self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
+        self.temp_topic = resolve_topic_in(
+            topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
+        )
+        self._salvage_mcap = files
+        self._open = True
+        return True
+
     def _open_ros1(self) -> Ros1Bag | None:
         """The bag as a :class:`Ros1Bag` with its topics resolved, or None to use rosbags.
 
@@ -214,10 +284,15 @@ class BagStream:
         if self.path.suffix != '.bag' or not self.path.is_file():
             return None
         try:
-            bag = Ros1Bag(self.path)
+            bag = Ros1Bag(self.path, salvage=self.salvage)
         except (Ros1FormatError, KeyError, OSError):
             return None
         topics = bag.topics()
+        if bag.walked and not topics:
+            raise BagError(
+                f'{self.path}: damaged bag: no connection record is readable '
+                '(the file ends inside its first, compressed chunk)'
+            )
         self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
         self.temp_topic = resolve_topic_in(
             topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
@@ -253,6 +328,13 @@ class BagStream:
             return
         if self._ros1 is not None:
             yield from self._scan_ros1(self._ros1)
+            return
+        if self._salvage_mcap:
+            ros2 = {
+                self.imu_topic: cdr.decode_imu_rates_cdr,
+                self.temp_topic: cdr.decode_temperature_cdr,
+            }
+            yield from self._scan_files(self._salvage_mcap, ros2)
             return
         reader = self.reader
         assert reader is not None
@@ -301,11 +383,17 @@ class BagStream:
         self, files: list[Path], decoders: dict[int, Any], conns: list[Any]
     ) -> Iterator[Chunk]:
         """Read MCAP chunks with :func:`fog_temp_comp.bag.mcapscan.scan_mcap`, decoded in place."""
-        by_topic = {c.topic: decoders[c.id] for c in conns}
+        yield from self._scan_files(files, {c.topic: decoders[c.id] for c in conns})
+
+    def _scan_files(self, files: list[Path], by_topic: dict[str, Any]) -> Iterator[Chunk]:
+        """Read MCAP files with ``scan_mcap`` (damage recorded in :attr:`salvage`)."""
         try:
             for file in files:
-                yield from self._from_spans(scan_mcap(file, set(by_topic)), by_topic)
-        except (ValueError, struct.error) as err:
+                batches = scan_mcap(file, set(by_topic), salvage=self.salvage)
+                yield from self._from_spans(batches, by_topic)
+        except RecoveryError:
+            raise
+        except (ValueError, struct.error, RuntimeError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def _kinds(self) -> dict[str, str]:
@@ -315,15 +403,46 @@ class BagStream:
     def _from_spans(
         self, batches: Iterable[tuple[str, NDArray[np.int64], cdr.Spans]], decoders: dict[str, Any]
     ) -> Iterator[Chunk]:
-        """Chunks of at most ``chunk_size`` from the fast readers' (topic, log ns, spans)."""
+        """Chunks of at most ``chunk_size`` from the fast readers' (topic, log ns, spans).
+
+        The batches of one bag chunk (one buffer) are decoded before any is yielded: if one
+        does not decode (damage the chunk's framing did not reveal), the whole chunk is
+        skipped and recorded in :attr:`salvage`, as its other messages may be damaged too.
+        """
+        group: list[tuple[str, NDArray[np.int64], cdr.Spans]] = []
+        for item in batches:
+            if group and item[2].buffer is not group[0][2].buffer:
+                yield from self._decode_group(group, decoders)
+                group = []
+            group.append(item)
+        yield from self._decode_group(group, decoders)
+
+    def _decode_group(
+        self, group: list[tuple[str, NDArray[np.int64], cdr.Spans]], decoders: dict[str, Any]
+    ) -> list[Chunk]:
+        """Decoded chunks of the batches of one bag chunk, or [] (recorded) if one fails."""
         kind_of = self._kinds()
-        for topic, log_ns, spans in batches:
+        out = []
+        try:
+            for topic, log_ns, spans in group:
+                for start in range(0, len(spans), self.chunk_size):
+                    part = slice(start, start + self.chunk_size)
+                    batch = (spans[part], log_ns[part], [topic])
+                    out.append(self._flush(kind_of[topic], batch, decoders))
+        except ValueError as err:
+            first = min(int(t.min()) for _, t, _ in group)
+            last = max(int(t.max()) for _, t, _ in group)
+            self.salvage.damage(
+                f'undecodable messages in a chunk ({err})',
+                chunks=1,
+                gap_ns=(first, last),
+                lost_messages=sum(t.size for _, t, _ in group),
+            )
+            return []
+        for _, log_ns, spans in group:
             if self.progress is not None:
                 self.progress.update(len(spans), int(log_ns.max()), int(log_ns.min()))
-            for start in range(0, len(spans), self.chunk_size):
-                part = slice(start, start + self.chunk_size)
-                batch = (spans[part], log_ns[part], [topic])
-                yield self._flush(kind_of[topic], batch, decoders)
+        return out
 
     def _scan_ros1(self, bag: Ros1Bag) -> Iterator[Chunk]:
         """Read an indexed ROS 1 bag with :class:`fog_temp_comp.bag.ros1scan.Ros1Bag`."""
@@ -335,31 +454,111 @@ class BagStream:
         }
         try:
             yield from self._from_spans(bag.scan(set(decoders)), decoders)
-        except (ValueError, KeyError, OSError, struct.error) as err:
+        except RecoveryError:
+            raise
+        except (ValueError, KeyError, OSError, struct.error, RuntimeError, EOFError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def _scan_sqlite(self, files: list[Path]) -> Iterator[Chunk]:
-        """Read sqlite3 databases with :func:`fog_temp_comp.bag.sqlitescan.scan_sqlite`."""
+        """Read sqlite3 databases with :func:`fog_temp_comp.bag.sqlitescan.scan_sqlite`.
+
+        A file cut short, or one SQLite reports damaged, is read page by page from there on
+        (:func:`fog_temp_comp.bag.sqlitesalvage.salvage_rows`), without repeating the rows
+        already read; the damage goes to :attr:`salvage`.
+        """
         kind_of = self._kinds()
         topics = {self.imu_topic: IMU_TYPE, self.temp_topic: TEMPERATURE_TYPE}
         decoders = {
             self.imu_topic: cdr.decode_imu_rates_cdr,
             self.temp_topic: cdr.decode_temperature_cdr,
         }
+        counts = dict.fromkeys(topics, 0)
         receive = self.time_source == 'receive'
         try:
             for file in files:
-                batches = scan_sqlite(file, topics, log_times=receive, batch_size=self.chunk_size)
-                for topic, log_ns, raws in batches:
-                    chunk = self._flush(kind_of[topic], (raws, log_ns, [topic]), decoders)
-                    if self.progress is not None:
-                        newest, oldest = chunk.stamps_s.max(), chunk.stamps_s.min()
-                        self.progress.update(
-                            len(raws), int(newest * NS_PER_S), int(oldest * NS_PER_S)
-                        )
-                    yield chunk
+                page_size, pages = expected_pages(file)
+                cut = page_size > 0 and file.stat().st_size < page_size * pages
+                done: dict[str, int | None] = {}  # topic -> newest log time read (None: all)
+                read = dict.fromkeys(topics, 0)  # rows of this file read per topic
+                batches: Iterator[tuple[str, Any, list[bytes]]] = iter(())
+                if not cut:
+                    batches = scan_sqlite(
+                        file, topics, log_times=receive, batch_size=self.chunk_size
+                    )
+                try:
+                    for topic, log_ns, raws in batches:
+                        for other in done:
+                            done[other] = None if other != topic else done[other]
+                        done[topic] = -1  # in progress: resolved if reading fails
+                        read[topic] += len(raws)
+                        counts[topic] += len(raws)
+                        yield self._sqlite_chunk(kind_of[topic], topic, log_ns, raws, decoders)
+                    if not cut:
+                        continue
+                except apsw.Error as err:
+                    self.salvage.damage(f'{file.name}: damaged database ({err})')
+                    for topic, last in done.items():
+                        if last == -1:  # the newest log time read, or skip the rest (unknown)
+                            newest = nth_log_time(file, topic, topics[topic], read[topic])
+                            done[topic] = None if newest is None else newest
+                yield from self._salvage_sqlite(file, done, counts, decoders, cut)
         except (apsw.Error, ValueError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
+        if self.salvage.recovered:  # lost: from metadata.yaml's counts, else rows unreadable
+            expected = metadata_counts(self.path) if self.path.is_dir() else {}
+            lost = sum(max(expected[t] - n, 0) for t, n in counts.items() if t in expected)
+            lost = lost if expected else self._dropped_rows
+            if lost:
+                self.salvage.lost_messages = (self.salvage.lost_messages or 0) + lost
+
+    def _salvage_sqlite(
+        self,
+        file: Path,
+        done: dict[str, int | None],
+        counts: dict[str, int],
+        decoders: dict[Any, Any],
+        cut: bool,
+    ) -> Iterator[Chunk]:
+        """The rows of a damaged database page by page, skipping those ``done`` already."""
+        ids = {i: name for i, (name, _) in salvage_topics(file).items()}
+        ids = {i: name for i, name in ids.items() if name in counts}
+        damage = SqliteDamage()
+        kind_of = self._kinds()
+        newest = 0
+        for topic, log_ns, raws in salvage_rows(
+            file, ids, batch_size=self.chunk_size, damage=damage
+        ):
+            if topic in done:
+                last = done[topic]
+                if last is None:
+                    continue
+                keep = log_ns > last
+                log_ns = log_ns[keep]
+                raws = [r for r, k in zip(raws, keep.tolist(), strict=True) if k]
+            if not raws:
+                continue
+            counts[topic] += len(raws)
+            newest = max(newest, int(log_ns.max()))
+            yield self._sqlite_chunk(kind_of[topic], topic, log_ns, raws, decoders)
+        if cut:
+            page_size, pages = expected_pages(file)
+            self.salvage.damage(
+                f'{file.name}: cut: {damage.pages_present} of {damage.pages_expected} pages '
+                'present (recorder killed or copy cut short?)',
+                skipped_bytes=page_size * pages - file.stat().st_size,
+                gap_ns=(min(newest, damage.newest_whole_ns), None),
+            )
+        self._dropped_rows += damage.dropped_rows
+
+    def _sqlite_chunk(
+        self, kind: str, topic: str, log_ns: Any, raws: list[bytes], decoders: dict[Any, Any]
+    ) -> Chunk:
+        log_ns = None if self.time_source != 'receive' else log_ns
+        chunk = self._flush(kind, (raws, log_ns, [topic]), decoders)
+        if self.progress is not None:
+            newest, oldest = chunk.stamps_s.max(), chunk.stamps_s.min()
+            self.progress.update(len(raws), int(newest * NS_PER_S), int(oldest * NS_PER_S))
+        return chunk
 
     def _flush(
         self,
@@ -421,10 +620,13 @@ def read_record(
     temp_field: str | None = None,
     time_source: str = 'header',
     quiet: bool = True,
+    strict: bool = False,
+    on_salvage: Callable[[Salvage], None] | None = None,
 ) -> ChamberRecord:
     """Read the gyro and temperature streams of a bag into arrays (sorted by stamp).
 
-    See :class:`fog_temp_comp.bag.stream.BagStream` for the options.
+    See :class:`fog_temp_comp.bag.stream.BagStream` for the options; ``on_salvage`` is called
+    with the :class:`~fog_temp_comp.bag.salvage.Salvage` of a damaged bag after reading it.
     """
     path = Path(path)
     progress = Progress(path.name, quiet=quiet)
@@ -436,10 +638,13 @@ def read_record(
         temp_field=temp_field,
         time_source=time_source,
         progress=progress,
+        strict=strict,
     ) as stream:
         for chunk in stream.chunks():
             parts[chunk.kind].append(chunk)
         progress.close()
+        if stream.salvage.recovered and on_salvage is not None:
+            on_salvage(stream.salvage)
         for kind, topic in (('imu', stream.imu_topic), ('temperature', stream.temp_topic)):
             if not parts[kind]:
                 raise BagError(f'{path}: topic {topic} has no messages')

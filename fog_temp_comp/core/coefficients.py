@@ -102,7 +102,28 @@ def save(coeffs: Coefficients, path: str | Path) -> None:
 
 
 class _Dumper(yaml.SafeDumper):
-    """Block style for mappings, flow style for lists of scalars (``[low, high]``)."""
+    """Block style for mappings, flow style for lists of scalars (``[low, high]``), no aliases."""
+
+    def ignore_aliases(self, data: Any) -> bool:
+        """Write shared objects out each time: :func:`load` refuses aliases."""
+        return True
+
+
+class _Loader(yaml.SafeLoader):
+    """``SafeLoader`` refusing aliases (``*name``): :func:`save` writes none.
+
+    A YAML bomb is made of them: a few lines that expand to billions of elements.
+    """
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        """Compose as ``SafeLoader`` does, after checking the next event is no alias."""
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise yaml.YAMLError(
+                f'alias *{event.anchor} at line {event.start_mark.line + 1}: aliases are not '
+                'allowed in a coefficients file'
+            )
+        return super().compose_node(parent, index)
 
 
 def _represent_list(dumper: yaml.SafeDumper, data: list[Any]) -> yaml.Node:
@@ -111,6 +132,10 @@ def _represent_list(dumper: yaml.SafeDumper, data: list[Any]) -> yaml.Node:
 
 
 _Dumper.add_representer(list, _represent_list)
+
+
+#: larger files are refused unread (a coefficients file has a few kB)
+MAX_FILE_BYTES = 1 << 20
 
 
 def load(path: str | Path) -> Coefficients:
@@ -125,13 +150,22 @@ def load(path: str | Path) -> Coefficients:
     """
     path = Path(path)
     try:
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise CoefficientsError(
+                f'{path}: {size:,} bytes, not a coefficients file (at most '
+                f'{MAX_FILE_BYTES:,} bytes; a real one has a few kB)'
+            )
         text = path.read_text(encoding='utf-8')
     except OSError as err:
         raise CoefficientsError(f'{path}: cannot read coefficients file: {err.strerror}') from err
+    except UnicodeDecodeError as err:
+        raise CoefficientsError(f'{path}: not a text (UTF-8) file: {err.reason}') from err
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_Loader)
     except yaml.YAMLError as err:
-        raise CoefficientsError(f'{path}: not valid YAML: {err}') from err
+        where = ' '.join(str(err).split())  # one line
+        raise CoefficientsError(f'{path}: not valid YAML: {where}') from err
     try:
         return from_dict(data)
     except CoefficientsError as err:

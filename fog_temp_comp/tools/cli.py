@@ -35,6 +35,15 @@ def _add_topics(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_strict(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    parser.add_argument(
+        '--strict',
+        action='store_true',
+        help='refuse a damaged bag (cut, no footer or metadata, damaged chunk) instead of '
+        'reading it as far as it is intact with a warning',
+    )
+
+
 def _add_guard(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     parser.add_argument(
         '--clamp-tdot',
@@ -138,6 +147,7 @@ def _add_calibrate_input(g: argparse._ArgumentGroup) -> None:
         help='align gyro and temperature by header stamp (default) or receive time',
     )
     g.add_argument('--quiet', action='store_true', help='no progress line on stderr')
+    _add_strict(g)
     g.add_argument(
         '--latitude-deg',
         type=float,
@@ -248,6 +258,7 @@ def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     _add_denoise(p, None)
     _add_guard(p)
+    _add_strict(p)
 
 
 def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -258,6 +269,7 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     _add_topics(p)
     _add_denoise(p, None)
     _add_guard(p)
+    _add_strict(p)
 
 
 def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -309,6 +321,7 @@ def run(args: argparse.Namespace) -> int:
             clamp_tdot=_guard(args).clamp_tdot,
             quiet=args.quiet,
             drop_unidentifiable=args.drop_unidentifiable,
+            strict=args.strict,
         )
         return commands.calibrate_command(args.bags, args.output, options=options)
     if args.command == 'compensate':
@@ -321,6 +334,7 @@ def run(args: argparse.Namespace) -> int:
             output_topic=args.output_topic,
             denoise_method=args.denoise,
             guard=_guard(args),
+            strict=args.strict,
         )
     if args.command == 'evaluate':
         return commands.evaluate_command(
@@ -330,6 +344,7 @@ def run(args: argparse.Namespace) -> int:
             temp_topic=args.temp_topic,
             denoise_method=args.denoise,
             guard=_guard(args),
+            strict=args.strict,
         )
     from fog_temp_comp.tools.demo import demo_command
 
@@ -339,18 +354,35 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fog-temp-comp`` console script."""
     args = build_parser().parse_args(argv)
-    from fog_temp_comp.tools import commands
+    from fog_temp_comp.tools.atomic import Terminated, terminating_on_signals
 
+    try:  # SIGTERM, SIGHUP: unwind (partial outputs removed) and exit 128 + n, as SIGINT
+        with terminating_on_signals():
+            from fog_temp_comp.tools import commands
+
+            return _run_reporting_errors(args, commands.USER_ERRORS)
+    except (KeyboardInterrupt, Terminated) as err:
+        if not getattr(err, 'outputs_reported', False):
+            outputs = [getattr(args, name, None) for name in ('output', 'report')]
+            names = ', '.join(str(o) for o in outputs if o is not None)
+            print(
+                f'interrupted: nothing written{" to " + names if names else ""}', file=sys.stderr
+            )
+        return err.exit_code if isinstance(err, Terminated) else 130
+
+
+def _run_reporting_errors(
+    args: argparse.Namespace, user_errors: tuple[type[BaseException], ...]
+) -> int:
+    """:func:`run`; a user error or an OS error becomes one ``ERROR:`` line and exit code 1."""
     try:
         return run(args)
-    except commands.USER_ERRORS as err:
+    except user_errors as err:
         print(f'ERROR: {err}', file=sys.stderr)
         return 1
     except OSError as err:  # unwritable output, disk full, permissions
         print(f'ERROR: {err.filename or ""}: {err.strerror or err}', file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        return 130
 
 
 if __name__ == '__main__':

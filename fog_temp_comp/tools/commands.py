@@ -5,7 +5,9 @@ from __future__ import annotations
 import dataclasses
 import shutil
 import sys
+import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
@@ -16,6 +18,7 @@ import yaml
 from fog_temp_comp.bag import bagio, cdr, mcapwrite
 from fog_temp_comp.bag.bagio import BagError, BagWriter
 from fog_temp_comp.bag.reduce import reduce_record
+from fog_temp_comp.bag.salvage import Salvage, finite_only, split_at_gaps
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.calibration import CalibrationError, CalibrationResult, calibrate_detailed
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load, save
@@ -29,11 +32,47 @@ from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
 from fog_temp_comp.core.units import AXES
 from fog_temp_comp.tools import blockreplay
+from fog_temp_comp.tools.atomic import AtomicOutputs
 from fog_temp_comp.tools.excitation import identifiable_terms
 from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
 
 #: errors that end a command with one ``ERROR:`` line and exit code 1
 USER_ERRORS = (BagError, CalibrationError, CoefficientsError, FileExistsError, ValueError)
+
+
+class Salvaged:
+    """What the readers recovered from damaged input bags: warns on stderr, feeds provenance."""
+
+    def __init__(self, stderr: TextIO | None = None) -> None:
+        self.stderr = stderr
+        self.found: dict[Path, Salvage] = {}
+        self.non_finite: dict[str, dict[str, int]] = {}  # bag -> samples dropped per stream
+
+    def add(self, salvage: Salvage) -> None:
+        """Called by the readers for a damaged bag (read as far as intact)."""
+        self.found[salvage.path] = salvage
+        print(f'WARNING: {salvage.summary()}', file=self.stderr or sys.stderr)
+
+    def split(self, record: ChamberRecord) -> list[ChamberRecord]:
+        """``record`` without non-finite samples, cut at the chunks skipped inside it."""
+        record, imu, temp = finite_only(record)
+        if imu or temp:
+            self.non_finite[str(record.path)] = {'gyro': imu, 'temperature': temp}
+            print(
+                f'WARNING: {record.path}: dropped {imu} gyro and {temp} temperature values '
+                'that are not finite (NaN or inf)',
+                file=self.stderr or sys.stderr,
+            )
+        return split_at_gaps(record, self.found.get(Path(record.path)))
+
+    def provenance(self) -> dict[str, Any]:
+        """Per recovered bag: what was wrong and what was lost; non-finite samples dropped."""
+        out: dict[str, Any] = {}
+        if self.found:
+            out['recovered_inputs'] = [s.provenance() for s in self.found.values()]
+        if self.non_finite:
+            out['non_finite_dropped'] = dict(self.non_finite)
+        return out
 
 
 def bag_name(name: str, fmt: str) -> str:
@@ -75,42 +114,45 @@ def simulate_command(
         'coil_lag_s': float(cfg.coil_lag_s),
         'runs': [],
     }
-    for k, (kind, setpoint) in enumerate(runs or paper_plan()):
-        run = simulate_run(kind, setpoint, cfg, seed=seed * 1000 + k)
-        path = out_dir / bag_name(run.name, fmt)
-        bagio.write_chamber_bag(
-            path,
-            fmt,
-            imu_stamps_s=run.imu_stamps_s,
-            rates_rad_s=run.rates_rad_s,
-            temp_stamps_s=run.temp_stamps_s,
-            temperature_degC=run.temperature_degC,
-            compress=compress,
-        )
-        truth = out_dir / f'{run.name}.truth.npz'
-        np.savez_compressed(
-            truth,
-            imu_stamps_s=run.imu_stamps_s,
-            true_drift_deg_h=run.true_drift_deg_h,
-            true_temperature_degC=run.true_temperature_degC,
-            true_tdot_degC_per_min=run.true_tdot_degC_per_min,
-        )
-        unit = 'degC_per_min' if kind == 'cycle' else 'degC'
-        manifest['runs'].append(
-            {
-                'name': run.name,
-                'kind': kind,
-                f'setpoint_{unit}': setpoint,
-                'bag': path.name,
-                'truth': truth.name,
-                'duration_s': float(run.imu_stamps_s[-1] - run.imu_stamps_s[0]),
-            }
-        )
-        print(
-            f'wrote {path} ({run.imu_stamps_s.size} Imu, {run.temp_stamps_s.size} Temperature)',
-            file=stdout,
-        )
-    (out_dir / 'manifest.yaml').write_text(yaml.safe_dump(manifest, sort_keys=False))
+    with AtomicOutputs() as outputs:  # all files appear at the end, or none
+        for k, (kind, setpoint) in enumerate(runs or paper_plan()):
+            run = simulate_run(kind, setpoint, cfg, seed=seed * 1000 + k)
+            path = out_dir / bag_name(run.name, fmt)
+            bagio.write_chamber_bag(
+                outputs.path(path),
+                fmt,
+                imu_stamps_s=run.imu_stamps_s,
+                rates_rad_s=run.rates_rad_s,
+                temp_stamps_s=run.temp_stamps_s,
+                temperature_degC=run.temperature_degC,
+                compress=compress,
+            )
+            truth = out_dir / f'{run.name}.truth.npz'
+            np.savez_compressed(
+                outputs.path(truth),
+                imu_stamps_s=run.imu_stamps_s,
+                true_drift_deg_h=run.true_drift_deg_h,
+                true_temperature_degC=run.true_temperature_degC,
+                true_tdot_degC_per_min=run.true_tdot_degC_per_min,
+            )
+            unit = 'degC_per_min' if kind == 'cycle' else 'degC'
+            manifest['runs'].append(
+                {
+                    'name': run.name,
+                    'kind': kind,
+                    f'setpoint_{unit}': setpoint,
+                    'bag': path.name,
+                    'truth': truth.name,
+                    'duration_s': float(run.imu_stamps_s[-1] - run.imu_stamps_s[0]),
+                }
+            )
+            print(
+                f'wrote {path} ({run.imu_stamps_s.size} Imu, '
+                f'{run.temp_stamps_s.size} Temperature)',
+                file=stdout,
+            )
+        manifest_path = outputs.path(out_dir / 'manifest.yaml', replace=True)
+        manifest_path.write_text(yaml.safe_dump(manifest, sort_keys=False))
     return 0
 
 
@@ -141,6 +183,8 @@ class CalibrateOptions:
     quiet: bool = True
     #: fit without the terms the bags do not excite (with a warning) instead of refusing
     drop_unidentifiable: bool = False
+    #: refuse damaged bags instead of reading them as far as they are intact
+    strict: bool = False
 
 
 def calibrate_command(
@@ -161,6 +205,22 @@ def calibrate_command(
     stdout = stdout or sys.stdout
     if not output.parent.is_dir():
         raise ValueError(f'-o {output}: directory {output.parent} does not exist')
+    report = options.report_dir if options else None
+    with AtomicOutputs(output, report) as outputs:  # -o, --report: complete, or not at all
+        return _calibrate(bags, output, outputs, options, settings, gyro_topic, temp_topic, stdout)
+
+
+def _calibrate(
+    bags: Sequence[Path],
+    output: Path,
+    outputs: AtomicOutputs,
+    options: CalibrateOptions | None,
+    settings: DenoiseSettings | None,
+    gyro_topic: str | None,
+    temp_topic: str | None,
+    stdout: TextIO,
+) -> int:
+    """:func:`calibrate_command` writing its outputs to the temporary paths of ``outputs``."""
     opt = options or CalibrateOptions()
     if opt.terms is not None and not opt.terms:
         raise ValueError('--terms: give at least one model term')
@@ -171,28 +231,35 @@ def calibrate_command(
         temp_topic=temp_topic or opt.temp_topic,
     )
     earth, provenance = _earth_correction(opt)
+    salvaged = Salvaged()
+    read: dict[str, Any] = dict(
+        gyro_topic=opt.gyro_topic,
+        temp_topic=opt.temp_topic,
+        temp_field=opt.temp_field,
+        time_source=opt.time_source,
+        quiet=opt.quiet,
+        strict=opt.strict,
+        on_salvage=salvaged.add,
+    )
 
-    def load_record(bag: Path, *, reduced: bool = False) -> ChamberRecord:
-        """A bag's record with the Earth rate removed (reduced to the Tdot grid if asked)."""
-        read: dict[str, Any] = dict(
-            gyro_topic=opt.gyro_topic,
-            temp_topic=opt.temp_topic,
-            temp_field=opt.temp_field,
-            time_source=opt.time_source,
-            quiet=opt.quiet,
-        )
-        if reduced:
-            return earth(reduce_record(bag, opt.settings.tdot_period_s, **read))
+    def load_record(bag: Path) -> ChamberRecord:
+        """A held-out or validation bag's record with the Earth rate removed."""
         return earth(read_record(bag, **read))
 
-    records = [load_record(b, reduced=True) for b in bags]
+    period = opt.settings.tdot_period_s
+    # a chunk skipped inside a run splits it: the grid never bridges what was lost
+    records = [
+        earth(piece) for b in bags for piece in salvaged.split(reduce_record(b, period, **read))
+    ]
     terms = identifiable_terms(records, opt.terms, drop=opt.drop_unidentifiable, stdout=stdout)
     opt = dataclasses.replace(opt, terms=terms)
-    result = _fit(opt, records, [load_record(b) for b in opt.heldout], provenance, stdout)
+    heldout = [load_record(b) for b in opt.heldout]
+    provenance = {**provenance, **salvaged.provenance()}
+    result = _fit(opt, records, heldout, provenance, stdout)
     coeffs = result.coefficients
     if opt.no_constant:
         coeffs = _without_constant(coeffs)
-    save(coeffs, output)
+    save(coeffs, outputs.path(output))
     _print_fit(result, coeffs, len(records), output, stdout)
     runs = _validate(opt, coeffs, [(b.name, load_record(b)) for b in opt.validate], stdout)
     if opt.report_dir is not None:
@@ -201,8 +268,9 @@ def calibrate_command(
             for record in records:
                 corrected, _ = replay_record(record, coeffs, guard=guard)
                 runs.append((f'{record.path.name} (training)', record, corrected))
-        index = _write_calibration_report(opt.report_dir, bags, runs, result, coeffs, provenance)
-        print(f'report: {index}', file=stdout)
+        report_dir = outputs.path(opt.report_dir, merge_into_dir=True)
+        index = _write_calibration_report(report_dir, bags, runs, result, coeffs, provenance)
+        print(f'report: {opt.report_dir / index.name}', file=stdout)
     return 0
 
 
@@ -412,6 +480,7 @@ def compensate_command(
     output_topic: str = '/imu/data',
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
+    strict: bool = False,
     stdout: TextIO | None = None,
     fast: bool = True,
 ) -> int:
@@ -431,30 +500,35 @@ def compensate_command(
     fmt = bagio.bag_format(in_bag)
     if output_topic and not output_topic.startswith('/'):
         output_topic = '/' + output_topic
-    with bagio.open_bag(in_bag) as reader:
+    with (
+        readable_bag(in_bag, out_bag.parent, strict=strict) as source,
+        bagio.open_bag(source) as reader,
+        AtomicOutputs(out_bag) as out,  # complete, or nothing at out_bag
+    ):
+        target = out.path(out_bag)
         job = _CompensateJob(
             reader=reader,
             in_bag=in_bag,
-            out_bag=out_bag,
+            out_bag=target,
             fmt=fmt,
             imu_name=bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic'),
             temp_name=bagio.resolve_topic(
                 reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic'
             ),
             output_topic=output_topic,
-            compress=fmt == 'mcap' and _compressed_mcap(in_bag),
+            compress=fmt == 'mcap' and _compressed_mcap(source),
         )
         if output_topic in reader.topics:
             raise BagError(f'--output-topic {output_topic}: already in {in_bag}; choose another')
         mcap = None
         if fast and reader.is2 and not blockreplay.per_message_compressed(reader):
-            mcap = blockreplay.single_mcap_file(in_bag)
+            mcap = blockreplay.single_mcap_file(source)
         result = None
         if mcap is not None:
             try:
                 result = job.run(Compensator(coeffs.model, settings, guard), mcap=mcap)
             except (blockreplay.UnsupportedError, ValueError):
-                remove_bag(out_bag)  # the per-message path decides (and words any error)
+                remove_bag(target)  # the per-message path decides (and words any error)
         if result is None:
             result = job.run(Compensator(coeffs.model, settings, guard), batched=fast)
     n_out, counters = result
@@ -545,6 +619,41 @@ class _CompensateJob:
                 for topic, log_ns, raw in out:
                     writer.write_raw(topic, log_ns, raw)
         return n_out
+
+
+@contextmanager
+def readable_bag(path: Path, scratch: Path, *, strict: bool) -> Iterator[Path]:
+    """``path``, or a repaired copy (in ``scratch``) of an MCAP bag a killed recorder left.
+
+    A cut MCAP file (no trailing magic) or an MCAP bag directory without ``metadata.yaml`` is
+    copied with :func:`fog_temp_comp.bag.repair.repair_mcap` (what is intact, all topics), with
+    a warning on stderr; with ``strict`` it is refused. Other bags are read as they are.
+    """
+    files = [path] if path.suffix == '.mcap' else sorted(path.glob('*.mcap'))
+    cut = [f for f in files if f.is_file() and not _ends_with_magic(f)]
+    bare = path.is_dir() and bool(files) and not (path / 'metadata.yaml').is_file()
+    if not (cut or bare):
+        yield path
+        return
+    from fog_temp_comp.bag.repair import repair_mcap
+
+    salvage = Salvage(path, strict=strict)
+    if bare:
+        salvage.damage('no metadata.yaml (recorder killed?): read the .mcap files')
+    with tempfile.TemporaryDirectory(dir=scratch, prefix=f'.{path.name}.repaired-') as tmp:
+        repaired = repair_mcap(files, Path(tmp) / path.stem, salvage)
+        Salvaged().add(salvage)
+        yield repaired
+
+
+def _ends_with_magic(file: Path) -> bool:
+    """Whether an MCAP file has its trailing magic (a recorder that closed it)."""
+    from fog_temp_comp.bag.mcapscan import MAGIC
+
+    with file.open('rb') as handle:
+        size = handle.seek(0, 2)
+        handle.seek(max(size - len(MAGIC), 0))
+        return size >= 2 * len(MAGIC) and handle.read() == MAGIC
 
 
 def effective_settings(coeffs: Coefficients, denoise_method: str | None) -> DenoiseSettings:
@@ -660,6 +769,7 @@ def evaluate_command(
     temp_topic: str | None = None,
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
+    strict: bool = False,
     stdout: TextIO | None = None,
 ) -> int:
     """Print stability and range before/after compensation for each bag and axis."""
@@ -667,8 +777,15 @@ def evaluate_command(
     coeffs = load(coeffs_path)
     scores = []
     notes = []
+    salvaged = Salvaged()
     for bag in bags:
-        record = read_record(bag, gyro_topic=gyro_topic, temp_topic=temp_topic)
+        record = read_record(
+            bag,
+            gyro_topic=gyro_topic,
+            temp_topic=temp_topic,
+            strict=strict,
+            on_salvage=salvaged.add,
+        )
         corrected, status = replay_record(
             record, coeffs, effective_settings(coeffs, denoise_method), guard
         )

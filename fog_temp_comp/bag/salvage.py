@@ -1,0 +1,155 @@
+"""What a reader recovered from a damaged bag, and what it had to skip.
+
+A killed recorder leaves an MCAP file without footer and summary, a rosbag2 directory without
+``metadata.yaml``, a ROS 1 bag that was never indexed, or a damaged chunk in the middle. The
+readers of :mod:`fog_temp_comp.bag` read such bags as far as they are intact and fill a
+:class:`Salvage` with what they skipped: bytes, chunks, the log-time spans of the skipped
+chunks (where known) and the messages lost (where known). :class:`RecoveryError` is raised
+instead when the caller asked for ``strict`` reading.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fog_temp_comp.bag.bagio import BagError
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.units import NS_PER_S
+
+__all__ = ['RecoveryError', 'Salvage', 'finite_only', 'split_at_gaps']
+
+
+class RecoveryError(BagError):
+    """The bag is damaged and strict reading was asked for."""
+
+
+@dataclass
+class Salvage:
+    """Damage found while reading one bag (empty when the bag was whole).
+
+    ``gaps_ns`` are log-time spans (ns) of skipped chunks inside the recording, ``(start,
+    None)`` when the end is unknown (a cut file). ``lost_messages`` is None when unknown.
+    """
+
+    path: Path
+    strict: bool = False
+    notes: list[str] = field(default_factory=list)
+    skipped_bytes: int = 0
+    skipped_chunks: int = 0
+    gaps_ns: list[tuple[int, int | None]] = field(default_factory=list)
+    lost_messages: int | None = None
+
+    @property
+    def recovered(self) -> bool:
+        """Whether anything was wrong with the bag."""
+        return bool(self.notes)
+
+    def damage(
+        self,
+        note: str,
+        *,
+        skipped_bytes: int = 0,
+        chunks: int = 0,
+        gap_ns: tuple[int, int | None] | None = None,
+        lost_messages: int | None = None,
+    ) -> None:
+        """Record damage; raise :class:`RecoveryError` at once when reading strictly."""
+        if self.strict:
+            raise RecoveryError(
+                f'{self.path}: {note}; refusing a damaged bag (--strict; without it the intact '
+                'part is read)'
+            )
+        self.notes.append(note)
+        self.skipped_bytes += skipped_bytes
+        self.skipped_chunks += chunks
+        if gap_ns is not None:
+            self.gaps_ns.append(gap_ns)
+        if lost_messages is not None:
+            self.lost_messages = (self.lost_messages or 0) + lost_messages
+
+    def gap_spans_s(self) -> list[tuple[float, float | None]]:
+        """The skipped log-time spans in s."""
+        return [(a / NS_PER_S, None if b is None else b / NS_PER_S) for a, b in self.gaps_ns]
+
+    def summary(self) -> str:
+        """One line: what was wrong and what was skipped."""
+        parts = [f'skipped {self.skipped_bytes:,} bytes']
+        if self.skipped_chunks:
+            parts.append(f'{self.skipped_chunks} chunk(s)')
+        for start, end in self.gap_spans_s():
+            parts.append(
+                f'log time {start:.3f} s to the end' if end is None
+                else f'log time {start:.3f}-{end:.3f} s ({end - start:.1f} s)'
+            )  # fmt: skip
+        lost = 'unknown' if self.lost_messages is None else f'{self.lost_messages:,}'
+        parts.append(f'messages lost: {lost}')
+        return f'{self.path}: recovered ({"; ".join(self.notes)}): {", ".join(parts)}'
+
+    def provenance(self) -> dict[str, Any]:
+        """Plain dict for the coefficients file's ``provenance``."""
+        return {
+            'bag': str(self.path),
+            'damage': list(self.notes),
+            'skipped_bytes': int(self.skipped_bytes),
+            'skipped_chunks': int(self.skipped_chunks),
+            'skipped_log_time_s': [
+                [float(a), None if b is None else float(b)] for a, b in self.gap_spans_s()
+            ],
+            'messages_lost': self.lost_messages,
+        }
+
+
+def split_at_gaps(record: ChamberRecord, salvage: Salvage | None) -> list[ChamberRecord]:
+    """The record cut at the skipped spans inside it, so no grid or fit bridges them.
+
+    A span ``(start, end)`` inside the run splits it into the samples stamped before
+    ``start`` and those from ``end`` on (log time; header stamps of a recorder follow it).
+    Pieces left without gyro or temperature samples are dropped.
+    """
+    if salvage is None:
+        return [record]
+    cuts = sorted((a, b) for a, b in salvage.gap_spans_s() if b is not None)
+    if not cuts:
+        return [record]
+    pieces = []
+    low = -np.inf
+    for start, end in [*cuts, (np.inf, np.inf)]:
+        imu = (record.imu_stamps_s >= low) & (record.imu_stamps_s < start)
+        temp = (record.temp_stamps_s >= low) & (record.temp_stamps_s < start)
+        if imu.any() and temp.any():
+            pieces.append(
+                dataclasses.replace(
+                    record,
+                    imu_stamps_s=record.imu_stamps_s[imu],
+                    rates_rad_s=record.rates_rad_s[imu],
+                    temp_stamps_s=record.temp_stamps_s[temp],
+                    temperature_degC=record.temperature_degC[temp],
+                )
+            )
+        low = end
+    return pieces
+
+
+def finite_only(record: ChamberRecord) -> tuple[ChamberRecord, int, int]:
+    """The record without its non-finite samples (NaN, inf in stamp or value).
+
+    Returns the record and the numbers of gyro and temperature samples dropped.
+    """
+    imu = np.isfinite(record.imu_stamps_s) & np.isfinite(record.rates_rad_s).all(axis=1)
+    temp = np.isfinite(record.temp_stamps_s) & np.isfinite(record.temperature_degC)
+    dropped_imu, dropped_temp = int((~imu).sum()), int((~temp).sum())
+    if not dropped_imu and not dropped_temp:
+        return record, 0, 0
+    clean = dataclasses.replace(
+        record,
+        imu_stamps_s=record.imu_stamps_s[imu],
+        rates_rad_s=record.rates_rad_s[imu],
+        temp_stamps_s=record.temp_stamps_s[temp],
+        temperature_degC=record.temperature_degC[temp],
+    )
+    return clean, dropped_imu, dropped_temp
