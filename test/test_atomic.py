@@ -116,7 +116,7 @@ def test_calibrate_interrupted_while_reading_leaves_no_yaml_or_report(
     tmp_path: Path, inputs: dict[str, Path], signum: int
 ) -> None:
     out, report = tmp_path / 'c.yaml', tmp_path / 'report'
-    argv = ['calibrate', str(inputs['long']), '-o', str(out), '--report', str(report)]
+    argv = ['calibrate', str(inputs['cal']), '-o', str(out), '--report', str(report)]
     trial = interrupt(argv, [out, report], signum=signum, delay_s=1.5)
     assert trial.returncode in (130, 128 + signal.SIGTERM), trial.stderr
     assert trial.leftovers == ()
