@@ -17,7 +17,7 @@ import dataclasses
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -191,18 +191,21 @@ IMU_INPUT_QOS = QoSProfile(
 )
 
 
-class CompensatorNode(Node):
-    """Subscribes raw gyro rate and temperature, publishes the drift-corrected Imu."""
+class CompensatorShell:
+    """The ROS glue shared by :class:`CompensatorNode` and the lifecycle node.
 
-    def __init__(
-        self,
-        node_name: str = 'fog_temp_compensator',
-        *,
-        params_file_paths: Sequence[str] = (),
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(node_name, **kwargs)
-        self._check_params_files([*params_file_paths, *params_files(kwargs.get('cli_args'))])
+    A mixin for an rclpy ``Node`` (or ``LifecycleNode``): parameters, the subscriptions and
+    publishers around one :class:`Compensator`, console lines and diagnostics. The two nodes
+    differ only in when they call :meth:`_setup_parameters`, :meth:`_configure`,
+    :meth:`_create_io` and :meth:`_destroy_io`.
+    """
+
+    config: Config | None
+    compensator: Compensator | None
+
+    def _setup_parameters(self, params_file_paths: Sequence[str], cli_args: Any) -> None:
+        """Declare and check the parameters (raises :class:`ParameterError` on a bad one)."""
+        self._check_params_files([*params_file_paths, *params_files(cli_args)])
         self._declare_parameters()
         executor = self.get_parameter('executor').value
         if executor not in EXECUTORS:
@@ -211,10 +214,8 @@ class CompensatorNode(Node):
             )
         for line in unknown_warnings(self._given_parameters(), self._parameters):
             self.get_logger().warning(line)
-        self.config = self._build_config({})
-        self.compensator = Compensator(
-            self.config.coefficients.model, self.config.settings, self.config.guard
-        )
+        self.config = None
+        self.compensator = None
         self.reconfigurations = 0
         self.frame_mismatches = 0
         self._require_frame_match = bool(self.get_parameter('require_frame_id_match').value)
@@ -222,10 +223,29 @@ class CompensatorNode(Node):
         self._throttle_s = float(self.get_parameter('log_throttle_s').value)
         self._warm_up_start_s: float | None = None
         self._last_frame_mismatches = 0
-        self._log_config('started')
+        #: gyro messages are corrected and published only while this is set (lifecycle: active)
+        self.output_enabled = True
+        #: gyro messages ignored while output_enabled was off
+        self.imu_while_inactive = 0
+        self.add_on_set_parameters_callback(self._on_set_parameters)
 
+    def _configure(self) -> None:
+        """Load and validate the coefficients, build the compensator (raises on bad ones)."""
+        self.config = self._build_config({})
+        self.compensator = Compensator(
+            self.config.coefficients.model, self.config.settings, self.config.guard
+        )
+        self._warm_up_start_s = None
+
+    def _create_io(self, *, lifecycle: bool = False) -> None:
+        """Subscriptions, publishers and the diagnostics timer.
+
+        With ``lifecycle`` the corrected output is a lifecycle publisher (silent until
+        activated); ``/diagnostics`` is a plain publisher, so the health stays visible.
+        """
         qos_options = QoSOverridingOptions.with_default_policies()
-        self._publisher = self.create_publisher(
+        create_output = self.create_lifecycle_publisher if lifecycle else self.create_publisher
+        self._publisher = create_output(
             Imu, 'imu/data', qos_profile_sensor_data, qos_overriding_options=qos_options
         )
         self._imu_sub = self.create_subscription(
@@ -243,11 +263,24 @@ class CompensatorNode(Node):
             qos_overriding_options=qos_options,
         )
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        assert self.compensator is not None
         self._last_counters = dataclasses.replace(self.compensator.status.counters)
         self._last_report_time = time.monotonic()
         period = self.get_parameter('diagnostics_period_s').value
         self._diag_timer = self.create_timer(period, self.publish_diagnostics)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    def _destroy_io(self) -> None:
+        """Undo :meth:`_create_io`."""
+        self.destroy_timer(self._diag_timer)
+        self.destroy_subscription(self._imu_sub)
+        self.destroy_subscription(self._temp_sub)
+        self.destroy_publisher(self._diag_pub)
+        if hasattr(self, 'destroy_lifecycle_publisher') and self._publisher in getattr(
+            self, '_managed_entities', ()
+        ):
+            self.destroy_lifecycle_publisher(self._publisher)
+        else:
+            self.destroy_publisher(self._publisher)
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
@@ -381,6 +414,8 @@ class CompensatorNode(Node):
             self._inflate_covariance = bool(changes['inflate_covariance'].value)
         rebuild = set(changes) & ({'coefficients_file'} | set(FILTER_PARAMETERS))
         guard_change = set(changes) & set(GUARD_PARAMETERS)
+        if self.compensator is None:  # lifecycle node not configured: configure checks them
+            return SetParametersResult(successful=True)
         if not (rebuild or guard_change):
             return SetParametersResult(successful=True)
         try:
@@ -430,6 +465,9 @@ class CompensatorNode(Node):
         self._warm_up_start_s = None
 
     def _on_imu(self, msg: Imu) -> None:
+        if not self.output_enabled:  # inactive lifecycle node: no output, no gyro state
+            self.imu_while_inactive += 1
+            return
         stamp = msg.header.stamp
         w = msg.angular_velocity
         expected_frame = self.config.coefficients.frame_id
@@ -559,6 +597,23 @@ class CompensatorNode(Node):
         self._diag_pub.publish(array)
 
 
+class CompensatorNode(CompensatorShell, Node):
+    """Subscribes raw gyro rate and temperature, publishes the drift-corrected Imu."""
+
+    def __init__(
+        self,
+        node_name: str = 'fog_temp_compensator',
+        *,
+        params_file_paths: Sequence[str] = (),
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(node_name, **kwargs)
+        self._setup_parameters(params_file_paths, kwargs.get('cli_args'))
+        self._configure()
+        self._log_config('started')
+        self._create_io()
+
+
 _KINDS = {
     _T.BOOL: 'bool',
     _T.INTEGER: 'integer',
@@ -612,6 +667,11 @@ def make_executor(node: Node) -> Executor:
 
 def main(args: Sequence[str] | None = None) -> int:
     """Entry point of ``ros2 run fog_temp_comp compensator``."""
+    return run(CompensatorNode, args)
+
+
+def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> int:
+    """Init rclpy, spin one ``node_class(params_file_paths=...)`` until shutdown; exit code."""
     argv = list(sys.argv if args is None else args)
     try:  # before rcl, which logs its own error and raises on a file it cannot parse
         files = params_files(argv)
@@ -627,7 +687,7 @@ def main(args: Sequence[str] | None = None) -> int:
     node = None
     executor = None
     try:
-        node = CompensatorNode(params_file_paths=files)
+        node = node_class(params_file_paths=files)
         executor = make_executor(node)
         executor.add_node(node)
         if isinstance(executor, SingleThreadedExecutor):
