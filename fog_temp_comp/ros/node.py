@@ -41,6 +41,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, Temperature
+from std_msgs.msg import Bool
 
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load
 from fog_temp_comp.core.compensator import STALE_POLICIES, Compensator, GuardSettings
@@ -51,6 +52,8 @@ from fog_temp_comp.core.denoise import (
     THRESHOLD_RULES,
     DenoiseSettings,
 )
+from fog_temp_comp.core.earth import earth_rate_body_deg_h, parse_orientation
+from fog_temp_comp.core.rest import REST_SOURCES, RestSettings
 from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.diagnostics import build_report
 from fog_temp_comp.ros.params import (
@@ -147,6 +150,64 @@ GUARD_PARAMETERS: dict[str, tuple[Any, str]] = {
 }
 
 
+_REST_DEFAULTS = RestSettings()
+#: bias learning at rest (read-only): name -> (RestSettings field, default, text)
+REST_PARAMETERS: dict[str, tuple[str, Any, str]] = {
+    'rest_learning': (
+        'enabled',
+        False,
+        'learn the residual constant bias per axis while at rest (off by default)',
+    ),
+    'rest_source': (
+        'source',
+        _REST_DEFAULTS.source,
+        f'one of {REST_SOURCES}: rest from the Imu variance alone, or also the std_msgs/Bool '
+        'topic imu/at_rest (true for the whole window)',
+    ),
+    'rest_window_s': ('window_s', _REST_DEFAULTS.window_s, 'rest detection window (s)'),
+    'rest_gyro_std_max_deg_h': (
+        'gyro_std_max_deg_h',
+        _REST_DEFAULTS.gyro_std_max_deg_h,
+        'largest gyro std in a rest window, each axis (deg/h)',
+    ),
+    'rest_accel_std_max_m_s2': (
+        'accel_std_max_m_s2',
+        _REST_DEFAULTS.accel_std_max_m_s2,
+        'largest accelerometer std in a rest window, each axis (m/s^2)',
+    ),
+    'rest_accel_drift_max_m_s2': (
+        'accel_drift_max_m_s2',
+        _REST_DEFAULTS.accel_drift_max_m_s2,
+        'largest change of the accelerometer mean between the window halves (m/s^2): a slow '
+        'tilt (false rest) beyond it is detected',
+    ),
+    'rest_residual_limit_deg_h': (
+        'residual_limit_deg_h',
+        _REST_DEFAULTS.residual_limit_deg_h,
+        'a rest residual above this on any axis is reported, not applied (deg/h)',
+    ),
+    'rest_time_constant_s': (
+        'time_constant_s',
+        _REST_DEFAULTS.time_constant_s,
+        'the applied residual follows the learned one with this first-order lag (s)',
+    ),
+}
+#: Earth rate for rest learning (read-only): name -> (default, text)
+REST_EARTH_PARAMETERS: dict[str, tuple[Any, str]] = {
+    'rest_earth_rate': (
+        False,
+        'subtract the Earth rate (rest_latitude_deg, rest_axes_orientation) from the rest '
+        'residual; off: the Earth rate is learned into the constant (right only while the unit '
+        'keeps its resting orientation)',
+    ),
+    'rest_latitude_deg': (0.0, 'latitude for rest_earth_rate (deg)'),
+    'rest_axes_orientation': (
+        'enu',
+        'sensor axes in ENU at rest, for rest_earth_rate: enu, ned, nwu, ..., as calibrate',
+    ),
+}
+
+
 @dataclass(frozen=True)
 class Config:
     """Everything the compensator is built from."""
@@ -155,6 +216,7 @@ class Config:
     coefficients: Coefficients
     settings: DenoiseSettings
     guard: GuardSettings
+    rest: RestSettings
 
 
 def resolve_path(path: str) -> str:
@@ -233,7 +295,10 @@ class CompensatorShell:
         """Load and validate the coefficients, build the compensator (raises on bad ones)."""
         self.config = self._build_config({})
         self.compensator = Compensator(
-            self.config.coefficients.model, self.config.settings, self.config.guard
+            self.config.coefficients.model,
+            self.config.settings,
+            self.config.guard,
+            self.config.rest,
         )
         self._warm_up_start_s = None
 
@@ -262,6 +327,9 @@ class CompensatorShell:
             qos_profile_sensor_data,
             qos_overriding_options=qos_options,
         )
+        self._rest_sub = None
+        if self.config is not None and self.config.rest.enabled:
+            self._rest_sub = self.create_subscription(Bool, 'imu/at_rest', self._on_at_rest, 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         assert self.compensator is not None
         self._last_counters = dataclasses.replace(self.compensator.status.counters)
@@ -275,6 +343,8 @@ class CompensatorShell:
         self.destroy_subscription(self._imu_sub)
         self.destroy_subscription(self._temp_sub)
         self.destroy_publisher(self._diag_pub)
+        if self._rest_sub is not None:
+            self.destroy_subscription(self._rest_sub)
         if hasattr(self, 'destroy_lifecycle_publisher') and self._publisher in getattr(
             self, '_managed_entities', ()
         ):
@@ -309,6 +379,20 @@ class CompensatorShell:
             if isinstance(default, float):
                 descriptor.floating_point_range = [
                     FloatingPointRange(from_value=0.001, to_value=1e6, step=0.0)
+                ]
+            self._declare(name, default, descriptor)
+        for name, (_, default, text) in REST_PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=text, read_only=True)
+            if isinstance(default, float):
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=1e-6, to_value=1e6, step=0.0)
+                ]
+            self._declare(name, default, descriptor)
+        for name, (default, text) in REST_EARTH_PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=text, read_only=True)
+            if name == 'rest_latitude_deg':
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=-90.0, to_value=90.0, step=0.0)
                 ]
             self._declare(name, default, descriptor)
         self._declare(
@@ -404,7 +488,20 @@ class CompensatorShell:
             )
         settings = dataclasses.replace(coefficients.denoise, **overrides)
         guard = GuardSettings(**{name: self._value(name, changes) for name in GUARD_PARAMETERS})
-        return Config(path, coefficients, settings, guard)
+        return Config(path, coefficients, settings, guard, self._rest_settings())
+
+    def _rest_settings(self) -> RestSettings:
+        """Bias learning at rest from its (read-only) parameters; raises ValueError."""
+        fields = {f: self._value(name, {}) for name, (f, _, _) in REST_PARAMETERS.items()}
+        if self._value('rest_earth_rate', {}):
+            orientation = parse_orientation(str(self._value('rest_axes_orientation', {})))
+            latitude_deg = float(self._value('rest_latitude_deg', {}))
+            earth = earth_rate_body_deg_h(latitude_deg, orientation)
+            fields['earth_rate_body_deg_h'] = tuple(float(v) for v in earth)
+        try:
+            return RestSettings(**fields)
+        except ValueError as err:
+            raise ParameterError(f'rest learning parameters: {err}') from None
 
     def _on_set_parameters(self, params: Sequence[Parameter]) -> SetParametersResult:
         changes = {p.name: p for p in params}
@@ -426,7 +523,7 @@ class CompensatorShell:
         if rebuild:
             counters = self.compensator.status.counters
             self.compensator = Compensator(
-                config.coefficients.model, config.settings, config.guard
+                config.coefficients.model, config.settings, config.guard, config.rest
             )
             self.compensator.status.counters = counters
             self.reconfigurations += 1
@@ -464,6 +561,10 @@ class CompensatorShell:
             )
         self._warm_up_start_s = None
 
+    def _on_at_rest(self, msg: Bool) -> None:
+        if self.compensator is not None and self.compensator.rest is not None:
+            self.compensator.rest.set_external_rest(msg.data)
+
     def _on_imu(self, msg: Imu) -> None:
         if not self.output_enabled:  # inactive lifecycle node: no output, no gyro state
             self.imu_while_inactive += 1
@@ -476,7 +577,14 @@ class CompensatorShell:
             if self._require_frame_match:
                 self._publisher.publish(msg)
                 return
-        rate = self.compensator.correct_xyz(stamp.sec + stamp.nanosec * 1e-9, w.x, w.y, w.z)
+        compensator = self.compensator
+        if compensator.rest is None:
+            rate = compensator.correct_xyz(stamp.sec + stamp.nanosec * 1e-9, w.x, w.y, w.z)
+        else:
+            a = msg.linear_acceleration
+            rate = compensator.correct_xyz(
+                stamp.sec + stamp.nanosec * 1e-9, w.x, w.y, w.z, (a.x, a.y, a.z)
+            )
         if rate is None:  # duplicate stamp: dropped and counted
             return
         w.x, w.y, w.z = rate
@@ -581,6 +689,7 @@ class CompensatorShell:
             / elapsed,
             frame_mismatches=self.frame_mismatches,
             require_frame_match=self._require_frame_match,
+            rest=None if self.compensator.rest is None else self.compensator.rest.finish(),
         )
         self._log_console(counters, previous)
         self._last_counters = dataclasses.replace(counters)
