@@ -26,6 +26,7 @@ from fog_temp_comp.core.evaluate import format_scores, replay_record, score_reco
 from fog_temp_comp.core.fitstats import format_fits
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, coefficient_key
 from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.rest import RestSettings
 from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
 from fog_temp_comp.core.units import AXES
 from fog_temp_comp.tools.excitation import identifiable_terms
@@ -368,17 +369,21 @@ def compensate_command(
     output_topic: str = '/imu/data',
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
+    rest: RestSettings | None = None,
     stdout: TextIO | None = None,
 ) -> int:
     """Replay ``in_bag`` through a :class:`Compensator`; write all inputs plus corrected Imu.
 
     Messages are processed in the bag's log-time order, i.e. the order a node sees on replay.
+    With ``rest`` (enabled) the bias learner at rest runs too, fed the Imu's accelerometer.
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
     if out_bag.exists():
         raise FileExistsError(f'{out_bag}: exists already, not overwriting')
-    compensator = Compensator(coeffs.model, effective_settings(coeffs, denoise_method), guard)
+    compensator = Compensator(
+        coeffs.model, effective_settings(coeffs, denoise_method), guard, rest
+    )
     fmt = bagio.bag_format(in_bag)
     if output_topic and not output_topic.startswith('/'):
         output_topic = '/' + output_topic
@@ -415,6 +420,18 @@ def compensate_command(
         f'({counters.imu_uncorrected} before the first temperature passed through)',
         file=stdout,
     )
+    if compensator.rest is not None:
+        st = compensator.rest.finish()
+        print(
+            f'rest learning: {st.windows_rest} rest windows learned from, '
+            f'{st.windows_motion} moving, {st.windows_tilting} tilting, '
+            f'{st.windows_over_limit} over the limit; learned '
+            + ', '.join(f'{v:.3f}' for v in st.learned_deg_h)
+            + ' deg/h (x, y, z), applied '
+            + ', '.join(f'{v:.3f}' for v in st.applied_deg_h)
+            + ' deg/h',
+            file=stdout,
+        )
     return 0
 
 
@@ -451,6 +468,8 @@ class ChunkReplayer:
         self.ros2 = bool(reader.is2)
         self.imu_topic = imu_topic
         self.temp_topic = temp_topic
+        #: the bias learner at rest wants the accelerometer: decode whole Imu messages
+        self.with_accel = compensator.rest is not None
         self._seq = {
             c.id: (cdr.ros1_header_has_seq(c.msgdef.data) if not self.ros2 else False)
             for c in reader.connections
@@ -467,6 +486,7 @@ class ChunkReplayer:
         imu_batch = self._decode([chunk[k] for k in imu], imu=True)
         temp_batch = self._decode([chunk[k] for k in temp], imu=False)
         rates = imu_batch.angular_velocity_rad_s.tolist() if imu else []
+        accel = imu_batch.linear_acceleration.tolist() if imu and self.with_accel else None
         imu_stamps = imu_batch.stamps_s.tolist() if imu else []
         temp_stamps = temp_batch.stamps_s.tolist() if temp else []
         temps = temp_batch.temperature_degC.tolist() if temp else []
@@ -483,7 +503,11 @@ class ChunkReplayer:
                 compensator.add_temperature(temp_stamps[j], temps[j])
             else:
                 x, y, z = rates[j]
-                corrected.append(compensator.correct_xyz(imu_stamps[j], x, y, z))
+                if accel is None:
+                    corrected.append(compensator.correct_xyz(imu_stamps[j], x, y, z))
+                else:
+                    ax, ay, az = accel[j]
+                    corrected.append(compensator.correct_xyz(imu_stamps[j], x, y, z, (ax, ay, az)))
         keep = [j for j, c in enumerate(corrected) if c is not None]
         patched = self._patch([chunk[imu[j]] for j in keep], [corrected[j] for j in keep])
         out_of = dict(zip((imu[j] for j in keep), patched, strict=True))
@@ -499,8 +523,12 @@ class ChunkReplayer:
             return None
         raws = [raw for _, _, raw in items]
         if self.ros2:
+            if imu and self.with_accel:
+                return cdr.decode_imu_cdr(raws)
             return (cdr.decode_imu_rates_cdr if imu else cdr.decode_temperature_cdr)(raws)
         seq = self._seq[items[0][0].id]
+        if imu and self.with_accel:
+            return cdr.decode_imu_ros1(raws, header_seq=seq)
         if imu:
             return cdr.decode_imu_rates_ros1(raws, header_seq=seq)
         return cdr.decode_temperature_ros1(raws, header_seq=seq)
