@@ -116,6 +116,13 @@ class RestLearner:
 
     def __init__(self, settings: RestSettings) -> None:
         self.settings = settings
+        self._clear()
+
+    def reset(self) -> None:
+        """Forget everything learned (a time jump: another run)."""
+        self._clear()
+
+    def _clear(self) -> None:
         self.status = RestStatus()
         self._window = _Window()
         self._external = False
@@ -124,10 +131,6 @@ class RestLearner:
         self._last_stamp_s = math.nan
         self._sums = [0.0, 0.0, 0.0]  # deg/h, over accepted windows
         self._sq_sums = [0.0, 0.0, 0.0]
-
-    def reset(self) -> None:
-        """Forget everything learned (a time jump: another run)."""
-        self.__init__(self.settings)  # type: ignore[misc]
 
     def set_external_rest(self, at_rest: bool) -> None:
         """The vehicle's "at rest" signal; a false value spoils the current window."""

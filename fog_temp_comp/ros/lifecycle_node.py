@@ -21,7 +21,8 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from rclpy.lifecycle import LifecycleNode, State, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, State, TransitionCallbackReturn
+from rclpy.publisher import Publisher
 
 from fog_temp_comp.core.coefficients import CoefficientsError
 from fog_temp_comp.ros.node import CompensatorShell, run
@@ -41,23 +42,25 @@ class CompensatorLifecycleNode(CompensatorShell, LifecycleNode):
         self._setup_parameters(params_file_paths, kwargs.get('cli_args'))
         self.output_enabled = False
 
-    @property
-    def configured(self) -> bool:
-        """Whether the compensator exists (inactive or active)."""
-        return self.compensator is not None
-
     def on_configure(self, state: State) -> TransitionCallbackReturn:
         """Load and validate the coefficients; create the topics (output still disabled)."""
         try:
             self._configure()
         except (CoefficientsError, ValueError, TypeError) as err:
-            self.config = None
-            self.compensator = None
+            self._forget_compensator()
             self.get_logger().error(f'configure failed, staying unconfigured: {err}')
             return TransitionCallbackReturn.FAILURE
-        self._create_io(lifecycle=True)
+        self._create_io()
         self._log_config('configured')
         return TransitionCallbackReturn.SUCCESS
+
+    def _create_output(self, *args: Any, **kwargs: Any) -> Publisher:
+        """``imu/data`` as a lifecycle publisher: silent unless active."""
+        return self.create_lifecycle_publisher(*args, **kwargs)
+
+    def _destroy_output(self, publisher: Publisher) -> None:
+        assert isinstance(publisher, LifecyclePublisher)
+        self.destroy_lifecycle_publisher(publisher)
 
     def on_activate(self, state: State) -> TransitionCallbackReturn:
         """Start publishing corrected gyro rates."""
@@ -81,10 +84,9 @@ class CompensatorLifecycleNode(CompensatorShell, LifecycleNode):
 
     def _release(self) -> None:
         self.output_enabled = False
-        if self.compensator is not None:
+        if self.configured:
             self._destroy_io()
-        self.config = None
-        self.compensator = None
+        self._forget_compensator()
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -19,7 +19,7 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -38,6 +38,7 @@ from rclpy.exceptions import (
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, Temperature
@@ -253,7 +254,13 @@ IMU_INPUT_QOS = QoSProfile(
 )
 
 
-class CompensatorShell:
+if TYPE_CHECKING:  # the mixin is always combined with a Node: type it as one
+    _NodeBase = Node
+else:
+    _NodeBase = object
+
+
+class CompensatorShell(_NodeBase):
     """The ROS glue shared by :class:`CompensatorNode` and the lifecycle node.
 
     A mixin for an rclpy ``Node`` (or ``LifecycleNode``): parameters, the subscriptions and
@@ -262,8 +269,10 @@ class CompensatorShell:
     :meth:`_create_io` and :meth:`_destroy_io`.
     """
 
-    config: Config | None
-    compensator: Compensator | None
+    #: both None only while a lifecycle node is unconfigured, when none of the callbacks
+    #: below runs (no subscription, no timer); typed for the configured state they run in
+    config: Config
+    compensator: Compensator
 
     def _setup_parameters(self, params_file_paths: Sequence[str], cli_args: Any) -> None:
         """Declare and check the parameters (raises :class:`ParameterError` on a bad one)."""
@@ -276,8 +285,7 @@ class CompensatorShell:
             )
         for line in unknown_warnings(self._given_parameters(), self._parameters):
             self.get_logger().warning(line)
-        self.config = None
-        self.compensator = None
+        self._forget_compensator()
         self.reconfigurations = 0
         self.frame_mismatches = 0
         self._require_frame_match = bool(self.get_parameter('require_frame_id_match').value)
@@ -291,6 +299,16 @@ class CompensatorShell:
         self.imu_while_inactive = 0
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
+    @property
+    def configured(self) -> bool:
+        """Whether the compensator exists (always for the plain node)."""
+        return getattr(self, 'compensator', None) is not None
+
+    def _forget_compensator(self) -> None:
+        """Unconfigured: no coefficients, no compensator."""
+        self.config = None  # type: ignore[assignment]
+        self.compensator = None  # type: ignore[assignment]
+
     def _configure(self) -> None:
         """Load and validate the coefficients, build the compensator (raises on bad ones)."""
         self.config = self._build_config({})
@@ -302,15 +320,21 @@ class CompensatorShell:
         )
         self._warm_up_start_s = None
 
-    def _create_io(self, *, lifecycle: bool = False) -> None:
+    def _create_output(self, *args: Any, **kwargs: Any) -> Publisher:
+        """The publisher of ``imu/data`` (the lifecycle node makes it a lifecycle publisher)."""
+        return self.create_publisher(*args, **kwargs)
+
+    def _destroy_output(self, publisher: Publisher) -> None:
+        self.destroy_publisher(publisher)
+
+    def _create_io(self) -> None:
         """Subscriptions, publishers and the diagnostics timer.
 
-        With ``lifecycle`` the corrected output is a lifecycle publisher (silent until
-        activated); ``/diagnostics`` is a plain publisher, so the health stays visible.
+        ``/diagnostics`` is always a plain publisher, so the health stays visible while a
+        lifecycle node is inactive.
         """
         qos_options = QoSOverridingOptions.with_default_policies()
-        create_output = self.create_lifecycle_publisher if lifecycle else self.create_publisher
-        self._publisher = create_output(
+        self._publisher = self._create_output(
             Imu, 'imu/data', qos_profile_sensor_data, qos_overriding_options=qos_options
         )
         self._imu_sub = self.create_subscription(
@@ -328,10 +352,9 @@ class CompensatorShell:
             qos_overriding_options=qos_options,
         )
         self._rest_sub = None
-        if self.config is not None and self.config.rest.enabled:
+        if self.config.rest.enabled:
             self._rest_sub = self.create_subscription(Bool, 'imu/at_rest', self._on_at_rest, 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        assert self.compensator is not None
         self._last_counters = dataclasses.replace(self.compensator.status.counters)
         self._last_report_time = time.monotonic()
         period = self.get_parameter('diagnostics_period_s').value
@@ -345,12 +368,7 @@ class CompensatorShell:
         self.destroy_publisher(self._diag_pub)
         if self._rest_sub is not None:
             self.destroy_subscription(self._rest_sub)
-        if hasattr(self, 'destroy_lifecycle_publisher') and self._publisher in getattr(
-            self, '_managed_entities', ()
-        ):
-            self.destroy_lifecycle_publisher(self._publisher)
-        else:
-            self.destroy_publisher(self._publisher)
+        self._destroy_output(self._publisher)
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
@@ -511,7 +529,7 @@ class CompensatorShell:
             self._inflate_covariance = bool(changes['inflate_covariance'].value)
         rebuild = set(changes) & ({'coefficients_file'} | set(FILTER_PARAMETERS))
         guard_change = set(changes) & set(GUARD_PARAMETERS)
-        if self.compensator is None:  # lifecycle node not configured: configure checks them
+        if not self.configured:  # lifecycle node not configured: configure checks them
             return SetParametersResult(successful=True)
         if not (rebuild or guard_change):
             return SetParametersResult(successful=True)
@@ -562,7 +580,7 @@ class CompensatorShell:
         self._warm_up_start_s = None
 
     def _on_at_rest(self, msg: Bool) -> None:
-        if self.compensator is not None and self.compensator.rest is not None:
+        if self.configured and self.compensator.rest is not None:
             self.compensator.rest.set_external_rest(msg.data)
 
     def _on_imu(self, msg: Imu) -> None:
