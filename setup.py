@@ -39,6 +39,7 @@ setup(
     entry_points={
         'console_scripts': [
             'compensator = fog_temp_comp.ros.node:main',
+            'compensator_lifecycle = fog_temp_comp.ros.lifecycle_node:main',
             'fog-temp-comp = fog_temp_comp.tools.cli:main',
         ],
     },

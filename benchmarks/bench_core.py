@@ -32,6 +32,7 @@ from benchutil import machine, table
 
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.compensator import Compensator, replay
+from fog_temp_comp.core.rest import RestSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 COEFFICIENTS = ROOT / 'config' / 'example_coefficients.yaml'
@@ -52,9 +53,13 @@ def streams(duration_s: float, seed: int = 0) -> dict[str, np.ndarray]:
     return {'imu_t': imu_t, 'rates': rates, 'temp_t': temp_t, 'temps': temps}
 
 
+#: ``--rest-learning``: the bias learner at rest on (the benchmark's gyro is still: it learns)
+REST = RestSettings(enabled=False)
+
+
 def make(method: str) -> Compensator:
     coeffs = load(COEFFICIENTS)
-    return Compensator(coeffs.model, dataclasses.replace(coeffs.denoise, method=method))
+    return Compensator(coeffs.model, dataclasses.replace(coeffs.denoise, method=method), rest=REST)
 
 
 def events(s: dict[str, np.ndarray]) -> list[tuple[bool, int]]:
@@ -143,13 +148,19 @@ def main() -> None:
         '--methods', nargs='+', default=['kalman', 'wavelet', 'iir', 'llr', 'none']
     )
     parser.add_argument('--repeat', type=int, default=None, help='rounds (default 3)')
+    parser.add_argument(
+        '--rest-learning', action='store_true', help='with bias learning at rest (core.rest)'
+    )
     args = parser.parse_args()
+    global REST
+    REST = RestSettings(enabled=args.rest_learning)
     duration = 600.0 if args.quick else 3600.0
     repeat = args.repeat or (1 if args.quick else 3)
     s = streams(duration)
     print(
         f'# bench_core: {s["imu_t"].size} gyro messages at 100 Hz + '
-        f'{int(duration)} temperatures at 1 Hz (after a {WARMUP_S / 60:.0f} min warm-up); '
+        f'{int(duration)} temperatures at 1 Hz (after a {WARMUP_S / 60:.0f} min warm-up'
+        f'{", rest learning on" if args.rest_learning else ""}); '
         f'{machine()}'
     )
     methods = ['floor', *args.methods]

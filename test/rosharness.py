@@ -12,8 +12,6 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, Temperature
 
-from fog_temp_comp.ros.node import CompensatorNode
-
 
 def split_stamp(stamp_s: float) -> tuple[int, int]:
     """Float seconds as (sec, nanosec), rounded to the nanosecond."""
@@ -66,10 +64,11 @@ class Harness:
     def __init__(
         self,
         context: object,
-        node: CompensatorNode,
+        node: Node,
         *,
         namespace: str = '',
         qos: QoSProfile = qos_profile_sensor_data,
+        connect: bool = True,
     ) -> None:
         self.node = node
         self.peer = Node('test_peer', namespace=namespace, context=context)
@@ -82,6 +81,11 @@ class Harness:
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(node)
         self.executor.add_node(self.peer)
+        if connect:
+            self.connect()
+
+    def connect(self) -> None:
+        """Wait (bounded) until the node's topics are matched with the peer's."""
         self.spin_until(
             lambda: (
                 self.imu_pub.get_subscription_count() > 0
@@ -113,14 +117,15 @@ class Harness:
     def send_imu(self, stamp_s: float, rate_rad_s: Any, frame_id: str = 'imu_link') -> Imu | None:
         """Publish an Imu; return the node's output for it (None if the node dropped it)."""
         node = self.node
-        before_total = node.compensator.status.counters.imu_total + node.frame_mismatches
+
+        def seen() -> int:
+            counters = node.compensator.status.counters
+            return counters.imu_total + node.frame_mismatches + node.imu_while_inactive
+
+        before_total = seen()
         count = len(self.received)
         self.imu_pub.publish(make_imu(stamp_s, rate_rad_s, frame_id))
-        self.spin_until(
-            lambda: (
-                node.compensator.status.counters.imu_total + node.frame_mismatches > before_total
-            )
-        )
+        self.spin_until(lambda: seen() > before_total)
         for _ in range(50):  # the output, if any, follows within a few spins
             if len(self.received) > count:
                 return self.received[-1]

@@ -507,6 +507,30 @@ def test_compensate_matches_the_offline_core(
     assert_allclose(got, expected, rtol=1e-15, atol=0.0)
 
 
+def test_compensate_rest_learning_removes_a_turn_on_shift(
+    tmp_path: Path,
+    coeffs_yaml: Path,
+    short_cycle_fast: SimulatedRun,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    # the chamber unit never moves: with learning on, the shift since calibration is learned
+    shift_deg_h = np.array([2.0, -1.5, 1.0])
+    run = dataclasses.replace(
+        short_cycle_fast, rates_rad_s=short_cycle_fast.rates_rad_s + shift_deg_h / DEG_H_PER_RAD_S
+    )
+    in_bag = write_run(tmp_path / 'in', 'mcap', run)
+    out = {}
+    for learn in (False, True):
+        out_bag = tmp_path / f'out_{learn}'
+        argv = ['compensate', str(in_bag), '--coeffs', str(coeffs_yaml), '-o', str(out_bag)]
+        assert cli.main(argv + (['--rest-learning'] if learn else [])) == 0
+        out[learn] = rates_of(plain_read(out_bag)['/imu/data'])
+    assert 'rest learning:' in capsys.readouterr().out
+    removed_deg_h = (out[False] - out[True]) * DEG_H_PER_RAD_S
+    assert_array_equal(removed_deg_h[:100], 0.0)  # Tdot filter still warming up: untouched
+    assert_allclose(removed_deg_h[-600:].mean(axis=0), shift_deg_h, atol=0.3)
+
+
 def copy_prefix(src: Path, dst: Path, cut_ns: int) -> int:
     """Copy the messages logged before ``cut_ns`` into a new MCAP bag; return how many."""
     store = get_typestore(Stores.ROS2_JAZZY)

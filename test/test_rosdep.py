@@ -27,6 +27,7 @@ ROS_PACKAGES = {
     'rclpy',
     'sensor_msgs',
     'std_msgs',
+    'lifecycle_msgs',
 }
 DEPEND_TAGS = (
     'depend',

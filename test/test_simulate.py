@@ -181,3 +181,27 @@ def test_realistic_plan_runs_and_is_seeded() -> None:
 def test_bad_realism_fields_raise(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         dataclasses.replace(SHORT_CHAMBER, **{field: value})
+
+
+def test_turn_on_shift_and_motion_phases_add_to_the_same_run() -> None:
+    base = SimulationConfig(imu_hz=2.0, low_degC=10.0, high_degC=30.0, soak_duration_s=600.0)
+    plain = simulate_run('soak', 20.0, base, seed=3)
+    shift = (1.0, -2.0, 0.5)
+    cfg = dataclasses.replace(
+        base, turn_on_shift_deg_h=shift, motion_period_s=100.0, motion_fraction=0.3
+    )
+    run = simulate_run('soak', 20.0, cfg, seed=3)
+    assert plain.true_rotation_rad_s is None
+    assert run.true_rotation_rad_s is not None
+    assert_allclose(
+        run.oracle_error_rad_s(run.rates_rad_s) - plain.rates_rad_s,
+        np.broadcast_to(np.array(shift) * RAD_S_PER_DEG_H, run.rates_rad_s.shape),
+        rtol=0,
+        atol=1e-15,
+    )
+    phase_s = np.mod(run.imu_stamps_s - run.imu_stamps_s[0], 100.0)
+    moving = np.any(run.true_rotation_rad_s != 0.0, axis=1)
+    assert not moving[phase_s < 70.0].any() and moving[phase_s >= 70.0].mean() > 0.9
+    assert_array_equal(run.turn_on_shift_deg_h, shift)
+    with pytest.raises(ValueError, match='motion_fraction'):
+        SimulationConfig(motion_fraction=1.5)

@@ -17,6 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.model import SCALAR_TERMS, DriftModel
 from fog_temp_comp.core.names import TDOT_LIMIT_DEGC_PER_MIN
+from fog_temp_comp.core.rest import RestLearner, RestSettings
 from fog_temp_comp.core.tdot import TdotEstimate, TdotEstimator, make_estimator
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H, S_PER_MIN
 
@@ -168,6 +169,9 @@ class Compensator:
         Tdot estimation (grid period and denoiser).
     guard : GuardSettings, optional
         Handling of stale, implausible and out-of-order input.
+    rest : RestSettings, optional
+        Bias learning at rest (:mod:`fog_temp_comp.core.rest`); off unless ``rest.enabled``.
+        When on, the residual learned from the drift-corrected rate at rest is subtracted too.
 
     Notes
     -----
@@ -178,9 +182,15 @@ class Compensator:
     """
 
     def __init__(
-        self, model: DriftModel, denoise: DenoiseSettings, guard: GuardSettings | None = None
+        self,
+        model: DriftModel,
+        denoise: DenoiseSettings,
+        guard: GuardSettings | None = None,
+        rest: RestSettings | None = None,
     ) -> None:
         self.model = model
+        #: the bias learner at rest, None when off
+        self.rest: RestLearner | None = RestLearner(rest) if rest and rest.enabled else None
         self.denoise = denoise
         self._guard = guard or GuardSettings()
         self._estimator: TdotEstimator = make_estimator(denoise)
@@ -212,6 +222,8 @@ class Compensator:
         self._correction = (0.0, 0.0, 0.0)
         self._pending = []
         self._last_temperature = math.nan
+        if self.rest is not None:
+            self.rest.reset()
 
     # ------------------------------------------------------------------ temperature
     def add_temperature(self, stamp_s: float, temperature_degC: float) -> bool:
@@ -293,7 +305,9 @@ class Compensator:
         """Drift subtracted at the last gyro message, shape (3,), rad/s."""
         return np.array(self._correction)
 
-    def correct(self, stamp_s: float, rate_rad_s: ArrayLike) -> FloatArray | None:
+    def correct(
+        self, stamp_s: float, rate_rad_s: ArrayLike, accel_m_s2: ArrayLike | None = None
+    ) -> FloatArray | None:
         """Corrected angular rate (rad/s, shape (3,)) for one gyro sample, or None to drop it.
 
         Only a repeated stamp is dropped. Without temperature (or with stale temperature and
@@ -301,13 +315,25 @@ class Compensator:
         left as they are and the others corrected.
         """
         x, y, z = (float(v) for v in np.asarray(rate_rad_s, dtype=np.float64).reshape(3))
-        out = self.correct_xyz(stamp_s, x, y, z)
+        accel = None
+        if accel_m_s2 is not None:
+            ax, ay, az = (float(v) for v in np.asarray(accel_m_s2, dtype=np.float64).reshape(3))
+            accel = (ax, ay, az)
+        out = self.correct_xyz(stamp_s, x, y, z, accel)
         return None if out is None else np.array(out)
 
     def correct_xyz(
-        self, stamp_s: float, x: float, y: float, z: float
+        self,
+        stamp_s: float,
+        x: float,
+        y: float,
+        z: float,
+        accel_m_s2: tuple[float, float, float] | None = None,
     ) -> tuple[float, float, float] | None:
-        """:meth:`correct` on plain floats (rad/s), the per-message hot path of the node."""
+        """:meth:`correct` on plain floats (rad/s), the per-message hot path of the node.
+
+        ``accel_m_s2`` (the accelerometer, m/s^2) is used only by the bias learner at rest.
+        """
         status = self.status
         counters = status.counters
         guard = self.guard
@@ -347,7 +373,15 @@ class Compensator:
                 self._update_correction(stamp_s)
             counters.imu_corrected += 1
         cx, cy, cz = self._correction
-        return (x - cx, y - cy, z - cz)
+        if self.rest is None:
+            return (x - cx, y - cy, z - cz)
+        x, y, z = x - cx, y - cy, z - cz
+        # learn only through the full model (estimator warmed up, temperature fresh)
+        if stamp_ok and status.estimator_ready and not status.temperature_stale:
+            bx, by, bz = self.rest.update(stamp_s, x, y, z, accel_m_s2)
+        else:
+            bx, by, bz = self.rest.applied_rad_s
+        return (x - bx, y - by, z - bz)
 
     def _set_correction(self, correction_deg_h: tuple[float, float, float]) -> None:
         self.status.correction_deg_h = correction_deg_h
@@ -407,10 +441,12 @@ def replay(
     rates_rad_s: ArrayLike,
     temp_stamps_s: ArrayLike,
     temperature_degC: ArrayLike,
+    accel_m_s2: ArrayLike | None = None,
 ) -> FloatArray:
     """Feed recorded streams through ``compensator`` in stamp order, as the node would see them.
 
-    Messages are merged by stamp (temperature first on equal stamps) and fed one at a time.
+    Messages are merged by stamp (temperature first on equal stamps) and fed one at a time;
+    ``accel_m_s2`` (shape (N, 3), optional) goes with each gyro sample to the bias learner.
 
     Returns
     -------
@@ -427,9 +463,12 @@ def replay(
     order = np.lexsort((np.r_[np.ones(n_imu), np.zeros(temp_t.size)], np.r_[imu_t, temp_t]))
     out = np.full_like(rates, np.nan)
     imu_list, temp_list, temp_values = imu_t.tolist(), temp_t.tolist(), temps.tolist()
+    accel = None if accel_m_s2 is None else np.asarray(accel_m_s2, np.float64).reshape(-1, 3)
     for k in order.tolist():
         if k < n_imu:
-            corrected = compensator.correct(imu_list[k], rates[k])
+            corrected = compensator.correct(
+                imu_list[k], rates[k], None if accel is None else accel[k]
+            )
             if corrected is not None:
                 out[k] = corrected
         else:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from fog_temp_comp.core.coefficients import Coefficients
 from fog_temp_comp.core.compensator import CompensatorCounters, CompensatorStatus
+from fog_temp_comp.core.rest import RestStatus
 from fog_temp_comp.core.units import AXES
 
 OK, WARN, ERROR = 0, 1, 2
@@ -47,6 +48,7 @@ def build_report(
     temperature_rate_hz: float,
     frame_mismatches: int = 0,
     require_frame_match: bool = False,
+    rest: RestStatus | None = None,
 ) -> Report:
     """Summarise ``status``; ``previous`` are the counters at the last report (for deltas)."""
     counters = status.counters
@@ -77,6 +79,10 @@ def build_report(
         level = ERROR if require_frame_match else WARN
         action = 'passed through uncorrected' if require_frame_match else 'corrected anyway'
         reasons.append((level, f'gyro frame_id differs from calibrated one ({action})'))
+    if rest is not None and rest.residual_over_limit:
+        reasons.append(
+            (WARN, 'rest residual above rest_residual_limit_deg_h: not applied (moving?)')
+        )
     level = max((lvl for lvl, _ in reasons), default=OK)
     message = '; '.join(text for _, text in reasons) or 'compensating'
     values = [
@@ -111,7 +117,33 @@ def build_report(
         ('frame_id_mismatches', str(frame_mismatches)),
     ]
     values += [(name, str(value)) for name, value in dataclasses.asdict(counters).items()]
+    if rest is not None:
+        values += _rest_values(rest)
     return Report(level, message, values)
+
+
+def _rest_values(rest: RestStatus) -> list[tuple[str, str]]:
+    """Bias learning at rest: verdict, window counts, and per-axis residuals (deg/h)."""
+    values = [('rest_learning', 'on'), ('rest_at_rest', str(rest.at_rest))]
+    values += [
+        (f'rest_{name}', str(getattr(rest, name)))
+        for name in (
+            'windows_rest',
+            'windows_motion',
+            'windows_tilting',
+            'windows_not_flagged',
+            'windows_over_limit',
+            'residual_over_limit',
+        )
+    ]
+    for name in ('learned_deg_h', 'learned_std_deg_h', 'applied_deg_h', 'last_residual_deg_h'):
+        prefix, _, unit = name.rpartition('_deg')
+        vector = getattr(rest, name)
+        values += [
+            (f'rest_{prefix}_{axis}_deg{unit}', _num(float(vector[j])))
+            for j, axis in enumerate(AXES)
+        ]
+    return values
 
 
 def _stale_action(counters: CompensatorCounters, previous: CompensatorCounters) -> str:

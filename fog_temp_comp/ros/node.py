@@ -17,9 +17,9 @@ import dataclasses
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -38,9 +38,11 @@ from rclpy.exceptions import (
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, Temperature
+from std_msgs.msg import Bool
 
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load
 from fog_temp_comp.core.compensator import STALE_POLICIES, Compensator, GuardSettings
@@ -51,6 +53,8 @@ from fog_temp_comp.core.denoise import (
     THRESHOLD_RULES,
     DenoiseSettings,
 )
+from fog_temp_comp.core.earth import earth_rate_body_deg_h, parse_orientation
+from fog_temp_comp.core.rest import REST_SOURCES, RestSettings
 from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.diagnostics import build_report
 from fog_temp_comp.ros.params import (
@@ -147,6 +151,64 @@ GUARD_PARAMETERS: dict[str, tuple[Any, str]] = {
 }
 
 
+_REST_DEFAULTS = RestSettings()
+#: bias learning at rest (read-only): name -> (RestSettings field, default, text)
+REST_PARAMETERS: dict[str, tuple[str, Any, str]] = {
+    'rest_learning': (
+        'enabled',
+        False,
+        'learn the residual constant bias per axis while at rest (off by default)',
+    ),
+    'rest_source': (
+        'source',
+        _REST_DEFAULTS.source,
+        f'one of {REST_SOURCES}: rest from the Imu variance alone, or also the std_msgs/Bool '
+        'topic imu/at_rest (true for the whole window)',
+    ),
+    'rest_window_s': ('window_s', _REST_DEFAULTS.window_s, 'rest detection window (s)'),
+    'rest_gyro_std_max_deg_h': (
+        'gyro_std_max_deg_h',
+        _REST_DEFAULTS.gyro_std_max_deg_h,
+        'largest gyro std in a rest window, each axis (deg/h)',
+    ),
+    'rest_accel_std_max_m_s2': (
+        'accel_std_max_m_s2',
+        _REST_DEFAULTS.accel_std_max_m_s2,
+        'largest accelerometer std in a rest window, each axis (m/s^2)',
+    ),
+    'rest_accel_drift_max_m_s2': (
+        'accel_drift_max_m_s2',
+        _REST_DEFAULTS.accel_drift_max_m_s2,
+        'largest change of the accelerometer mean between the window halves (m/s^2): a slow '
+        'tilt (false rest) beyond it is detected',
+    ),
+    'rest_residual_limit_deg_h': (
+        'residual_limit_deg_h',
+        _REST_DEFAULTS.residual_limit_deg_h,
+        'a rest residual above this on any axis is reported, not applied (deg/h)',
+    ),
+    'rest_time_constant_s': (
+        'time_constant_s',
+        _REST_DEFAULTS.time_constant_s,
+        'the applied residual follows the learned one with this first-order lag (s)',
+    ),
+}
+#: Earth rate for rest learning (read-only): name -> (default, text)
+REST_EARTH_PARAMETERS: dict[str, tuple[Any, str]] = {
+    'rest_earth_rate': (
+        False,
+        'subtract the Earth rate (rest_latitude_deg, rest_axes_orientation) from the rest '
+        'residual; off: the Earth rate is learned into the constant (right only while the unit '
+        'keeps its resting orientation)',
+    ),
+    'rest_latitude_deg': (0.0, 'latitude for rest_earth_rate (deg)'),
+    'rest_axes_orientation': (
+        'enu',
+        'sensor axes in ENU at rest, for rest_earth_rate: enu, ned, nwu, ..., as calibrate',
+    ),
+}
+
+
 @dataclass(frozen=True)
 class Config:
     """Everything the compensator is built from."""
@@ -155,6 +217,7 @@ class Config:
     coefficients: Coefficients
     settings: DenoiseSettings
     guard: GuardSettings
+    rest: RestSettings
 
 
 def resolve_path(path: str) -> str:
@@ -191,18 +254,29 @@ IMU_INPUT_QOS = QoSProfile(
 )
 
 
-class CompensatorNode(Node):
-    """Subscribes raw gyro rate and temperature, publishes the drift-corrected Imu."""
+if TYPE_CHECKING:  # the mixin is always combined with a Node: type it as one
+    _NodeBase = Node
+else:
+    _NodeBase = object
 
-    def __init__(
-        self,
-        node_name: str = 'fog_temp_compensator',
-        *,
-        params_file_paths: Sequence[str] = (),
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(node_name, **kwargs)
-        self._check_params_files([*params_file_paths, *params_files(kwargs.get('cli_args'))])
+
+class CompensatorShell(_NodeBase):
+    """The ROS glue shared by :class:`CompensatorNode` and the lifecycle node.
+
+    A mixin for an rclpy ``Node`` (or ``LifecycleNode``): parameters, the subscriptions and
+    publishers around one :class:`Compensator`, console lines and diagnostics. The two nodes
+    differ only in when they call :meth:`_setup_parameters`, :meth:`_configure`,
+    :meth:`_create_io` and :meth:`_destroy_io`.
+    """
+
+    #: both None only while a lifecycle node is unconfigured, when none of the callbacks
+    #: below runs (no subscription, no timer); typed for the configured state they run in
+    config: Config
+    compensator: Compensator
+
+    def _setup_parameters(self, params_file_paths: Sequence[str], cli_args: Any) -> None:
+        """Declare and check the parameters (raises :class:`ParameterError` on a bad one)."""
+        self._check_params_files([*params_file_paths, *params_files(cli_args)])
         self._declare_parameters()
         executor = self.get_parameter('executor').value
         if executor not in EXECUTORS:
@@ -211,10 +285,7 @@ class CompensatorNode(Node):
             )
         for line in unknown_warnings(self._given_parameters(), self._parameters):
             self.get_logger().warning(line)
-        self.config = self._build_config({})
-        self.compensator = Compensator(
-            self.config.coefficients.model, self.config.settings, self.config.guard
-        )
+        self._forget_compensator()
         self.reconfigurations = 0
         self.frame_mismatches = 0
         self._require_frame_match = bool(self.get_parameter('require_frame_id_match').value)
@@ -222,10 +293,48 @@ class CompensatorNode(Node):
         self._throttle_s = float(self.get_parameter('log_throttle_s').value)
         self._warm_up_start_s: float | None = None
         self._last_frame_mismatches = 0
-        self._log_config('started')
+        #: gyro messages are corrected and published only while this is set (lifecycle: active)
+        self.output_enabled = True
+        #: gyro messages ignored while output_enabled was off
+        self.imu_while_inactive = 0
+        self.add_on_set_parameters_callback(self._on_set_parameters)
 
+    @property
+    def configured(self) -> bool:
+        """Whether the compensator exists (always for the plain node)."""
+        return getattr(self, 'compensator', None) is not None
+
+    def _forget_compensator(self) -> None:
+        """Unconfigured: no coefficients, no compensator."""
+        self.config = None  # type: ignore[assignment]
+        self.compensator = None  # type: ignore[assignment]
+
+    def _configure(self) -> None:
+        """Load and validate the coefficients, build the compensator (raises on bad ones)."""
+        self.config = self._build_config({})
+        self.compensator = Compensator(
+            self.config.coefficients.model,
+            self.config.settings,
+            self.config.guard,
+            self.config.rest,
+        )
+        self._warm_up_start_s = None
+
+    def _create_output(self, *args: Any, **kwargs: Any) -> Publisher:
+        """The publisher of ``imu/data`` (the lifecycle node makes it a lifecycle publisher)."""
+        return self.create_publisher(*args, **kwargs)
+
+    def _destroy_output(self, publisher: Publisher) -> None:
+        self.destroy_publisher(publisher)
+
+    def _create_io(self) -> None:
+        """Subscriptions, publishers and the diagnostics timer.
+
+        ``/diagnostics`` is always a plain publisher, so the health stays visible while a
+        lifecycle node is inactive.
+        """
         qos_options = QoSOverridingOptions.with_default_policies()
-        self._publisher = self.create_publisher(
+        self._publisher = self._create_output(
             Imu, 'imu/data', qos_profile_sensor_data, qos_overriding_options=qos_options
         )
         self._imu_sub = self.create_subscription(
@@ -242,12 +351,24 @@ class CompensatorNode(Node):
             qos_profile_sensor_data,
             qos_overriding_options=qos_options,
         )
+        self._rest_sub = None
+        if self.config.rest.enabled:
+            self._rest_sub = self.create_subscription(Bool, 'imu/at_rest', self._on_at_rest, 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._last_counters = dataclasses.replace(self.compensator.status.counters)
         self._last_report_time = time.monotonic()
         period = self.get_parameter('diagnostics_period_s').value
         self._diag_timer = self.create_timer(period, self.publish_diagnostics)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    def _destroy_io(self) -> None:
+        """Undo :meth:`_create_io`."""
+        self.destroy_timer(self._diag_timer)
+        self.destroy_subscription(self._imu_sub)
+        self.destroy_subscription(self._temp_sub)
+        self.destroy_publisher(self._diag_pub)
+        if self._rest_sub is not None:
+            self.destroy_subscription(self._rest_sub)
+        self._destroy_output(self._publisher)
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
@@ -276,6 +397,20 @@ class CompensatorNode(Node):
             if isinstance(default, float):
                 descriptor.floating_point_range = [
                     FloatingPointRange(from_value=0.001, to_value=1e6, step=0.0)
+                ]
+            self._declare(name, default, descriptor)
+        for name, (_, default, text) in REST_PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=text, read_only=True)
+            if isinstance(default, float):
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=1e-6, to_value=1e6, step=0.0)
+                ]
+            self._declare(name, default, descriptor)
+        for name, (default, text) in REST_EARTH_PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=text, read_only=True)
+            if name == 'rest_latitude_deg':
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=-90.0, to_value=90.0, step=0.0)
                 ]
             self._declare(name, default, descriptor)
         self._declare(
@@ -371,7 +506,20 @@ class CompensatorNode(Node):
             )
         settings = dataclasses.replace(coefficients.denoise, **overrides)
         guard = GuardSettings(**{name: self._value(name, changes) for name in GUARD_PARAMETERS})
-        return Config(path, coefficients, settings, guard)
+        return Config(path, coefficients, settings, guard, self._rest_settings())
+
+    def _rest_settings(self) -> RestSettings:
+        """Bias learning at rest from its (read-only) parameters; raises ValueError."""
+        fields = {f: self._value(name, {}) for name, (f, _, _) in REST_PARAMETERS.items()}
+        if self._value('rest_earth_rate', {}):
+            orientation = parse_orientation(str(self._value('rest_axes_orientation', {})))
+            latitude_deg = float(self._value('rest_latitude_deg', {}))
+            earth = earth_rate_body_deg_h(latitude_deg, orientation)
+            fields['earth_rate_body_deg_h'] = tuple(float(v) for v in earth)
+        try:
+            return RestSettings(**fields)
+        except ValueError as err:
+            raise ParameterError(f'rest learning parameters: {err}') from None
 
     def _on_set_parameters(self, params: Sequence[Parameter]) -> SetParametersResult:
         changes = {p.name: p for p in params}
@@ -381,6 +529,8 @@ class CompensatorNode(Node):
             self._inflate_covariance = bool(changes['inflate_covariance'].value)
         rebuild = set(changes) & ({'coefficients_file'} | set(FILTER_PARAMETERS))
         guard_change = set(changes) & set(GUARD_PARAMETERS)
+        if not self.configured:  # lifecycle node not configured: configure checks them
+            return SetParametersResult(successful=True)
         if not (rebuild or guard_change):
             return SetParametersResult(successful=True)
         try:
@@ -391,7 +541,7 @@ class CompensatorNode(Node):
         if rebuild:
             counters = self.compensator.status.counters
             self.compensator = Compensator(
-                config.coefficients.model, config.settings, config.guard
+                config.coefficients.model, config.settings, config.guard, config.rest
             )
             self.compensator.status.counters = counters
             self.reconfigurations += 1
@@ -429,7 +579,14 @@ class CompensatorNode(Node):
             )
         self._warm_up_start_s = None
 
+    def _on_at_rest(self, msg: Bool) -> None:
+        if self.configured and self.compensator.rest is not None:
+            self.compensator.rest.set_external_rest(msg.data)
+
     def _on_imu(self, msg: Imu) -> None:
+        if not self.output_enabled:  # inactive lifecycle node: no output, no gyro state
+            self.imu_while_inactive += 1
+            return
         stamp = msg.header.stamp
         w = msg.angular_velocity
         expected_frame = self.config.coefficients.frame_id
@@ -438,7 +595,14 @@ class CompensatorNode(Node):
             if self._require_frame_match:
                 self._publisher.publish(msg)
                 return
-        rate = self.compensator.correct_xyz(stamp.sec + stamp.nanosec * 1e-9, w.x, w.y, w.z)
+        compensator = self.compensator
+        if compensator.rest is None:
+            rate = compensator.correct_xyz(stamp.sec + stamp.nanosec * 1e-9, w.x, w.y, w.z)
+        else:
+            a = msg.linear_acceleration
+            rate = compensator.correct_xyz(
+                stamp.sec + stamp.nanosec * 1e-9, w.x, w.y, w.z, (a.x, a.y, a.z)
+            )
         if rate is None:  # duplicate stamp: dropped and counted
             return
         w.x, w.y, w.z = rate
@@ -543,6 +707,7 @@ class CompensatorNode(Node):
             / elapsed,
             frame_mismatches=self.frame_mismatches,
             require_frame_match=self._require_frame_match,
+            rest=None if self.compensator.rest is None else self.compensator.rest.finish(),
         )
         self._log_console(counters, previous)
         self._last_counters = dataclasses.replace(counters)
@@ -557,6 +722,23 @@ class CompensatorNode(Node):
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(array)
+
+
+class CompensatorNode(CompensatorShell, Node):
+    """Subscribes raw gyro rate and temperature, publishes the drift-corrected Imu."""
+
+    def __init__(
+        self,
+        node_name: str = 'fog_temp_compensator',
+        *,
+        params_file_paths: Sequence[str] = (),
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(node_name, **kwargs)
+        self._setup_parameters(params_file_paths, kwargs.get('cli_args'))
+        self._configure()
+        self._log_config('started')
+        self._create_io()
 
 
 _KINDS = {
@@ -612,6 +794,11 @@ def make_executor(node: Node) -> Executor:
 
 def main(args: Sequence[str] | None = None) -> int:
     """Entry point of ``ros2 run fog_temp_comp compensator``."""
+    return run(CompensatorNode, args)
+
+
+def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> int:
+    """Init rclpy, spin one ``node_class(params_file_paths=...)`` until shutdown; exit code."""
     argv = list(sys.argv if args is None else args)
     try:  # before rcl, which logs its own error and raises on a file it cannot parse
         files = params_files(argv)
@@ -627,7 +814,7 @@ def main(args: Sequence[str] | None = None) -> int:
     node = None
     executor = None
     try:
-        node = CompensatorNode(params_file_paths=files)
+        node = node_class(params_file_paths=files)
         executor = make_executor(node)
         executor.add_node(node)
         if isinstance(executor, SingleThreadedExecutor):

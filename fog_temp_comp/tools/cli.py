@@ -20,6 +20,7 @@ from fog_temp_comp.core.names import METHODS, TDOT_LIMIT_DEGC_PER_MIN, TERM_NAME
 
 if TYPE_CHECKING:
     from fog_temp_comp.core.compensator import GuardSettings
+    from fog_temp_comp.core.rest import RestSettings
 
 
 def _add_topics(parser: argparse.ArgumentParser) -> None:
@@ -74,6 +75,53 @@ def _guard(args: argparse.Namespace) -> GuardSettings:
     if args.extrapolate_tdot:
         print('note: --extrapolate-tdot is the default now; the flag is ignored', file=sys.stderr)
     return GuardSettings(clamp_tdot=args.clamp_tdot)
+
+
+def _add_rest(parser: argparse.ArgumentParser) -> None:
+    from fog_temp_comp.core.rest import RestSettings
+
+    defaults = RestSettings()
+    g = parser.add_argument_group(
+        "bias learning at rest (the node's rest_* parameters; rest from the Imu alone)"
+    )
+    g.add_argument(
+        '--rest-learning',
+        action='store_true',
+        help='learn the residual constant bias per axis while at rest (off by default)',
+    )
+    for name, unit in (
+        ('window_s', 'rest detection window (s)'),
+        ('gyro_std_max_deg_h', 'largest gyro std in a rest window (deg/h)'),
+        ('accel_std_max_m_s2', 'largest accelerometer std in a rest window (m/s^2)'),
+        ('accel_drift_max_m_s2', 'largest accelerometer mean change within a window (m/s^2)'),
+        ('residual_limit_deg_h', 'a residual above this is reported, not applied (deg/h)'),
+        ('time_constant_s', 'lag of the applied residual (s)'),
+    ):
+        g.add_argument(
+            '--rest-' + name.replace('_', '-'),
+            dest='rest_' + name,
+            type=float,
+            default=getattr(defaults, name),
+            metavar='X',
+            help=f'{unit}; default %(default)s',
+        )
+
+
+def _rest(args: argparse.Namespace) -> RestSettings | None:
+    from fog_temp_comp.core.rest import RestSettings
+
+    if not args.rest_learning:
+        return None
+    names = (
+        'window_s',
+        'gyro_std_max_deg_h',
+        'accel_std_max_m_s2',
+        'accel_drift_max_m_s2',
+        'residual_limit_deg_h',
+        'time_constant_s',
+    )
+    fields = {name: getattr(args, 'rest_' + name) for name in names}
+    return RestSettings(enabled=True, **fields)
 
 
 def _add_denoise(parser: argparse.ArgumentParser, default: str | None) -> None:
@@ -259,6 +307,7 @@ def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     _add_denoise(p, None)
     _add_guard(p)
     _add_strict(p)
+    _add_rest(p)
 
 
 def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -335,6 +384,7 @@ def run(args: argparse.Namespace) -> int:
             denoise_method=args.denoise,
             guard=_guard(args),
             strict=args.strict,
+            rest=_rest(args),
         )
     if args.command == 'evaluate':
         return commands.evaluate_command(

@@ -29,6 +29,7 @@ from fog_temp_comp.core.evaluate import format_scores, replay_record, score_reco
 from fog_temp_comp.core.fitstats import format_fits
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, coefficient_key
 from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.rest import RestSettings
 from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
 from fog_temp_comp.core.units import AXES
 from fog_temp_comp.tools import blockreplay
@@ -481,6 +482,7 @@ def compensate_command(
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
     strict: bool = False,
+    rest: RestSettings | None = None,
     stdout: TextIO | None = None,
     fast: bool = True,
 ) -> int:
@@ -490,13 +492,15 @@ def compensate_command(
     ``fast`` (the default) reads an MCAP bag a chunk at a time and writes blocks
     (:mod:`~fog_temp_comp.tools.blockreplay`), other bags through ``AnyReader`` and
     :meth:`BagWriter.write_many`; ``fast=False`` writes through rosbags one message at a time.
-    Both give the same bag.
+    Both give the same bag. With ``rest`` (enabled) the bias learner at rest runs too, fed the
+    Imu's accelerometer (through ``AnyReader``: the MCAP block path decodes rates only).
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
     if out_bag.exists():
         raise FileExistsError(f'{out_bag}: exists already, not overwriting')
     settings = effective_settings(coeffs, denoise_method)
+    compensator = Compensator(coeffs.model, settings, guard, rest)
     fmt = bagio.bag_format(in_bag)
     if output_topic and not output_topic.startswith('/'):
         output_topic = '/' + output_topic
@@ -521,22 +525,36 @@ def compensate_command(
         if output_topic in reader.topics:
             raise BagError(f'--output-topic {output_topic}: already in {in_bag}; choose another')
         mcap = None
-        if fast and reader.is2 and not blockreplay.per_message_compressed(reader):
+        block = fast and reader.is2 and compensator.rest is None
+        if block and not blockreplay.per_message_compressed(reader):
             mcap = blockreplay.single_mcap_file(source)
         result = None
         if mcap is not None:
             try:
-                result = job.run(Compensator(coeffs.model, settings, guard), mcap=mcap)
+                result = job.run(compensator, mcap=mcap)
             except (blockreplay.UnsupportedError, ValueError):
                 remove_bag(target)  # the per-message path decides (and words any error)
+                compensator = Compensator(coeffs.model, settings, guard, rest)
         if result is None:
-            result = job.run(Compensator(coeffs.model, settings, guard), batched=fast)
+            result = job.run(compensator, batched=fast)
     n_out, counters = result
     print(
         f'wrote {out_bag}: {n_out} corrected Imu on {output_topic} '
         f'({counters.imu_uncorrected} before the first temperature passed through)',
         file=stdout,
     )
+    if compensator.rest is not None:
+        st = compensator.rest.finish()
+        print(
+            f'rest learning: {st.windows_rest} rest windows learned from, '
+            f'{st.windows_motion} moving, {st.windows_tilting} tilting, '
+            f'{st.windows_over_limit} over the limit; learned '
+            + ', '.join(f'{v:.3f}' for v in st.learned_deg_h)
+            + ' deg/h (x, y, z), applied '
+            + ', '.join(f'{v:.3f}' for v in st.applied_deg_h)
+            + ' deg/h',
+            file=stdout,
+        )
     return 0
 
 
@@ -689,6 +707,8 @@ class ChunkReplayer:
         self.ros2 = bool(reader.is2)
         self.imu_topic = imu_topic
         self.temp_topic = temp_topic
+        #: the bias learner at rest wants the accelerometer: decode whole Imu messages
+        self.with_accel = compensator.rest is not None
         self._seq = {
             c.id: (cdr.ros1_header_has_seq(c.msgdef.data) if not self.ros2 else False)
             for c in reader.connections
@@ -705,6 +725,7 @@ class ChunkReplayer:
         imu_batch = self._decode([chunk[k] for k in imu], imu=True)
         temp_batch = self._decode([chunk[k] for k in temp], imu=False)
         rates = imu_batch.angular_velocity_rad_s.tolist() if imu else []
+        accel = imu_batch.linear_acceleration.tolist() if imu and self.with_accel else None
         imu_stamps = imu_batch.stamps_s.tolist() if imu else []
         temp_stamps = temp_batch.stamps_s.tolist() if temp else []
         temps = temp_batch.temperature_degC.tolist() if temp else []
@@ -721,7 +742,11 @@ class ChunkReplayer:
                 compensator.add_temperature(temp_stamps[j], temps[j])
             else:
                 x, y, z = rates[j]
-                corrected.append(compensator.correct_xyz(imu_stamps[j], x, y, z))
+                if accel is None:
+                    corrected.append(compensator.correct_xyz(imu_stamps[j], x, y, z))
+                else:
+                    ax, ay, az = accel[j]
+                    corrected.append(compensator.correct_xyz(imu_stamps[j], x, y, z, (ax, ay, az)))
         keep = [j for j, c in enumerate(corrected) if c is not None]
         patched = self._patch([chunk[imu[j]] for j in keep], [corrected[j] for j in keep])
         out_of = dict(zip((imu[j] for j in keep), patched, strict=True))
@@ -737,8 +762,12 @@ class ChunkReplayer:
             return None
         raws = [raw for _, _, raw in items]
         if self.ros2:
+            if imu and self.with_accel:
+                return cdr.decode_imu_cdr(raws)
             return (cdr.decode_imu_rates_cdr if imu else cdr.decode_temperature_cdr)(raws)
         seq = self._seq[items[0][0].id]
+        if imu and self.with_accel:
+            return cdr.decode_imu_ros1(raws, header_seq=seq)
         if imu:
             return cdr.decode_imu_rates_ros1(raws, header_seq=seq)
         return cdr.decode_temperature_ros1(raws, header_seq=seq)

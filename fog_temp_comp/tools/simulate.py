@@ -92,6 +92,15 @@ class SimulationConfig:
         Time constant of a first-order lag from the fibre coil to the temperature sensor, s:
         the sensor sits *behind* the coil and reads it late (0: the sensor reads the housing,
         which the coil follows through ``coil_lag_s``).
+    turn_on_shift_deg_h : tuple of 3 float
+        Constant bias added at this power-on (turn-on to turn-on repeatability), deg/h; not in
+        ``true_drift_deg_h`` (the temperature part), in ``turn_on_shift_deg_h`` of the run.
+    motion_period_s, motion_fraction : float
+        Vehicle phases: every ``motion_period_s`` the unit rests first, then moves (a shaking
+        rotation of ``motion_rate_deg_s`` amplitude on each axis) for the last
+        ``motion_fraction`` of the period; period 0 = always at rest (a chamber).
+    motion_rate_deg_s : float
+        Amplitude of that rotation (deg/s); it is in ``true_rotation_rad_s`` of the run.
 
     """
 
@@ -121,6 +130,10 @@ class SimulationConfig:
     t_tdot_coefficients: tuple[float, float, float] = (0.0, 0.0, 0.0)
     bias_random_walk_deg_h_per_sqrt_h: float = 0.0
     sensor_lag_s: float = 0.0
+    turn_on_shift_deg_h: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    motion_period_s: float = 0.0
+    motion_fraction: float = 0.5
+    motion_rate_deg_s: float = 5.0
 
     def __post_init__(self) -> None:
         for name in ('imu_hz', 'temp_hz', 'lag_s', 'soak_duration_s'):
@@ -132,12 +145,16 @@ class SimulationConfig:
             'cycle_oscillation_degC',
             'bias_random_walk_deg_h_per_sqrt_h',
             'sensor_lag_s',
+            'motion_period_s',
+            'motion_rate_deg_s',
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
         if not self.chamber_damping > 0:
             raise ValueError(f'chamber_damping must be > 0, got {self.chamber_damping}')
-        for name in ('t2_coefficients', 't_tdot_coefficients'):
+        if not 0.0 <= self.motion_fraction <= 1.0:
+            raise ValueError(f'motion_fraction must be within [0, 1], got {self.motion_fraction}')
+        for name in ('t2_coefficients', 't_tdot_coefficients', 'turn_on_shift_deg_h'):
             value = tuple(float(v) for v in getattr(self, name))
             if len(value) != 3 or not all(np.isfinite(value)):
                 raise ValueError(f'{name} must be 3 finite numbers (x, y, z), got {value}')
@@ -200,6 +217,8 @@ class SimulatedRun:
     temp_stamps_s : (M,) ; temperature_degC : (M,) measured (noisy, quantized) temperature
     true_temperature_degC, true_tdot_degC_per_min : (N,) coil temperature and rate at imu stamps
     true_drift_deg_h : (N, 3) temperature drift in the gyro output (the part to remove)
+    turn_on_shift_deg_h : (3,) constant bias of this power-on, also in the output
+    true_rotation_rad_s : (N, 3) or None, the vehicle's rotation (motion phases), also in it
 
     """
 
@@ -213,6 +232,13 @@ class SimulatedRun:
     true_temperature_degC: FloatArray
     true_tdot_degC_per_min: FloatArray
     true_drift_deg_h: FloatArray
+    turn_on_shift_deg_h: FloatArray = field(default_factory=lambda: np.zeros(3))
+    true_rotation_rad_s: FloatArray | None = None
+
+    def oracle_error_rad_s(self, corrected_rad_s: FloatArray) -> FloatArray:
+        """Error of a corrected rate (rad/s, (N, 3)) against the oracle: the vehicle's rotation."""
+        out = np.asarray(corrected_rad_s, dtype=np.float64)
+        return out if self.true_rotation_rad_s is None else out - self.true_rotation_rad_s
 
     def as_record(self, frame_id: str = 'imu_link') -> ChamberRecord:
         """The run as if read back from a bag (topics ``/imu/data_raw``, ``/imu/temperature``)."""
@@ -368,7 +394,19 @@ def simulate_run(
     if cfg.bias_random_walk_deg_h_per_sqrt_h > 0 and n_imu:
         step = cfg.bias_random_walk_deg_h_per_sqrt_h * np.sqrt(1.0 / cfg.imu_hz / S_PER_H)
         rates = rates + np.cumsum(extra_rng.normal(0.0, step, size=(n_imu, 3)), axis=0)
+    shift = np.array(cfg.turn_on_shift_deg_h)
+    if np.any(shift):
+        rates = rates + shift
     rates = rates * RAD_S_PER_DEG_H
+    rotation = None
+    if cfg.motion_period_s > 0 and cfg.motion_fraction > 0:
+        phase_s = np.mod(t_imu, cfg.motion_period_s)
+        moving = phase_s >= (1.0 - cfg.motion_fraction) * cfg.motion_period_s
+        amplitude = np.radians(cfg.motion_rate_deg_s)
+        rotation = np.zeros((n_imu, 3))
+        for j in range(3):  # 0.5 Hz shaking, a different phase per axis
+            rotation[moving, j] = amplitude * np.sin(2 * np.pi * 0.5 * t_imu[moving] + j)
+        rates = rates + rotation
 
     n_temp = int(np.floor(duration * cfg.temp_hz))
     t_temp = np.arange(n_temp) / cfg.temp_hz
@@ -386,6 +424,8 @@ def simulate_run(
         true_temperature_degC=true_t,
         true_tdot_degC_per_min=true_tdot,
         true_drift_deg_h=drift,
+        turn_on_shift_deg_h=shift,
+        true_rotation_rad_s=rotation,
     )
 
 

@@ -1,0 +1,98 @@
+"""ROS 2 managed (lifecycle) node ``compensator_lifecycle``, for lifecycle managers.
+
+The same glue as :class:`fog_temp_comp.ros.node.CompensatorNode` (:class:`CompensatorShell`:
+parameters, topics, diagnostics), driven by the lifecycle transitions instead of the constructor:
+
+- **configure** loads and validates the coefficients and builds the compensator, subscriptions
+  and publishers; a bad coefficients file (or filter parameter) fails the transition, the node
+  stays *unconfigured* and the reason is logged;
+- **activate** enables the corrected output (a lifecycle publisher on ``imu/data``);
+- **deactivate** stops the output; the compensator is kept, and temperature keeps feeding the
+  Tdot filter, so re-activation resumes warm (no new warm-up);
+- **cleanup** releases the compensator, subscriptions and publishers (back to unconfigured);
+- **shutdown** releases them too.
+
+``/diagnostics`` is a plain publisher, published while configured (active or not).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, State, TransitionCallbackReturn
+from rclpy.publisher import Publisher
+
+from fog_temp_comp.core.coefficients import CoefficientsError
+from fog_temp_comp.ros.node import CompensatorShell, run
+
+
+class CompensatorLifecycleNode(CompensatorShell, LifecycleNode):
+    """Managed compensator: unconfigured at construction, publishing only while active."""
+
+    def __init__(
+        self,
+        node_name: str = 'fog_temp_compensator',
+        *,
+        params_file_paths: Sequence[str] = (),
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(node_name, **kwargs)
+        self._setup_parameters(params_file_paths, kwargs.get('cli_args'))
+        self.output_enabled = False
+
+    def on_configure(self, state: State) -> TransitionCallbackReturn:
+        """Load and validate the coefficients; create the topics (output still disabled)."""
+        try:
+            self._configure()
+        except (CoefficientsError, ValueError, TypeError) as err:
+            self._forget_compensator()
+            self.get_logger().error(f'configure failed, staying unconfigured: {err}')
+            return TransitionCallbackReturn.FAILURE
+        self._create_io()
+        self._log_config('configured')
+        return TransitionCallbackReturn.SUCCESS
+
+    def _create_output(self, *args: Any, **kwargs: Any) -> Publisher:
+        """``imu/data`` as a lifecycle publisher: silent unless active."""
+        return self.create_lifecycle_publisher(*args, **kwargs)
+
+    def _destroy_output(self, publisher: Publisher) -> None:
+        assert isinstance(publisher, LifecyclePublisher)
+        self.destroy_lifecycle_publisher(publisher)
+
+    def on_activate(self, state: State) -> TransitionCallbackReturn:
+        """Start publishing corrected gyro rates."""
+        self.output_enabled = True
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: State) -> TransitionCallbackReturn:
+        """Stop the output; keep the compensator (Tdot filter state) and temperature input."""
+        self.output_enabled = False
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: State) -> TransitionCallbackReturn:
+        """Release the compensator, subscriptions and publishers."""
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: State) -> TransitionCallbackReturn:
+        """Release everything from any primary state."""
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _release(self) -> None:
+        self.output_enabled = False
+        if self.configured:
+            self._destroy_io()
+        self._forget_compensator()
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Entry point of ``ros2 run fog_temp_comp compensator_lifecycle``."""
+    return run(CompensatorLifecycleNode, args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

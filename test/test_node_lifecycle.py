@@ -1,0 +1,149 @@
+"""The managed compensator driven through its lifecycle services, as a lifecycle manager would."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+from lifecycle_msgs.msg import State, Transition
+from lifecycle_msgs.srv import ChangeState, GetState
+from numpy.testing import assert_array_equal
+from rclpy.parameter import Parameter
+from rosharness import Harness, rate_of
+
+from fog_temp_comp.core.coefficients import load
+from fog_temp_comp.core.compensator import Compensator
+from fog_temp_comp.ros.lifecycle_node import CompensatorLifecycleNode
+
+EXAMPLE = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
+NAME = 'fog_temp_compensator'
+RATE_RAD_S = (1e-4, -2e-4, 3e-4)
+
+
+class Manager:
+    """The lifecycle-manager side: change_state / get_state clients on the harness peer."""
+
+    def __init__(self, harness: Harness) -> None:
+        self.harness = harness
+        self.change = harness.peer.create_client(ChangeState, f'/{NAME}/change_state')
+        self.get = harness.peer.create_client(GetState, f'/{NAME}/get_state')
+        harness.spin_until(lambda: self.change.service_is_ready() and self.get.service_is_ready())
+
+    def _call(self, client: Any, request: Any) -> Any:
+        future = client.call_async(request)
+        self.harness.spin_until(future.done)
+        return future.result()
+
+    def transition(self, transition_id: int) -> bool:
+        """Ask for one transition; whether it succeeded."""
+        request = ChangeState.Request()
+        request.transition.id = transition_id
+        return bool(self._call(self.change, request).success)
+
+    def state(self) -> int:
+        """The node's primary state id."""
+        return int(self._call(self.get, GetState.Request()).current_state.id)
+
+
+@pytest.fixture()
+def managed(ros_context: object, tmp_path: Path) -> Any:
+    node = CompensatorLifecycleNode(
+        context=ros_context,
+        parameter_overrides=[Parameter('coefficients_file', value=str(EXAMPLE))],
+    )
+    harness = Harness(ros_context, node, connect=False)
+    try:
+        yield harness, Manager(harness)
+    finally:
+        harness.close()
+
+
+def feed_temperature(harness: Harness, offline: Compensator, start_s: float, n: int) -> float:
+    """1 Hz temperature ramp of 0.1 degC/min to the node and to an offline compensator."""
+    stamp_s = start_s
+    for k in range(n):
+        stamp_s = start_s + k
+        value = 20.0 + 0.1 * k / 60.0
+        harness.send_temperature(stamp_s, value)
+        offline.add_temperature(stamp_s, value)
+    return stamp_s
+
+
+def test_bad_coefficients_file_fails_configure_and_stays_unconfigured(
+    ros_context: object, tmp_path: Path
+) -> None:
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('schema_version: 1\naxes: [not, a, mapping]\n', encoding='utf-8')
+    node = CompensatorLifecycleNode(
+        context=ros_context,
+        parameter_overrides=[Parameter('coefficients_file', value=str(bad))],
+    )
+    harness = Harness(ros_context, node, connect=False)
+    try:
+        manager = Manager(harness)
+        assert manager.state() == State.PRIMARY_STATE_UNCONFIGURED
+        assert not manager.transition(Transition.TRANSITION_CONFIGURE)
+        assert manager.state() == State.PRIMARY_STATE_UNCONFIGURED
+        assert node.compensator is None
+        assert node.count_publishers('/imu/data') == 0
+        assert node.count_subscribers('/imu/data_raw') == 0
+        # a missing file fails too; a good one then configures
+        node.set_parameters([Parameter('coefficients_file', value=str(tmp_path / 'none.yaml'))])
+        assert not manager.transition(Transition.TRANSITION_CONFIGURE)
+        node.set_parameters([Parameter('coefficients_file', value=str(EXAMPLE))])
+        assert manager.transition(Transition.TRANSITION_CONFIGURE)
+        assert manager.state() == State.PRIMARY_STATE_INACTIVE
+        assert node.compensator is not None
+    finally:
+        harness.close()
+
+
+def test_output_only_while_active_and_tdot_state_kept_across_deactivate(managed: Any) -> None:
+    harness, manager = managed
+    node = harness.node
+    assert manager.transition(Transition.TRANSITION_CONFIGURE)
+    assert manager.state() == State.PRIMARY_STATE_INACTIVE
+    harness.connect()
+    coeffs = load(EXAMPLE)
+    offline = Compensator(coeffs.model, coeffs.denoise, node.config.guard)
+    compensator = node.compensator
+
+    # configured but inactive: temperature is taken, the gyro is not published
+    stamp_s = feed_temperature(harness, offline, 1000.0, 120)
+    assert harness.send_imu(stamp_s + 0.5, RATE_RAD_S) is None
+    assert node.imu_while_inactive == 1
+
+    assert manager.transition(Transition.TRANSITION_ACTIVATE)
+    assert manager.state() == State.PRIMARY_STATE_ACTIVE
+    stamp_s = feed_temperature(harness, offline, stamp_s + 1.0, 240)
+    assert compensator.status.estimator_ready
+    out = harness.send_imu(stamp_s + 0.5, RATE_RAD_S)
+    assert out is not None
+    assert_array_equal(rate_of(out), offline.correct(stamp_s + 0.5, RATE_RAD_S))
+
+    # deactivate: no output, the filter keeps its state and keeps taking temperature
+    assert manager.transition(Transition.TRANSITION_DEACTIVATE)
+    assert manager.state() == State.PRIMARY_STATE_INACTIVE
+    stamp_s = feed_temperature(harness, offline, stamp_s + 1.0, 30)
+    received = len(harness.received)
+    assert harness.send_imu(stamp_s + 0.5, RATE_RAD_S) is None
+    harness.spin_for(20)
+    assert len(harness.received) == received
+    assert node.compensator is compensator
+    assert compensator.status.estimator_ready
+
+    # re-activate: output at once, the same numbers as the uninterrupted offline filter
+    assert manager.transition(Transition.TRANSITION_ACTIVATE)
+    out = harness.send_imu(stamp_s + 0.7, RATE_RAD_S)
+    assert out is not None
+    assert_array_equal(rate_of(out), offline.correct(stamp_s + 0.7, RATE_RAD_S))
+    assert compensator.status.estimator_ready
+
+    # cleanup releases the compensator and the topics
+    assert manager.transition(Transition.TRANSITION_DEACTIVATE)
+    assert manager.transition(Transition.TRANSITION_CLEANUP)
+    assert manager.state() == State.PRIMARY_STATE_UNCONFIGURED
+    assert node.compensator is None
+    harness.spin_until(lambda: node.count_subscribers('/imu/data_raw') == 0)
+    assert node.count_publishers('/imu/data') == 0
