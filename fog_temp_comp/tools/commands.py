@@ -137,6 +137,8 @@ class CalibrateOptions:
     report_dir: Path | None = None
     clamp_tdot: bool = False
     quiet: bool = True
+    #: a fleet prior YAML (``fleet prior``): fit toward it (:mod:`fog_temp_comp.core.prior`)
+    prior: Path | None = None
 
 
 def calibrate_command(
@@ -177,6 +179,8 @@ def calibrate_command(
     earth, provenance = _earth_correction(opt)
     period = opt.settings.tdot_period_s
     records = [earth(reduce_record(b, period, **read)) for b in bags]  # type: ignore[arg-type]
+    if opt.prior is not None and (opt.terms or opt.fit_coil_lag or opt.heldout):
+        raise ValueError('--prior sets the terms and Tdot settings; drop --terms/--fit-coil-lag')
     automatic = (
         opt.terms is None
         and not opt.fit_coil_lag
@@ -184,7 +188,14 @@ def calibrate_command(
         and not opt.leave_one_run_out
         and opt.settings.method == 'kalman'
     )
-    if automatic:
+    if opt.prior is not None:
+        from fog_temp_comp.core import prior
+
+        result = prior.calibrate_with_prior(
+            records, prior.load_prior(opt.prior), provenance=provenance
+        )
+        print(prior.format_prior_fit(result), file=stdout)
+    elif automatic:
         from fog_temp_comp.core import model_choice
 
         heldout_records = [earth(read_record(b, **read)) for b in opt.heldout]  # type: ignore[arg-type]
