@@ -78,13 +78,18 @@ class FleetPrior:
 
 
 def robust_z(values: Any) -> FloatArray:
-    """Robust z-scores ``0.6745 (x - median) / MAD`` along axis 0 (0 where MAD is 0)."""
+    """Modified z-scores ``0.6745 (x - median) / MAD`` along axis 0 (Iglewicz and Hoaglin).
+
+    Where the MAD is 0 (over half the values equal), ``(x - median) / (1.2533 meanAD)``; 0
+    where every value is the median.
+    """
     x = np.asarray(values, dtype=np.float64)
     med = np.median(x, axis=0)
     mad = np.median(np.abs(x - med), axis=0)
+    mean_ad = np.mean(np.abs(x - med), axis=0)
     with np.errstate(divide='ignore', invalid='ignore'):
-        z = 0.6745 * (x - med) / mad
-    return np.asarray(np.where(mad > 0, z, 0.0), dtype=np.float64)
+        z = np.where(mad > 0, 0.6745 * (x - med) / mad, (x - med) / (1.253314 * mean_ad))
+    return np.asarray(np.where((mad > 0) | (mean_ad > 0), z, 0.0), dtype=np.float64)
 
 
 def estimate_prior(units: Sequence[tuple[str, Coefficients]]) -> tuple[FleetPrior, list[str]]:

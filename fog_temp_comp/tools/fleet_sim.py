@@ -7,7 +7,7 @@ with each unit's true coefficients and fault. Faults (:data:`FAULTS`, in turn):
 
 - ``missing``: the manifest names a bag that was never written;
 - ``damaged``: the bag's data file is cut in half;
-- ``short``: the run stops after 20 min, before the chamber ramps (too small a swing);
+- ``short``: the run stops 5 min into the first ramp (too small a swing);
 - ``bad_coil``: a unit that calibrates but whose Tdot coefficient is 3 times the fleet's.
 """
 
@@ -29,8 +29,8 @@ from fog_temp_comp.tools.simulate import REALISTIC, SimulatedRun, SimulationConf
 FAULTS = ('missing', 'damaged', 'short', 'bad_coil')
 #: unit-to-unit spread: d0 (deg/h), dt (deg/h/degC) std; dtdot, T^2, coil lag relative std
 SPREAD = {'d0_deg_h': 1.0, 'dt_deg_h_per_degC': 1e-3, 'dtdot': 0.08, 't2': 0.2, 'coil_lag': 0.15}
-#: a short run lasts this long (s): the chamber has not started ramping
-SHORT_RUN_S = 1200.0
+#: a short run stops this long (s) after the first ramp starts: far too small a swing
+SHORT_RUN_RAMP_S = 300.0
 
 
 def draw_unit(base: SimulationConfig, rng: np.random.Generator) -> SimulationConfig:
@@ -72,9 +72,13 @@ def simulate_fleet_command(
     faulty_fraction: float = 0.1,
     base: SimulationConfig | None = None,
     cycle_degC_per_min: float = 1.0,
+    options: dict[str, Any] | None = None,
     stdout: TextIO | None = None,
 ) -> int:
-    """Write ``n_units`` units (one cycle each), ``fleet.yaml`` and ``population.yaml``."""
+    """Write ``n_units`` units (one cycle each), ``fleet.yaml`` and ``population.yaml``.
+
+    ``options`` go to the manifest's ``options`` (``calibrate`` flags for every unit).
+    """
     stdout = stdout or sys.stdout
     if n_units < 1:
         raise ValueError(f'--fleet {n_units}: must be >= 1')
@@ -90,7 +94,7 @@ def simulate_fleet_command(
             cfg = dataclasses.replace(cfg, coefficients=cfg.coefficients * [[1], [1], [3]])
         run = simulate_run('cycle', cycle_degC_per_min, cfg, seed=seed * 100_000 + k)
         if fault == 'short':
-            run = _cut(run, SHORT_RUN_S)
+            run = _cut(run, cfg.cycle_soak_s / 2 + SHORT_RUN_RAMP_S)
         bag = Path(unit) / (run.name + ('.bag' if fmt == 'ros1' else ''))
         if fault != 'missing':
             _write(out_dir / bag, fmt, run)
@@ -108,7 +112,9 @@ def simulate_fleet_command(
                 for j, axis in enumerate(AXES)
             },
         }
-    manifest = {'description': f'simulated fleet of {n_units} units (seed {seed})', 'units': units}
+    manifest: dict[str, Any] = {'description': f'simulated fleet of {n_units} units (seed {seed})'}
+    manifest.update({'options': options} if options else {})
+    manifest['units'] = units
     (out_dir / 'fleet.yaml').write_text(yaml.safe_dump(manifest, sort_keys=False))
     (out_dir / 'population.yaml').write_text(yaml.safe_dump(truth, sort_keys=False))
     faulty = {u: t['fault'] for u, t in truth.items() if t['fault'] != 'none'}
