@@ -141,7 +141,7 @@ def _typical_settings(settings: Sequence[DenoiseSettings]) -> DenoiseSettings:
     dicts = [s.to_dict() for s in settings]
     out: dict[str, Any] = {}
     for key, first in dicts[0].items():
-        values = [d[key] for d in dicts]
+        values: list[Any] = [d[key] for d in dicts]
         if isinstance(first, bool) or not isinstance(first, (int, float)):
             out[key] = Counter(values).most_common(1)[0][0]
         elif isinstance(first, int):

@@ -320,7 +320,7 @@ def parse_calibrate(argv: Sequence[str]) -> tuple[list[Path], CalibrateOptions]:
     def error(message: str) -> NoReturn:
         raise ValueError(message)
 
-    calibrate.error = error  # type: ignore[method-assign]
+    calibrate.error = error
     args = calibrate.parse_args([*argv, '-o', 'unused.yaml'])
     return list(args.bags), calibrate_options(args)
 

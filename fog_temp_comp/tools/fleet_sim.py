@@ -45,8 +45,9 @@ def draw_unit(base: SimulationConfig, rng: np.random.Generator) -> SimulationCon
     )
     t2 = np.asarray(base.t2_coefficients) * (1 + rng.normal(0.0, SPREAD['t2'], 3))
     lag = base.coil_lag_s * max(0.2, 1 + rng.normal(0.0, SPREAD['coil_lag']))
+    t2_x, t2_y, t2_z = (float(v) for v in t2)
     return dataclasses.replace(
-        base, coefficients=c, t2_coefficients=tuple(float(v) for v in t2), coil_lag_s=lag
+        base, coefficients=c, t2_coefficients=(t2_x, t2_y, t2_z), coil_lag_s=lag
     )
 
 
