@@ -37,8 +37,10 @@ FloatArray = NDArray[np.float64]
 #: file kind and version of a prior YAML
 PRIOR_KIND = 'fog_temp_comp fleet prior'
 PRIOR_VERSION = 1
-#: a unit whose coefficient lies beyond this robust z-score (median/MAD) is left out of the prior
-OUTLIER_Z = 3.5
+#: a unit whose coefficient lies beyond this robust z-score (median/MAD) is an outlier: 5, not
+#: Iglewicz and Hoaglin's 3.5, because every coefficient of every axis is tested (9+ columns of
+#: a few tens of units, where 3.5 flags normal units)
+OUTLIER_Z = 5.0
 #: fewest good units a prior is estimated from
 MIN_UNITS = 3
 #: multipliers of the prior precision tried on held-out blocks (1: the fleet's spread as it is)
@@ -186,9 +188,9 @@ def load_prior(path: str | Path) -> FleetPrior:
         raise PriorError(f'{path}: cannot read prior: {err.strerror}') from err
     except yaml.YAMLError as err:
         raise PriorError(f'{path}: not valid YAML: {err}') from err
+    if not isinstance(data, dict) or data.get('kind') != PRIOR_KIND:
+        raise PriorError(f'{path}: kind: expected {PRIOR_KIND!r} (written by `fleet prior`)')
     try:
-        if not isinstance(data, dict) or data.get('kind') != PRIOR_KIND:
-            raise PriorError(f'kind: expected {PRIOR_KIND!r} (written by `fleet prior`)')
         terms = tuple(str(t) for t in data['terms'])
         keys = [coefficient_key(t) for t in terms]
         mean = np.array([[float(data['axes'][a]['mean'][k]) for a in AXES] for k in keys])

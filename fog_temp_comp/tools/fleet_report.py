@@ -20,11 +20,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from fog_temp_comp import __version__
-from fog_temp_comp.core.prior import robust_z
+from fog_temp_comp.core.prior import OUTLIER_Z, robust_z
 from fog_temp_comp.core.units import AXES
 
-#: a unit beyond this robust z-score on any column is an outlier
-OUTLIER_Z = 3.5
 #: fewest calibrated units for the rule to say anything
 MIN_UNITS = 5
 _DPI = 100
