@@ -18,13 +18,17 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 import yaml
 
+from fog_temp_comp.core.prior import PRIOR_WEIGHTS
 from fog_temp_comp.tools import cli
 from fog_temp_comp.tools.fleet_report import outliers
-from fog_temp_comp.tools.fleet_sim import fault_plan, simulate_fleet_command
-from fog_temp_comp.tools.simulate import SimulationConfig
+from fog_temp_comp.tools.fleet_sim import cut_run, draw_unit, fault_plan, simulate_fleet_command
+from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
+
+from simdata import write_run
 
 #: a 5..35 degC cycle at 1 degC/min with 5 min soaks, 1 Hz: 75 min, about 1 s to calibrate
 FLEET_CHAMBER = SimulationConfig(
@@ -160,6 +164,33 @@ def test_report_page_and_plots(fleet: tuple[Path, Path, int, str]) -> None:
     assert 'coefficient_dtdot_deg_h_per_degC_per_min.png' in images
     for name in images:
         assert (out / 'report' / name).read_bytes().startswith(PNG_SIGNATURE)
+
+
+def test_fleet_prior_then_calibrate_a_short_run_with_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], fleet: tuple[Path, Path, int, str]
+) -> None:
+    _, out, _, _ = fleet
+    prior = tmp_path / 'prior.yaml'
+    assert cli.main(['fleet', 'prior', str(out), '-o', str(prior)]) == 0, capsys.readouterr()
+    data = yaml.safe_load(prior.read_text())
+    assert data['n_units'] == 3 and len(data['left_out']) == 3  # the failed units
+    assert data['terms'] == OPTIONS['terms'].split(',')
+    # a new unit of the model, stopped 7 min into its first ramp
+    unit = draw_unit(FLEET_CHAMBER, np.random.default_rng(99))
+    run = cut_run(simulate_run('cycle', 1.0, unit, seed=99), unit.cycle_soak_s / 2 + 420)
+    bag = write_run(tmp_path / 'short', 'mcap', run)
+    alone = ['calibrate', str(bag), '-o', str(tmp_path / 'alone.yaml'), '--quiet']
+    capsys.readouterr()
+    assert cli.main(alone) == 1
+    assert 'swing' in capsys.readouterr().err
+    assert (
+        cli.main(['calibrate', str(bag), '-o', str(tmp_path / 'c.yaml'), '--prior', str(prior)])
+        == 0
+    )
+    assert 'fit toward the fleet prior of 3 units' in capsys.readouterr().out
+    coeffs = yaml.safe_load((tmp_path / 'c.yaml').read_text())
+    assert coeffs['provenance']['prior']['weight'] in PRIOR_WEIGHTS
+    assert coeffs['fit']['x']['standard_error_method'].startswith('posterior std')
 
 
 def test_outliers_by_median_and_mad() -> None:

@@ -43,6 +43,8 @@ PRIOR_VERSION = 1
 OUTLIER_Z = 5.0
 #: fewest good units a prior is estimated from
 MIN_UNITS = 3
+#: fewest units for the outlier rule to say anything (a MAD of fewer is noise)
+MIN_OUTLIER_UNITS = 5
 #: multipliers of the prior precision tried on held-out blocks (1: the fleet's spread as it is)
 PRIOR_WEIGHTS = (0.25, 1.0, 4.0)
 #: contiguous time blocks of the unit's rows held out in turn to choose the weight
@@ -111,7 +113,7 @@ def estimate_prior(units: Sequence[tuple[str, Coefficients]]) -> tuple[FleetPrio
     kept = [(u, c) for u, c in units if c.model.terms == common]
     stack = np.stack([c.model.coefficients for _, c in kept])  # (n, p, 3)
     z = robust_z(stack)
-    bad = np.abs(z) > OUTLIER_Z
+    bad = (np.abs(z) > OUTLIER_Z) & (len(kept) >= MIN_OUTLIER_UNITS)
     good = []
     for k, (unit, _) in enumerate(kept):
         if bad[k].any():

@@ -20,11 +20,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from fog_temp_comp import __version__
-from fog_temp_comp.core.prior import OUTLIER_Z, robust_z
+from fog_temp_comp.core.prior import MIN_OUTLIER_UNITS, OUTLIER_Z, robust_z
 from fog_temp_comp.core.units import AXES
 
-#: fewest calibrated units for the rule to say anything
-MIN_UNITS = 5
 _DPI = 100
 
 
@@ -49,14 +47,14 @@ def coefficient_columns(rows: Sequence[dict[str, Any]]) -> list[str]:
 def outliers(rows: Sequence[dict[str, Any]]) -> dict[str, str]:
     """Unit -> reason, for calibrated units beyond :data:`OUTLIER_Z` on some column."""
     ok = [r for r in rows if r.get('status') == 'ok']
-    if len(ok) < MIN_UNITS:
+    if len(ok) < MIN_OUTLIER_UNITS:
         return {}
     reasons: dict[str, list[str]] = {}
     columns = [(c, False) for c in coefficient_columns(ok)]
     columns += [(f'{a}_residual_std_deg_h', True) for a in AXES]
     for column, high_only in columns:
         have = [r for r in ok if math.isfinite(_number(r.get(column)))]
-        if len(have) < MIN_UNITS:
+        if len(have) < MIN_OUTLIER_UNITS:
             continue
         values = np.array([_number(r[column]) for r in have])
         z = robust_z(values)

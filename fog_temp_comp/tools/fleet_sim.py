@@ -95,7 +95,7 @@ def simulate_fleet_command(
             cfg = dataclasses.replace(cfg, coefficients=cfg.coefficients * [[1], [1], [3]])
         run = simulate_run('cycle', cycle_degC_per_min, cfg, seed=seed * 100_000 + k)
         if fault == 'short':
-            run = _cut(run, cfg.cycle_soak_s / 2 + SHORT_RUN_RAMP_S)
+            run = cut_run(run, cfg.cycle_soak_s / 2 + SHORT_RUN_RAMP_S)
         bag = Path(unit) / (run.name + ('.bag' if fmt == 'ros1' else ''))
         if fault != 'missing':
             _write(out_dir / bag, fmt, run)
@@ -128,7 +128,8 @@ def simulate_fleet_command(
     return 0
 
 
-def _cut(run: SimulatedRun, duration_s: float) -> SimulatedRun:
+def cut_run(run: SimulatedRun, duration_s: float) -> SimulatedRun:
+    """The first ``duration_s`` seconds of ``run`` (a chamber run stopped early)."""
     imu = run.imu_stamps_s < run.imu_stamps_s[0] + duration_s
     temp = run.temp_stamps_s < run.temp_stamps_s[0] + duration_s
     return dataclasses.replace(
