@@ -3,7 +3,8 @@
 A fleet of ``--units`` gyros of one model (drawn by :func:`fog_temp_comp.tools.fleet_sim.draw_unit`
 around the realistic chamber of :data:`~fog_temp_comp.tools.simulate.REALISTIC`: +-1 deg/h D0,
 +-1e-3 deg/h/degC DT, 8 % DTdot, 20 % T^2, 15 % coil lag from unit to unit) is calibrated on the
-full 0.2 degC/min cycle (19.7 h; T^2 terms, fitted coil lag); :func:`estimate_prior` gives the prior.
+full 0.2 degC/min cycle (19.7 h; T^2 terms, fitted coil lag); :func:`estimate_prior` gives
+the prior.
 Then ``--new`` other units of the model are each calibrated on the first 2, 4, 8 and 18 h of
 their own cycle, alone (least squares, the fleet's Tdot settings) and with the prior, and on the
 full cycle alone (the reference). Every calibration is judged on the unit's own held-out runs
@@ -85,9 +86,9 @@ def main() -> None:
         for hours in HOURS:
             short = cut_run(full, hours * 3600.0).as_record()
             cases = {
-                'alone': lambda r=short: calibrate_detailed(
-                    [r], prior.settings, terms=TERMS
-                ).coefficients,
+                'alone': lambda r=short: (
+                    calibrate_detailed([r], prior.settings, terms=TERMS).coefficients
+                ),
                 'prior': lambda r=short: calibrate_with_prior([r], prior).coefficients,
             }
             for name, fit in cases.items():
