@@ -5,7 +5,7 @@ around the realistic chamber of :data:`~fog_temp_comp.tools.simulate.REALISTIC`:
 +-1e-3 deg/h/degC DT, 8 % DTdot, 20 % T^2, 15 % coil lag from unit to unit) is calibrated on the
 full 0.2 degC/min cycle (19.7 h; T^2 terms, fitted coil lag); :func:`estimate_prior` gives
 the prior.
-Then ``--new`` other units of the model are each calibrated on the first 2, 4, 8 and 18 h of
+Then ``--new`` other units of the model are each calibrated on the first 2 to 18 h of
 their own cycle, alone (least squares, the fleet's Tdot settings) and with the prior, and on the
 full cycle alone (the reference). Every calibration is judged on the unit's own held-out runs
 (a 1 degC/min and a 0.5 degC/min cycle, full length): the 100 s bias stability after
@@ -32,7 +32,7 @@ from fog_temp_comp.tools.fleet_sim import cut_run, draw_unit
 from fog_temp_comp.tools.simulate import REALISTIC, simulate_run
 
 TERMS = ('const', 'T', 'Tdot', 'T2')
-HOURS = (2, 4, 8, 18)
+HOURS = (2, 4, 8, 12, 14, 16, 18)
 HELDOUT = (1.0, 0.5)  # cycle rates (degC/min) of the held-out runs
 
 
@@ -90,6 +90,9 @@ def main() -> None:
                     calibrate_detailed([r], prior.settings, terms=TERMS).coefficients
                 ),
                 'prior': lambda r=short: calibrate_with_prior([r], prior).coefficients,
+                'prior w=1': lambda r=short: (
+                    calibrate_with_prior([r], prior, weights=(1.0,)).coefficients
+                ),
             }
             for name, fit in cases.items():
                 try:
@@ -108,7 +111,7 @@ def main() -> None:
     print('| chamber time | fit | units fitted | median deg/h | median excess | worst excess |')
     print('|---|---|---|---|---|---|')
     for hours in HOURS:
-        for name in ('alone', 'prior'):
+        for name in ('alone', 'prior', 'prior w=1'):
             r = ratios.get((name, hours), [])
             n_refused = refused.get((name, hours), 0)
             if not r:

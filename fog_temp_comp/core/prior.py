@@ -71,6 +71,9 @@ class FleetPrior:
         Covariance of the coefficients across units, per axis.
     units : tuple of str
         The units it was estimated from.
+    temperature_range_degC, tdot_range_degC_per_min : Range or None
+        The range the fleet was calibrated over (median of the units' low and high ends): a
+        unit fitted toward the prior is valid there too, even from a short run.
 
     """
 
@@ -79,6 +82,8 @@ class FleetPrior:
     mean: FloatArray
     covariance: FloatArray
     units: tuple[str, ...] = ()
+    temperature_range_degC: Range | None = None
+    tdot_range_degC_per_min: Range | None = None
 
 
 def robust_z(values: Any) -> FloatArray:
@@ -128,6 +133,7 @@ def estimate_prior(units: Sequence[tuple[str, Coefficients]]) -> tuple[FleetPrio
         raise PriorError(f'{len(good)} good units; a prior needs at least {MIN_UNITS}')
     coeffs = stack[good]
     cov = np.stack([np.atleast_2d(np.cov(coeffs[:, :, j], rowvar=False)) for j in range(3)])
+    models = [kept[k][1].model for k in good]
     return (
         FleetPrior(
             terms=common,
@@ -135,8 +141,16 @@ def estimate_prior(units: Sequence[tuple[str, Coefficients]]) -> tuple[FleetPrio
             mean=coeffs.mean(axis=0),
             covariance=cov,
             units=tuple(kept[k][0] for k in good),
+            temperature_range_degC=_median_range([m.temperature_range_degC for m in models]),
+            tdot_range_degC_per_min=_median_range([m.tdot_range_degC_per_min for m in models]),
         ),
         notes,
+    )
+
+
+def _median_range(ranges: Sequence[Range]) -> Range:
+    return Range(
+        float(np.median([r.low for r in ranges])), float(np.median([r.high for r in ranges]))
     )
 
 
@@ -173,6 +187,14 @@ def save_prior(prior: FleetPrior, path: str | Path, *, notes: Sequence[str] = ()
             }
             for j, axis in enumerate(AXES)
         },
+        'calibrated_range': {
+            name: [float(r.low), float(r.high)]
+            for name, r in (
+                ('temperature_degC', prior.temperature_range_degC),
+                ('tdot_degC_per_min', prior.tdot_range_degC_per_min),
+            )
+            if r is not None
+        },
         'denoise': prior.settings.to_dict(),
         'units': list(prior.units),
         'left_out': list(notes),
@@ -199,12 +221,21 @@ def load_prior(path: str | Path) -> FleetPrior:
         cov = np.array([data['axes'][a]['covariance'] for a in AXES], dtype=np.float64)
         settings = DenoiseSettings.from_dict(data['denoise'])
         units = tuple(str(u) for u in data.get('units') or ())
+        ranges = {k: Range(float(v[0]), float(v[1])) for k, v in data['calibrated_range'].items()}
     except (KeyError, TypeError, ValueError) as err:
         raise PriorError(f'{path}: malformed prior: {err!r}') from None
     p = len(terms)
     if cov.shape != (3, p, p) or not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
         raise PriorError(f'{path}: covariance must be 3 finite {p}x{p} matrices')
-    return FleetPrior(terms, settings, mean, cov, units)
+    return FleetPrior(
+        terms,
+        settings,
+        mean,
+        cov,
+        units,
+        ranges.get('temperature_degC'),
+        ranges.get('tdot_degC_per_min'),
+    )
 
 
 def posterior(
@@ -274,8 +305,10 @@ def _fit_axis(
     return b, c, math.sqrt(noise), factor
 
 
-def choose_weight(table: GridTable, prior: FleetPrior) -> tuple[float, dict[float, float]]:
-    """The prior weight of :data:`PRIOR_WEIGHTS` with the least held-out squared error.
+def choose_weight(
+    table: GridTable, prior: FleetPrior, weights: Sequence[float] = PRIOR_WEIGHTS
+) -> tuple[float, dict[float, float]]:
+    """The prior weight of ``weights`` with the least held-out squared error.
 
     The unit's rows are cut into :data:`CV_BLOCKS` contiguous blocks; each is predicted by a fit
     on the others. Returns the weight and the held-out RMS (deg/h) of every weight.
@@ -284,7 +317,7 @@ def choose_weight(table: GridTable, prior: FleetPrior) -> tuple[float, dict[floa
     n = a.shape[0]
     edges = np.linspace(0, n, CV_BLOCKS + 1).astype(int)
     scores = {}
-    for weight in PRIOR_WEIGHTS:
+    for weight in weights:
         sq, count = 0.0, 0
         for k in range(CV_BLOCKS):
             test = np.zeros(n, dtype=bool)
@@ -308,13 +341,15 @@ def calibrate_with_prior(
     records: Sequence[ChamberRecord],
     prior: FleetPrior,
     *,
+    weights: Sequence[float] = PRIOR_WEIGHTS,
     provenance: dict[str, Any] | None = None,
 ) -> CalibrationResult:
     """Fit ``prior.terms`` on ``records`` by Bayesian regression toward the fleet prior.
 
     The Tdot estimator is the prior's; the standard errors written are the posterior standard
     deviations (the residual's autocorrelation taken into account). A run too short to identify
-    the model alone is accepted: the prior supplies what it lacks.
+    the model alone is accepted: the prior supplies what it lacks, and the calibrated range is
+    the run's widened to the fleet's.
     """
     if not records:
         raise CalibrationError('no records to calibrate on')
@@ -324,7 +359,7 @@ def calibrate_with_prior(
         raise CalibrationError(
             f'{table.rate_deg_h.shape[0]} grid rows: too short even with a prior'
         )
-    weight, scores = choose_weight(table, prior)
+    weight, scores = choose_weight(table, prior, weights)
     a = table.design(prior.terms)
     fits = []
     for j, axis in enumerate(AXES):
@@ -356,8 +391,8 @@ def calibrate_with_prior(
     model = DriftModel(
         prior.terms,
         np.stack([f.coefficients for f in fits], axis=1),
-        Range(float(table.temperature_degC.min()), float(table.temperature_degC.max())),
-        Range(float(table.tdot_degC_per_min.min()), float(table.tdot_degC_per_min.max())),
+        _union(table.temperature_degC, prior.temperature_range_degC),
+        _union(table.tdot_degC_per_min, prior.tdot_range_degC_per_min),
     )
     frame_ids = sorted({r.frame_id for r in records})
     base = _base_provenance(records)
@@ -378,6 +413,14 @@ def calibrate_with_prior(
         },
     )
     return CalibrationResult(coefficients, table, fits, [])
+
+
+def _union(values: FloatArray, fleet: Range | None) -> Range:
+    """The range of ``values`` widened to the fleet's calibrated range."""
+    low, high = float(values.min()), float(values.max())
+    if fleet is None:
+        return Range(low, high)
+    return Range(min(low, fleet.low), max(high, fleet.high))
 
 
 def _base_provenance(records: Sequence[ChamberRecord]) -> dict[str, Any]:
