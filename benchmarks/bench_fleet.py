@@ -6,7 +6,9 @@ Simulates a fleet (``simulate --fleet``: one realistic 1 degC/min cycle per unit
 - serial: ``calibrate_command`` on every unit, one after the other, in this (warm) process;
 - fleet: ``fleet calibrate`` on a ``LocalCluster`` of ``--workers`` single-thread processes
   (started by this script so that it can read each worker's peak RSS afterwards), cluster start
-  included.
+  included;
+
+and checks that every unit's YAML is the same both ways (but its creation time).
 
     .venv/bin/python benchmarks/bench_fleet.py [--units 100] [--workers 2] [--dir DIR]
 """
@@ -32,6 +34,14 @@ from fog_temp_comp.tools.fleet_sim import simulate_fleet_command
 def peak_rss_mib() -> float:
     """Peak resident memory of the calling process, MiB (Linux ru_maxrss is in KiB)."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _without_time(path: Path) -> dict[str, object] | None:
+    if not path.is_file():
+        return None
+    data = yaml.safe_load(path.read_text())
+    del data['provenance']['created_utc']
+    return data
 
 
 def main() -> None:
@@ -87,7 +97,13 @@ def main() -> None:
         finally:
             client.close()
             cluster.close()
+        equal = sum(
+            _without_time(root / 'out' / f'{u}.yaml') == _without_time(root / f'serial_{u}.yaml')
+            for u in units
+            if (root / f'serial_{u}.yaml').is_file()
+        )
 
+    print(f'{equal} of {serial_ok} unit YAMLs equal to calibrate alone (but the creation time)')
     print(f'machine: {os.cpu_count()} CPUs; load average {os.getloadavg()[0]:.1f} at the end')
     print('| run | units ok | wall s | ratio | peak RSS MiB |')
     print('|---|---|---|---|---|')
