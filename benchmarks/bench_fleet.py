@@ -53,7 +53,7 @@ def main() -> None:
     from distributed import Client, LocalCluster
 
     with tempfile.TemporaryDirectory() as tmp:
-        root = args.dir or Path(tmp)
+        root = (args.dir or Path(tmp)).resolve()
         manifest = root / 'units' / 'fleet.yaml'
         if not manifest.is_file():
             start = time.perf_counter()
