@@ -12,6 +12,7 @@ blocks of the unit's own run(s), among :data:`PRIOR_WEIGHTS`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import Counter
 from collections.abc import Sequence
@@ -337,11 +338,58 @@ def choose_weight(
     return best, scores
 
 
+def unit_coil_lag(records: Sequence[ChamberRecord], prior: FleetPrior) -> float:
+    """The unit's own sensor-to-coil lag (s), searched within 0.5-2x the fleet's.
+
+    The objective is that of ``calibrate --fit-coil-lag`` (the residual less its 30 min moving
+    average, summed over axes), with the fit toward the prior (weight 1) in place of least
+    squares, so that a short run can place its lag too.
+    """
+    from scipy import ndimage
+
+    from fog_temp_comp.core.calibration import table_of
+    from fog_temp_comp.core.coil import search_time_constant
+    from fog_temp_comp.core.tdot import offline_estimates
+
+    settings = prior.settings
+    bases = [
+        offline_estimates(settings, r.temp_stamps_s, r.temperature_degC, coil_lag=False)
+        for r in records
+    ]
+    width = round(1800.0 / settings.tdot_period_s)
+
+    def objective(tau: float) -> float:
+        parts = [
+            table_of(
+                r,
+                b.lagged(tau).shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s),
+                settings.tdot_period_s,
+            )
+            for r, b in zip(records, bases, strict=True)
+        ]
+        total = 0.0
+        for part in parts:
+            a = part.design(prior.terms)
+            for j in range(3):
+                y = part.rate_deg_h[:, j]
+                b, _, _, _ = _fit_axis(a, y, prior.mean[:, j], prior.covariance[j], 1.0)
+                r = y - a @ b
+                if width > 1 and r.size > 1:
+                    r = r - ndimage.uniform_filter1d(r, min(width, r.size), mode='nearest')
+                total += float(r @ r)
+        return total
+
+    lag = settings.coil_lag_s
+    tau, _ = search_time_constant(objective, (0.5 * lag, 2.0 * lag), coarse_points=8)
+    return tau
+
+
 def calibrate_with_prior(
     records: Sequence[ChamberRecord],
     prior: FleetPrior,
     *,
     weights: Sequence[float] = PRIOR_WEIGHTS,
+    fit_coil_lag: bool = True,
     provenance: dict[str, Any] | None = None,
 ) -> CalibrationResult:
     """Fit ``prior.terms`` on ``records`` by Bayesian regression toward the fleet prior.
@@ -349,10 +397,17 @@ def calibrate_with_prior(
     The Tdot estimator is the prior's; the standard errors written are the posterior standard
     deviations (the residual's autocorrelation taken into account). A run too short to identify
     the model alone is accepted: the prior supplies what it lacks, and the calibrated range is
-    the run's widened to the fleet's.
+    the run's widened to the fleet's. With ``fit_coil_lag``, the unit's own sensor-to-coil lag
+    is searched near the fleet's (:func:`unit_coil_lag`).
     """
     if not records:
         raise CalibrationError('no records to calibrate on')
+    fleet_lag = prior.settings.coil_lag_s
+    if fit_coil_lag and fleet_lag > 0:
+        lag = unit_coil_lag(records, prior)
+        prior = dataclasses.replace(
+            prior, settings=dataclasses.replace(prior.settings, coil_lag_s=lag)
+        )
     table = GridTable.concatenate([_grid_table(r, prior.settings) for r in records])
     p = len(prior.terms)
     if table.rate_deg_h.shape[0] < max(2 * CV_BLOCKS, p + 1):
@@ -406,6 +461,7 @@ def calibrate_with_prior(
             'prior': {
                 'units': len(prior.units),
                 'weight': weight,
+                'coil_lag_s': {'fleet': fleet_lag, 'unit': prior.settings.coil_lag_s},
                 'heldout_rms_deg_h': {str(w): s for w, s in scores.items()},
                 'choice': f'prior weight chosen on {CV_BLOCKS} contiguous held-out blocks',
             },
