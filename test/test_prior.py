@@ -166,3 +166,17 @@ def test_progress_bar_redraws_on_a_terminal_only() -> None:
     bar.update(2, 0)
     bar.close()
     assert plain.getvalue() == ''
+
+
+def test_the_unit_finds_its_own_coil_lag_near_the_fleets() -> None:
+    units = population(30, seed=5)
+    fleet_lag_s, unit_lag_s = 120.0, 190.0
+    settings = dataclasses.replace(SETTINGS, coil_lag_s=fleet_lag_s)
+    prior = dataclasses.replace(truth_prior(units[1:]), settings=settings)
+    unit = dataclasses.replace(units[0], coil_lag_s=unit_lag_s)
+    run = simulate_run('cycle', 1.0, unit, seed=50).as_record()
+    lag = calibrate_with_prior([run], prior).coefficients.provenance['prior']['coil_lag_s']
+    assert lag['fleet'] == fleet_lag_s
+    assert abs(lag['unit'] - unit_lag_s) < 0.15 * unit_lag_s, lag
+    fixed = calibrate_with_prior([run], prior, fit_coil_lag=False).coefficients
+    assert fixed.denoise.coil_lag_s == fleet_lag_s
