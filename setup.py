@@ -28,6 +28,7 @@ setup(
         'backports.zstd; python_version < "3.14"',  # MCAP chunks (rosbags uses it too)
         'matplotlib',
         'allantools',
+        'dask[distributed]',  # fleet commands only (imported when they run)
     ],
     python_requires='>=3.10',
     zip_safe=True,

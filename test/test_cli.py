@@ -788,9 +788,12 @@ def test_evaluate_missing_bag(
 # --------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize('argv', [['--help'], ['calibrate', '--help'], ['calibrate', 'x']])
+@pytest.mark.parametrize(
+    'argv',
+    [['--help'], ['calibrate', '--help'], ['calibrate', 'x'], ['fleet', 'calibrate', '--help']],
+)
 def test_help_and_argument_errors_import_nothing_heavy(argv: list[str]) -> None:
-    """--help and a bad argument never import numpy, scipy, rosbags or matplotlib."""
+    """--help and a bad argument never import numpy, scipy, rosbags, matplotlib or dask."""
     code = (
         'import sys\n'
         'from fog_temp_comp.tools import cli\n'
@@ -798,11 +801,30 @@ def test_help_and_argument_errors_import_nothing_heavy(argv: list[str]) -> None:
         f'    cli.main({argv!r})\n'
         'except SystemExit:\n'
         '    pass\n'
-        "heavy = ('numpy', 'scipy', 'rosbags', 'matplotlib', 'pywt', 'yaml')\n"
+        "heavy = ('numpy', 'scipy', 'rosbags', 'matplotlib', 'pywt', 'yaml', 'dask')\n"
         "print('IMPORTED', sorted(m for m in heavy if m in sys.modules))\n"
     )
     proc = subprocess.run(
         [sys.executable, '-c', code], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert 'IMPORTED []' in proc.stdout, proc.stdout + proc.stderr
+
+
+def test_single_gyro_commands_and_the_node_never_import_dask(
+    tmp_path: Path, cal_bag: Path
+) -> None:
+    """The calibrate and evaluate commands and the node never import dask or distributed."""
+    coeffs = tmp_path / 'c.yaml'
+    code = (
+        'import sys\n'
+        'from fog_temp_comp.tools import cli\n'
+        'import fog_temp_comp.ros.node\n'
+        f"assert cli.main(['calibrate', {str(cal_bag)!r}, '-o', {str(coeffs)!r}]) == 0\n"
+        f"assert cli.main(['evaluate', {str(cal_bag)!r}, '--coeffs', {str(coeffs)!r}]) == 0\n"
+        "print('IMPORTED', sorted(m for m in ('dask', 'distributed') if m in sys.modules))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, '-c', code], capture_output=True, text=True, timeout=120, check=False
     )
     assert 'IMPORTED []' in proc.stdout, proc.stdout + proc.stderr
 

@@ -124,12 +124,13 @@ def test_the_check_finds_a_cycle(tmp_path: Path) -> None:
 
 
 def test_the_core_imports_without_ros_or_bag_libraries() -> None:
-    """Importing every core module pulls in neither rclpy nor rosbags nor matplotlib."""
+    """Importing every core module pulls in neither rclpy, rosbags, matplotlib nor dask."""
     code = (
         'import sys, pkgutil, importlib, fog_temp_comp.core as core\n'
         'for m in pkgutil.iter_modules(core.__path__):\n'
         "    importlib.import_module('fog_temp_comp.core.' + m.name)\n"
-        "bad = [m for m in ('rclpy', 'rosbags', 'matplotlib') if m in sys.modules]\n"
+        "heavy = ('rclpy', 'rosbags', 'matplotlib', 'dask', 'distributed')\n"
+        'bad = [m for m in heavy if m in sys.modules]\n'
         'print(bad)\n'
     )
     out = subprocess.run(

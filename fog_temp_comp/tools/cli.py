@@ -12,7 +12,7 @@ import dataclasses
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from fog_temp_comp import __version__
 from fog_temp_comp.bag.names import FORMATS, TIME_SOURCES
@@ -21,6 +21,7 @@ from fog_temp_comp.core.names import METHODS, TDOT_LIMIT_DEGC_PER_MIN, TERM_NAME
 if TYPE_CHECKING:
     from fog_temp_comp.core.compensator import GuardSettings
     from fog_temp_comp.core.rest import RestSettings
+    from fog_temp_comp.tools.commands import CalibrateOptions
 
 
 def _add_topics(parser: argparse.ArgumentParser) -> None:
@@ -139,6 +140,26 @@ def _add_denoise(parser: argparse.ArgumentParser, default: str | None) -> None:
     )
 
 
+def _add_fleet(sub: Any) -> None:
+    p = sub.add_parser('fleet', help='calibrate many gyros in parallel (Dask); the fleet prior')
+    fleet = p.add_subparsers(dest='fleet_command', required=True, metavar='FLEET_COMMAND')
+    f = fleet.add_parser('calibrate', help='calibrate every unit of a manifest, one task each')
+    f.add_argument('manifest', type=Path, metavar='MANIFEST', help='YAML or CSV: unit -> bag(s)')
+    f.add_argument('-o', '--output', type=Path, required=True, metavar='OUT_DIR')
+    f.add_argument(
+        '--scheduler',
+        metavar='ADDR',
+        help='a running Dask scheduler, tcp://HOST:PORT (default: an embedded LocalCluster)',
+    )
+    f.add_argument(
+        '--workers', type=int, metavar='N', help='LocalCluster workers (default: CPU count)'
+    )
+    f.add_argument('--no-report', action='store_true', help='no OUT_DIR/report/index.html')
+    f = fleet.add_parser('prior', help="the fleet's coefficient distribution as a prior")
+    f.add_argument('fleet_dir', type=Path, metavar='OUT_DIR', help='a `fleet calibrate` output')
+    f.add_argument('-o', '--output', type=Path, required=True, metavar='PRIOR.yaml')
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Argument parser with the simulate / calibrate / compensate / evaluate / demo commands."""
     parser = argparse.ArgumentParser(
@@ -147,7 +168,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
-    for add in (_add_simulate, _add_calibrate, _add_compensate, _add_evaluate, _add_demo):
+    for add in (
+        _add_simulate,
+        _add_calibrate,
+        _add_compensate,
+        _add_evaluate,
+        _add_demo,
+        _add_fleet,
+    ):
         add(sub)
     return parser
 
@@ -165,6 +193,21 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         action='store_true',
         help="the accuracy study's chamber: sensor-to-coil lag, controller "
         'overshoot, T^2 nonlinearity, wandering bias',
+    )
+    p.add_argument(
+        '--fleet',
+        type=int,
+        metavar='N',
+        help='write N units drawn from a population (some faulty), one realistic 1 degC/min '
+        'cycle each, and OUT_DIR/fleet.yaml, the manifest of `fleet calibrate`',
+    )
+    p.add_argument(
+        '--faulty-fraction',
+        type=float,
+        default=0.1,
+        metavar='F',
+        help='with --fleet: fraction of faulty units (missing, damaged or short bags, a bad '
+        'coil; default 0.1)',
     )
 
 
@@ -244,6 +287,13 @@ def _add_calibrate_model(g: argparse._ArgumentGroup) -> None:
         '--online-tdot',
         action='store_true',
         help='fit with the Tdot the node computes, also for wavelet/iir/none',
+    )
+    g.add_argument(
+        '--prior',
+        type=Path,
+        metavar='PRIOR.yaml',
+        help='fit toward a fleet prior (`fleet prior`): terms and Tdot settings from the prior, '
+        'a Bayesian (ridge) fit whose prior weight is chosen on held-out time blocks',
     )
     g.add_argument(
         '--hac-lag',
@@ -334,11 +384,67 @@ def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument('--out', type=Path, default=Path('demo_out'), metavar='OUT')
 
 
-def run(args: argparse.Namespace) -> int:
-    """Dispatch parsed arguments to a command (imported here, not at start-up)."""
+def calibrate_options(args: argparse.Namespace) -> CalibrateOptions:
+    """:class:`~fog_temp_comp.tools.commands.CalibrateOptions` of parsed calibrate arguments."""
     from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
     from fog_temp_comp.tools import commands
 
+    return commands.CalibrateOptions(
+        gyro_topic=args.gyro_topic,
+        temp_topic=args.temp_topic,
+        temp_field=args.temp_field,
+        time_source=args.time_source,
+        settings=dataclasses.replace(RECOMMENDED_SETTINGS, method=args.denoise or 'kalman'),
+        terms=_terms(args),
+        fit_coil_lag=args.fit_coil_lag,
+        online_tdot=args.online_tdot,
+        hac_lag=args.hac_lag,
+        latitude_deg=args.latitude_deg,
+        axes_orientation=args.axes_orientation,
+        no_constant=args.no_constant,
+        heldout=tuple(args.heldout),
+        leave_one_run_out=args.leave_one_run_out,
+        tolerance=args.tolerance,
+        validate=tuple(args.validate),
+        report_dir=args.report,
+        clamp_tdot=_guard(args).clamp_tdot,
+        prior=args.prior,
+        quiet=args.quiet,
+        drop_unidentifiable=args.drop_unidentifiable,
+        strict=args.strict,
+    )
+
+
+def parse_calibrate(argv: Sequence[str]) -> tuple[list[Path], CalibrateOptions]:
+    """Bags and options of ``calibrate`` arguments (without ``-o``); ValueError on a bad one."""
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    calibrate = sub.choices['calibrate']
+
+    def error(message: str) -> NoReturn:
+        raise ValueError(message)
+
+    calibrate.error = error
+    args = calibrate.parse_args([*argv, '-o', 'unused.yaml'])
+    return list(args.bags), calibrate_options(args)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Dispatch parsed arguments to a command (imported here, not at start-up)."""
+    from fog_temp_comp.tools import commands
+
+    if args.command == 'simulate' and args.fleet is not None:
+        from fog_temp_comp.tools.fleet_sim import simulate_fleet_command
+
+        return simulate_fleet_command(
+            args.out_dir,
+            args.fleet,
+            fmt=args.fmt,
+            imu_hz=args.imu_hz,
+            temp_hz=args.temp_hz,
+            seed=args.seed,
+            faulty_fraction=args.faulty_fraction,
+        )
     if args.command == 'simulate':
         return commands.simulate_command(
             args.out_dir,
@@ -349,30 +455,11 @@ def run(args: argparse.Namespace) -> int:
             realistic=args.realistic,
         )
     if args.command == 'calibrate':
-        options = commands.CalibrateOptions(
-            gyro_topic=args.gyro_topic,
-            temp_topic=args.temp_topic,
-            temp_field=args.temp_field,
-            time_source=args.time_source,
-            settings=dataclasses.replace(RECOMMENDED_SETTINGS, method=args.denoise or 'kalman'),
-            terms=_terms(args),
-            fit_coil_lag=args.fit_coil_lag,
-            online_tdot=args.online_tdot,
-            hac_lag=args.hac_lag,
-            latitude_deg=args.latitude_deg,
-            axes_orientation=args.axes_orientation,
-            no_constant=args.no_constant,
-            heldout=tuple(args.heldout),
-            leave_one_run_out=args.leave_one_run_out,
-            tolerance=args.tolerance,
-            validate=tuple(args.validate),
-            report_dir=args.report,
-            clamp_tdot=_guard(args).clamp_tdot,
-            quiet=args.quiet,
-            drop_unidentifiable=args.drop_unidentifiable,
-            strict=args.strict,
-        )
-        return commands.calibrate_command(args.bags, args.output, options=options)
+        return commands.calibrate_command(args.bags, args.output, options=calibrate_options(args))
+    if args.command == 'fleet':
+        from fog_temp_comp.tools import fleet
+
+        return fleet.fleet_command(args, parse_calibrate=parse_calibrate)
     if args.command == 'compensate':
         return commands.compensate_command(
             args.in_bag,

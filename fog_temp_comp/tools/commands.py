@@ -186,6 +186,8 @@ class CalibrateOptions:
     drop_unidentifiable: bool = False
     #: refuse damaged bags instead of reading them as far as they are intact
     strict: bool = False
+    #: a fleet prior YAML (``fleet prior``): fit toward it (:mod:`fog_temp_comp.core.prior`)
+    prior: Path | None = None
 
 
 def calibrate_command(
@@ -252,8 +254,11 @@ def _calibrate(
     records = [
         earth(piece) for b in bags for piece in salvaged.split(reduce_record(b, period, **read))
     ]
-    terms = identifiable_terms(records, opt.terms, drop=opt.drop_unidentifiable, stdout=stdout)
-    opt = dataclasses.replace(opt, terms=terms)
+    if opt.prior is not None and (opt.terms or opt.fit_coil_lag or opt.heldout):
+        raise ValueError('--prior sets the terms and Tdot settings; drop --terms/--fit-coil-lag')
+    if opt.prior is None:  # with a fleet prior, the prior carries what a short run lacks
+        terms = identifiable_terms(records, opt.terms, drop=opt.drop_unidentifiable, stdout=stdout)
+        opt = dataclasses.replace(opt, terms=terms)
     heldout = [load_record(b) for b in opt.heldout]
     provenance = {**provenance, **salvaged.provenance()}
     result = _fit(opt, records, heldout, provenance, stdout)
@@ -290,6 +295,14 @@ def _fit(
         and not opt.leave_one_run_out
         and opt.settings.method == 'kalman'
     )
+    if opt.prior is not None:
+        from fog_temp_comp.core import prior
+
+        result = prior.calibrate_with_prior(
+            records, prior.load_prior(opt.prior), provenance=provenance
+        )
+        print(prior.format_prior_fit(result), file=stdout)
+        return result
     if automatic:
         from fog_temp_comp.core import model_choice
 
