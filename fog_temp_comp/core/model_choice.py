@@ -330,16 +330,10 @@ def _parts(
     masks = [_blocks(t) for t in tables]
     folds = []
     for k in range(BLOCKS_PER_RUN):
-        train = GridTable.concatenate(
-            [_rows(t, ~m[k]) for t, m in zip(tables, masks, strict=True)]
-        )
-        tests = [_rows(t, m[k]) for t, m in zip(tables, masks, strict=True)]
+        train = GridTable.concatenate([t.rows(~m[k]) for t, m in zip(tables, masks, strict=True)])
+        tests = [t.rows(m[k]) for t, m in zip(tables, masks, strict=True)]
         folds.append((train, tests))
     return folds
-
-
-def _rows(table: GridTable, mask: NDArray[np.bool_]) -> GridTable:
-    return table.rows(mask)
 
 
 def _log_ratios(before: FloatArray, after: FloatArray, period_s: float) -> list[float]:
