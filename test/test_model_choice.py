@@ -109,6 +109,7 @@ def test_the_paper_plant_gets_no_sensor_dynamics_and_no_t2() -> None:
     model = result.coefficients.model
     assert model.terms[:3] == PAPER_TERMS
     assert 'T2' not in model.terms
+    assert 'T_Tdot' not in model.terms
     assert result.coefficients.denoise.coil_lag_s == 0.0
     if 'Tdot_lag' in model.terms:
         lead = effective_lead_s(model.terms, model.coefficients, chosen.structure.tdot_lag_s)
@@ -116,6 +117,21 @@ def test_the_paper_plant_gets_no_sensor_dynamics_and_no_t2() -> None:
     # the chosen one (its time constant refined) scores at least as well as its grid versions
     same = [s.criterion for s in scores if s.structure.model == chosen.structure.model]
     assert chosen.criterion <= min(same)
+
+
+def test_a_rate_sensitivity_that_changes_with_temperature_is_found() -> None:
+    """A T*Tdot drift (the Shupe factor bends with temperature) is chosen and fitted.
+
+    Without the term the Tdot coefficient is right only at the cycle's mean temperature.
+    """
+    truth = (0.02, -0.015, 0.01)  # deg/h per (degC degC/min)
+    cfg = dataclasses.replace(CHAMBER, t_tdot_coefficients=truth)
+    result, scores, chosen = choose_and_calibrate([cycle(cfg).as_record()], RECOMMENDED_SETTINGS)
+    model = result.coefficients.model
+    assert 'T_Tdot' in chosen.structure.terms
+    np.testing.assert_allclose(model.coefficients[model.terms.index('T_Tdot')], truth, rtol=0.3)
+    without = min(s.criterion for s in scores if 'T_Tdot' not in s.structure.terms)
+    assert chosen.criterion < 0.9 * without
 
 
 def effective_lead_s(terms: tuple[str, ...], coefficients: np.ndarray, tau_s: float) -> np.ndarray:

@@ -6,9 +6,9 @@ steps of 1/32 or 0.1 degC, at 0.2 or 10 Hz, and the static drift may bend. So wi
 
 1. measures the temperature sensor from the bags: its quantization step and white noise
    (:func:`sensor_noise`), which set the Kalman filter's measurement variance;
-2. builds candidates (:func:`default_structures`): the paper's terms, plus ``T2``, plus the
-   lead-lag ``Tdot_lag`` at a few time constants, each with a few Kalman bandwidths (and the
-   Tdot shrinkage that keeps soaks quiet);
+2. builds candidates (:func:`default_structures`): the paper's terms, plus ``T2`` and/or
+   ``T_Tdot``, plus the lead-lag ``Tdot_lag`` or a coil lag at a few time constants, each with
+   a few Kalman bandwidths (and the Tdot shrinkage that keeps soaks quiet);
 3. scores every candidate by cross-validation that never scores a row with a fit that saw it
    (:func:`cross_validate`): with one bag, contiguous time blocks are held out in turn; with
    several, one bag at a time; with ``--heldout`` bags, on those;
@@ -47,7 +47,7 @@ from fog_temp_comp.core.calibration import (
 )
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.gls import gls_coefficients, segment_starts
-from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.model import CANDIDATE_TERMS, PAPER_TERMS
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.tdot import EstimateSeries, offline_estimates
 
@@ -202,7 +202,13 @@ def default_structures(
     shrinks: Sequence[float] = SHRINK_SIGMAS,
     lags_s: Sequence[float] = TDOT_LAGS_S,
 ) -> list[Structure]:
-    """Every candidate: the paper's terms or ``+T2``; plain, with a lead-lag, or a coil lag.
+    """Every candidate: the paper's terms and extras; plain, with a lead-lag, or a coil lag.
+
+    The terms are the paper's, ``+T2``, ``+T_Tdot`` or both (:data:`CANDIDATE_TERMS`).
+
+    ``T_Tdot`` is a rate sensitivity that changes with temperature (the fibre's Shupe factor
+    does), ``T2`` a bent static drift; neither is in the paper, and either is kept only where
+    held-out data asks for it.
 
     The lead-lag ``Tdot_lag`` fits a sensor ahead of or behind the coil; the coil lag lags the
     estimated temperature and Tdot (a coil behind the sensor); each at every time constant of
@@ -211,8 +217,7 @@ def default_structures(
     out = []
     for walk in walks:
         for shrink in shrinks:
-            for extra in ((), ('T2',)):
-                terms = (*PAPER_TERMS, *extra)
+            for terms in CANDIDATE_TERMS:
                 out.append(Structure(terms, walk, shrink))
                 out += [Structure((*terms, 'Tdot_lag'), walk, shrink, lag) for lag in lags_s]
                 out += [Structure(terms, walk, shrink, coil_lag_s=lag) for lag in lags_s]
@@ -360,11 +365,16 @@ def _score(
     logs: list[float] = []
     for train, tests in folds:
         a = train.design(terms)
-        if a.shape[0] <= a.shape[1] or np.linalg.matrix_rank(a) < a.shape[1]:
+        if a.shape[0] <= a.shape[1]:
             raise CalibrationError('too few rows or a rank-deficient fold')
         if fit == 'ols':
-            coef = np.linalg.lstsq(a, train.rate_deg_h, rcond=None)[0]
+            # lstsq's rank uses matrix_rank's default tolerance: one SVD, not two
+            coef, _, rank, _ = np.linalg.lstsq(a, train.rate_deg_h, rcond=None)
+            if rank < a.shape[1]:
+                raise CalibrationError('too few rows or a rank-deficient fold')
         else:
+            if np.linalg.matrix_rank(a) < a.shape[1]:
+                raise CalibrationError('too few rows or a rank-deficient fold')
             coef = gls_coefficients(
                 a,
                 train.rate_deg_h,
@@ -406,6 +416,10 @@ def cross_validate(
     """
     period = base.tdot_period_s
     cache: dict[float, tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
+    # grid tables depend on the estimator settings, not on the terms: structures that differ
+    # only in their terms (T2, T_Tdot) share them
+    folds_cache: dict[tuple[float, float, float, float], list[Any]] = {}
+    thresholds: dict[tuple[float, float], tuple[float, float]] = {}
     scores = []
     for structure in structures:
         result = StructureScore(structure)
@@ -417,7 +431,11 @@ def cross_validate(
             )
         train_series, test_series = cache[structure.walk]
         lag = structure.tdot_lag_s if 'Tdot_lag' in structure.terms else 0.0
-        threshold, typical = _shrink_threshold(train_series, structure.shrink_sigmas)
+        if (structure.walk, structure.shrink_sigmas) not in thresholds:
+            thresholds[structure.walk, structure.shrink_sigmas] = _shrink_threshold(
+                train_series, structure.shrink_sigmas
+            )
+        threshold, typical = thresholds[structure.walk, structure.shrink_sigmas]
         if threshold > MAX_SHRINK_FRACTION * typical:
             result.error = (
                 f'shrinkage threshold {threshold:.3g} degC/min exceeds '
@@ -426,20 +444,22 @@ def cross_validate(
             continue
         try:
             coil, shrink = structure.coil_lag_s, structure.shrink_sigmas
-            tables = [
-                table_of(r, s.lagged(coil).shaped(shrink, lag), period)
-                for r, s in zip(records, train_series, strict=True)
-            ]
-            tests = [
-                table_of(r, s.lagged(coil).shaped(shrink, lag), period)
-                for r, s in zip(heldout, test_series, strict=True)
-            ]
+            key = (structure.walk, shrink, lag, coil)
+            if key not in folds_cache:
+                tables = [
+                    table_of(r, s.lagged(coil).shaped(shrink, lag), period)
+                    for r, s in zip(records, train_series, strict=True)
+                ]
+                tests = [
+                    table_of(r, s.lagged(coil).shaped(shrink, lag), period)
+                    for r, s in zip(heldout, test_series, strict=True)
+                ]
+                folds_cache[key] = [GridTable.concatenate(tables), _parts(tables, tests)]
+            whole, folds = folds_cache[key]
             # a structure the final fit would refuse (e.g. a coil lag so long that the lagged
             # temperature no longer swings) is not a candidate
-            check_identifiable(GridTable.concatenate(tables), structure.terms)
-            result.criterion, result.parts = _score(
-                _parts(tables, tests), structure.terms, period, structure.fit
-            )
+            check_identifiable(whole, structure.terms)
+            result.criterion, result.parts = _score(folds, structure.terms, period, structure.fit)
         except CalibrationError as err:
             result.error = str(err)
     return scores
@@ -657,13 +677,14 @@ def format_scores(scores: Sequence[StructureScore], chosen: StructureScore) -> s
     for s in scores:
         if s.structure.model not in best or s.criterion < best[s.structure.model].criterion:
             best[s.structure.model] = s
-    head = f'{"model":<28} {"k":>2} {"best settings":<44} {"score":>7}'
+    width = max([len('model'), *(len(key) for key in best)])
+    head = f'{"model":<{width}} {"k":>2} {"best settings":<48} {"score":>7}'
     lines = [head, '-' * len(head)]
     for key, s in best.items():
         settings = s.structure.name[len(key) + 2 : -1]
         mark = ' <- chosen' if s.structure.model == chosen.structure.model else ''
         value = f'{s.criterion:>7.4f}' if math.isfinite(s.criterion) else f'ERROR: {s.error}'
-        lines.append(f'{key:<28} {s.structure.complexity:>2} {settings:<44} {value}{mark}')
+        lines.append(f'{key:<{width}} {s.structure.complexity:>2} {settings:<48} {value}{mark}')
     lines.append(f'chosen: {chosen.structure.name}')
     lines.append(
         '(cross-validated score: geometric mean of held-out stability after/before at 10 s and '
