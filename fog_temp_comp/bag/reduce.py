@@ -91,6 +91,7 @@ def reduce_bag(
             if keep_temperature and chunk.kind == 'temperature':
                 kept.append((chunk.stamps_s, chunk.values))
         progress.close()
+        stream.warn_unstamped()
         if stream.salvage.recovered and on_salvage is not None:
             on_salvage(stream.salvage)
         for acc, topic in ((gyro, stream.imu_topic), (temperature, stream.temp_topic)):

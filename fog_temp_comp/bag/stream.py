@@ -192,6 +192,8 @@ class BagStream:
         self.salvage = Salvage(self.path, strict=strict)
         self._salvage_mcap: list[Path] = []  # MCAP files rosbags cannot open
         self._dropped_rows = 0  # sqlite3 rows found but unreadable
+        #: topic -> messages whose header stamp was unset (0) and took their receive time
+        self.unstamped: dict[str, int] = {}
 
     def __enter__(self) -> BagStream:
         if not self.path.exists():
@@ -482,9 +484,7 @@ class BagStream:
                 read = dict.fromkeys(topics, 0)  # rows of this file read per topic
                 batches: Iterator[tuple[str, Any, list[bytes]]] = iter(())
                 if not cut:
-                    batches = scan_sqlite(
-                        file, topics, log_times=receive, batch_size=self.chunk_size
-                    )
+                    batches = scan_sqlite(file, topics, batch_size=self.chunk_size)
                 try:
                     for topic, log_ns, raws in batches:
                         for other in done:
@@ -553,7 +553,6 @@ class BagStream:
     def _sqlite_chunk(
         self, kind: str, topic: str, log_ns: Any, raws: list[bytes], decoders: dict[Any, Any]
     ) -> Chunk:
-        log_ns = None if self.time_source != 'receive' else log_ns
         chunk = self._flush(kind, (raws, log_ns, [topic]), decoders)
         if self.progress is not None:
             newest, oldest = chunk.stamps_s.max(), chunk.stamps_s.min()
@@ -589,7 +588,29 @@ class BagStream:
                     self.frame_id = batch_out.frame_id
             else:
                 values = batch_out.temperature_degC
-        return Chunk(kind, receive if self.time_source == 'receive' else stamps, values)
+        if self.time_source == 'receive':
+            return Chunk(kind, receive, values)
+        return Chunk(kind, self._stamped(kind, stamps, receive), values)
+
+    def _stamped(self, kind: str, stamps: Any, receive: Any) -> Any:
+        """Header stamps, s, with an unset one (0: a driver that never stamps) replaced by
+        the message's receive time; counted in :attr:`unstamped`."""
+        stamps = np.asarray(stamps, dtype=float)
+        unset = stamps == 0.0
+        if not unset.any() or receive.size != stamps.size:
+            return stamps
+        topic = self.imu_topic if kind == 'imu' else self.temp_topic
+        self.unstamped[topic] = self.unstamped.get(topic, 0) + int(unset.sum())
+        return np.where(unset, receive, stamps)
+
+    def warn_unstamped(self, stderr: TextIO | None = None) -> None:
+        """One ``WARNING:`` line per topic whose unset header stamps took the receive time."""
+        for topic, count in self.unstamped.items():
+            print(
+                f'WARNING: {self.path}: {count} messages on {topic} have no header stamp (0); '
+                'their receive time is used (the driver does not stamp them)',
+                file=stderr or sys.stderr,
+            )
 
 
 def _decoder(conn: Any, is_ros2: bool) -> Any:
@@ -643,6 +664,7 @@ def read_record(
         for chunk in stream.chunks():
             parts[chunk.kind].append(chunk)
         progress.close()
+        stream.warn_unstamped()
         if stream.salvage.recovered and on_salvage is not None:
             on_salvage(stream.salvage)
         for kind, topic in (('imu', stream.imu_topic), ('temperature', stream.temp_topic)):
