@@ -474,16 +474,3 @@ def test_compensate_copies_what_a_killed_mcap_recorder_left(
     np.testing.assert_array_equal(copied.rates_rad_s, intact.rates_rad_s)
     np.testing.assert_array_equal(copied.temperature_degC, intact.temperature_degC)
     assert not [p for p in tmp_path.iterdir() if p.name.startswith('.')]
-
-
-@pytest.mark.parametrize('key', ['sqlite3', 'ros1'])
-def test_compensate_refuses_a_cut_bag_with_one_line_and_writes_nothing(
-    key: str, bases: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """Compensate reads these through rosbags: refused whole, never half-written."""
-    bag = edit(copy(bases, key, tmp_path), cut_fraction(0.6))
-    out = tmp_path / ('out.bag' if key == 'ros1' else 'out')
-    code = cli.main(['compensate', str(bag), '--coeffs', str(bases['coeffs']), '-o', str(out)])
-    err = capsys.readouterr().err
-    assert code == 1 and err.startswith('ERROR: ') and 'Traceback' not in err, err
-    assert not out.exists() and not partial_dir(out).exists()

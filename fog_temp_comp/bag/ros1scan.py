@@ -64,12 +64,13 @@ _DAMAGE = (Ros1FormatError, KeyError, ValueError, OSError, struct.error, Runtime
 
 @dataclass(frozen=True)
 class Ros1Connection:
-    """A connection of the bag: id, topic, message type (``pkg/msg/Name``), definition."""
+    """A connection of the bag: id, topic, message type (``pkg/msg/Name``), definition, MD5."""
 
     id: int
     topic: str
     msgtype: str
     msgdef: str
+    md5sum: str = ''
 
 
 def _fields(header: bytes) -> dict[str, bytes]:
@@ -93,6 +94,7 @@ def _connection(fields: dict[str, bytes], info: dict[str, bytes]) -> Ros1Connect
         '/' + fields['topic'].decode().lstrip('/'),
         _msgtype(info['type'].decode()),
         info.get('message_definition', b'').decode(),
+        info.get('md5sum', b'').decode(),
     )
 
 
