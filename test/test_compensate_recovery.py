@@ -24,6 +24,7 @@ from test_bad_input import (
     edit,
     flip,
     mcap_at,
+    never_indexed,
     ros1_chunk,
     sqlite_page,
 )
@@ -120,5 +121,62 @@ def test_compensate_writes_exactly_the_recovered_messages(
     assert_array_equal(corrected.imu_stamps_s, intact.imu_stamps_s)
     assert not np.array_equal(corrected.rates_rad_s, intact.rates_rad_s)  # corrected
     assert not [p for p in tmp_path.iterdir() if p.name.startswith('.')]  # no scratch left
+    whole = messages(bases[key])
+    lost = sum(map(len, whole.values())) - len(got[IMU]) - len(got[TEMP])
+    assert lost > 0
+    if key.startswith('ros1') and kind == 'cut':  # no index, no count: said so
+        assert 'messages lost: unknown' in warning or 'more unknown' in warning, warning
+    else:  # from the statistics, the chunk infos or metadata.yaml
+        assert f'messages lost: {lost:,}' in warning, warning
+
+
+@pytest.mark.parametrize(('key', 'kind', 'match'), CASES, ids=[f'{c[0]} {c[1]}' for c in CASES])
+def test_the_messages_lost_are_counted_where_the_bag_says_how_many_there_were(
+    key: str, kind: str, match: str, bases: dict[str, Path], tmp_path: Path
+) -> None:
+    """Calibrate's readers: the loss from an index, the statistics or metadata.yaml."""
+    bag = edit(copy(bases, key, tmp_path), DAMAGES[kind] or CHUNK[key])
+    found: list[Salvage] = []
+    record = read_record(bag, on_salvage=found.append)
+    (salvage,) = found
     whole = read_record(bases[key])
-    assert intact.imu_stamps_s.size < whole.imu_stamps_s.size
+    lost = (
+        whole.imu_stamps_s.size + whole.temp_stamps_s.size
+        - record.imu_stamps_s.size - record.temp_stamps_s.size
+    )  # fmt: skip
+    assert lost > 0
+    if key.startswith('ros1') and kind == 'cut':
+        assert salvage.lost_messages is None or salvage.uncounted
+        assert 'unknown' in salvage.summary()
+        assert salvage.provenance()['messages_lost'] in (None, salvage.lost_messages)
+    else:
+        assert salvage.lost_messages == lost and not salvage.uncounted, salvage.summary()
+        assert salvage.summary().endswith(f'messages lost: {lost:,}')
+
+
+def test_a_cut_mcap_without_metadata_says_the_loss_is_unknown(
+    bases: dict[str, Path], tmp_path: Path
+) -> None:
+    """What a killed recorder leaves: no summary, no metadata.yaml: nothing counts the loss."""
+    bag = edit(copy(bases, 'mcap', tmp_path), cut_fraction(0.6))
+    (bag / 'metadata.yaml').unlink()
+    found: list[Salvage] = []
+    read_record(bag, on_salvage=found.append)
+    assert found[0].lost_messages is None
+    assert found[0].summary().endswith('messages lost: unknown')
+    assert found[0].provenance()['messages_lost'] is None
+
+
+def test_a_damaged_chunk_of_a_ros1_bag_never_indexed_is_counted_from_its_idxdata(
+    bases: dict[str, Path], tmp_path: Path
+) -> None:
+    bag = edit(copy(bases, 'ros1_lz4', tmp_path), lambda d: CHUNK['ros1_lz4'](never_indexed(d)))
+    found: list[Salvage] = []
+    record = read_record(bag, on_salvage=found.append)
+    whole = read_record(bases['ros1_lz4'])
+    lost = (
+        whole.imu_stamps_s.size + whole.temp_stamps_s.size
+        - record.imu_stamps_s.size - record.temp_stamps_s.size
+    )  # fmt: skip
+    assert 'never indexed' in found[0].summary() and found[0].skipped_chunks == 1
+    assert found[0].lost_messages == lost > 0

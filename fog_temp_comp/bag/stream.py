@@ -386,15 +386,28 @@ class BagStream:
         yield from self._scan_files(files, {c.topic: decoders[c.id] for c in conns})
 
     def _scan_files(self, files: list[Path], by_topic: dict[str, Any]) -> Iterator[Chunk]:
-        """Read MCAP files with ``scan_mcap`` (damage recorded in :attr:`salvage`)."""
+        """Read MCAP files with ``scan_mcap`` (damage recorded in :attr:`salvage`).
+
+        Where the loss is not counted otherwise, ``metadata.yaml``'s message counts (a bag
+        directory copied whole, then cut) give it.
+        """
+        read = {'imu': 0, 'temperature': 0}
         try:
             for file in files:
                 batches = scan_mcap(file, set(by_topic), salvage=self.salvage)
-                yield from self._from_spans(batches, by_topic)
+                for chunk in self._from_spans(batches, by_topic):
+                    read[chunk.kind] += chunk.stamps_s.size
+                    yield chunk
         except RecoveryError:
             raise
         except (ValueError, struct.error, RuntimeError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
+        salvage = self.salvage
+        if salvage.recovered and (salvage.lost_messages is None or salvage.uncounted):
+            expected = metadata_counts(self.path) if self.path.is_dir() else {}
+            wanted = {self.imu_topic: read['imu'], self.temp_topic: read['temperature']}
+            if expected and all(t in expected for t in wanted):
+                salvage.lost_total(sum(max(expected[t] - n, 0) for t, n in wanted.items()))
 
     def _kinds(self) -> dict[str, str]:
         """Topic -> chunk kind."""
@@ -506,10 +519,12 @@ class BagStream:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
         if self.salvage.recovered:  # lost: from metadata.yaml's counts, else rows unreadable
             expected = metadata_counts(self.path) if self.path.is_dir() else {}
-            lost = sum(max(expected[t] - n, 0) for t, n in counts.items() if t in expected)
-            lost = lost if expected else self._dropped_rows
-            if lost:
-                self.salvage.lost_messages = (self.salvage.lost_messages or 0) + lost
+            if expected:
+                self.salvage.lost_total(
+                    sum(max(expected[t] - n, 0) for t, n in counts.items() if t in expected)
+                )
+            elif self._dropped_rows:
+                self.salvage.lost_messages = (self.salvage.lost_messages or 0) + self._dropped_rows
 
     def _salvage_sqlite(
         self,
