@@ -45,6 +45,23 @@ class Salvage:
     lost_messages: int | None = None
     #: messages were lost that no count covers (``lost_messages`` is then a lower bound)
     uncounted: bool = False
+    #: stream ('gyro', 'temperature') -> (stamps earlier than one read before, stamps equal
+    #: to the one read just before), in the order read; the readers sort by stamp and keep both
+    disorder: dict[str, tuple[int, int]] = field(default_factory=dict)
+
+    def order_summary(self) -> str:
+        """One line: stamps out of order and duplicate per stream ('' when in order)."""
+        parts = [
+            f'{stream} {late:,} out of order, {same:,} duplicate'
+            for stream, (late, same) in self.disorder.items()
+            if late or same
+        ]
+        if not parts:
+            return ''
+        return (
+            f'{self.path}: stamps not in order: {"; ".join(parts)} (sorted by stamp, '
+            'duplicates kept)'
+        )
 
     @property
     def recovered(self) -> bool:

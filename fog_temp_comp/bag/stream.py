@@ -316,6 +316,30 @@ class BagStream:
     def chunks(self) -> Iterator[Chunk]:
         """Chunks of each stream in bag order; every message appears exactly once.
 
+        Stamps out of order and duplicate are counted in :attr:`salvage` (``disorder``).
+        """
+        newest = {'imu': -np.inf, 'temperature': -np.inf}
+        last = {'imu': np.nan, 'temperature': np.nan}
+        late = {'imu': 0, 'temperature': 0}
+        same = {'imu': 0, 'temperature': 0}
+        for chunk in self._chunks():
+            stamps = chunk.stamps_s
+            if stamps.size:
+                kind = chunk.kind
+                before = np.maximum.accumulate(np.r_[newest[kind], stamps[:-1]])
+                late[kind] += int((stamps < before).sum())
+                same[kind] += int((stamps == np.r_[last[kind], stamps[:-1]]).sum())
+                newest[kind] = max(newest[kind], float(stamps.max()))
+                last[kind] = float(stamps[-1])
+            yield chunk
+        self.salvage.disorder = {
+            'gyro': (late['imu'], same['imu']),
+            'temperature': (late['temperature'], same['temperature']),
+        }
+
+    def _chunks(self) -> Iterator[Chunk]:
+        """Chunks of each stream in bag order; every message appears exactly once.
+
         Within a stream, chunks follow the bag's log-time order (MCAP: chunk by chunk; the
         streams may interleave differently than in the bag). Standard ``sensor_msgs`` messages
         are decoded in batches with :mod:`fog_temp_comp.bag.cdr` (no Python object per message); a
@@ -658,7 +682,7 @@ def read_record(
         for chunk in stream.chunks():
             parts[chunk.kind].append(chunk)
         progress.close()
-        if stream.salvage.recovered and on_salvage is not None:
+        if on_salvage is not None and (stream.salvage.recovered or stream.salvage.order_summary()):
             on_salvage(stream.salvage)
         for kind, topic in (('imu', stream.imu_topic), ('temperature', stream.temp_topic)):
             if not parts[kind]:

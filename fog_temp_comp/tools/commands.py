@@ -48,9 +48,19 @@ class Salvaged:
         self.stderr = stderr
         self.found: dict[Path, Salvage] = {}
         self.non_finite: dict[str, dict[str, int]] = {}  # bag -> samples dropped per stream
+        self.disorder: dict[str, dict[str, dict[str, int]]] = {}  # bag -> stream -> counts
 
     def add(self, salvage: Salvage) -> None:
-        """Called by the readers for a damaged bag (read as far as intact)."""
+        """Called by the readers for a damaged bag (read as far as intact) or unsorted stamps."""
+        order = salvage.order_summary()
+        if order:
+            self.disorder[str(salvage.path)] = {
+                stream: {'out_of_order': late, 'duplicate': same}
+                for stream, (late, same) in salvage.disorder.items()
+            }
+            print(f'WARNING: {order}', file=self.stderr or sys.stderr)
+        if not salvage.recovered:
+            return
         self.found[salvage.path] = salvage
         print(f'WARNING: {salvage.summary()}', file=self.stderr or sys.stderr)
 
@@ -73,6 +83,8 @@ class Salvaged:
             out['recovered_inputs'] = [s.provenance() for s in self.found.values()]
         if self.non_finite:
             out['non_finite_dropped'] = dict(self.non_finite)
+        if self.disorder:
+            out['stamps_not_in_order'] = dict(self.disorder)
         return out
 
 
