@@ -223,3 +223,36 @@ def test_memory_stays_bounded_per_message(method: str) -> None:
         tracemalloc.stop()
     # one-off allocations (a cache filling, a warning registry entry) do not recur
     assert min(growth) < 5_000, f'{method}: bytes kept per 10k messages: {growth}'
+
+
+def test_a_marked_hole_restarts_the_tdot_estimate_however_short(model: DriftModel) -> None:
+    """A skipped chunk of a bag (2 s here, far under the 10 s timeout) is not bridged."""
+    t0 = 1.7e9
+    lost = (300, 301)  # 1 Hz, 0.5 degC/min, two samples lost
+
+    def ramp(comp: Compensator, stop: int, start: int = 0) -> None:
+        for k in range(start, stop):
+            if k not in lost:
+                comp.add_temperature(t0 + k, 0.5 / 60 * k)
+
+    plain, holed = Compensator(model, DenoiseSettings()), Compensator(model, DenoiseSettings())
+    holed.mark_holes([(t0 + 299.5, t0 + 301.5)])
+    ramp(plain, 310)
+    ramp(holed, 310)
+    assert plain.status.counters.temperature_gaps == 0
+    assert holed.status.counters.temperature_gaps == 1
+    # from the hole on, the same as a compensator started after it (and unlike the plain one)
+    fresh = Compensator(model, DenoiseSettings())
+    ramp(fresh, 310, start=302)
+
+    def state(comp: Compensator) -> tuple[float, float, bool]:
+        st = comp.status
+        return (st.tdot_degC_per_min, st.temperature_degC, st.estimator_ready)
+
+    assert state(holed) == state(fresh) != state(plain)
+    ramp(fresh, 600, start=310)
+    ramp(holed, 600, start=310)
+    assert state(holed) == state(fresh)
+    holed.mark_holes([(t0 + 10.0, t0 + 11.0)])  # a hole already passed changes nothing
+    holed.add_temperature(t0 + 600, 5.0)
+    assert holed.status.counters.temperature_gaps == 1

@@ -183,11 +183,23 @@ class BagWriter:
             self._blocks = None
         self._writer.close()
 
-    def add_topic(self, topic: str, msgtype: str, *, like: Connection | None = None) -> None:
-        """Register a topic; ``like`` copies definition and QoS of a connection being copied."""
+    def add_topic(
+        self,
+        topic: str,
+        msgtype: str,
+        *,
+        like: Connection | None = None,
+        definition: tuple[str, str] | None = None,
+    ) -> None:
+        """Register a topic; ``like`` copies definition and QoS of a connection being copied.
+
+        ``definition`` is a ROS 1 (message definition, MD5 sum) to write as it is.
+        """
         ts = typestore()
         kwargs: dict[str, Any] = {}
-        if like is not None and (self._ros1 or like.msgtype not in ts.types):
+        if definition is not None and self._ros1:
+            kwargs['msgdef'], kwargs['md5sum'] = definition
+        elif like is not None and (self._ros1 or like.msgtype not in ts.types):
             # ROS 1: keep the source's definition (a real ROS 1 Header has seq)
             kwargs['msgdef'] = like.msgdef.data
             kwargs['md5sum' if self._ros1 else 'rihs01'] = like.digest

@@ -167,11 +167,12 @@ class _Scanner:
                     )
             pos = nxt
 
-    def check_counts(self, salvage: Salvage | None = None) -> None:
+    def check_counts(self, salvage: Salvage | None = None, counted: int = 0) -> None:
         """At the end: the messages yielded per topic match the file's Statistics record.
 
         A Message Index that leaves out messages would otherwise lose them silently. With
-        ``salvage`` (a damaged file), a shortfall is recorded there instead of raised.
+        ``salvage`` (a damaged file), the shortfall is the count of messages lost, replacing
+        the ``counted`` ones the skipped chunks' indexes gave.
         """
         if self.channel_counts is None:
             return
@@ -180,17 +181,17 @@ class _Scanner:
             topic = self.channel_topic.get(cid)
             if topic in self.topics:
                 expected[topic] = expected.get(topic, 0) + count
+        shortfall = 0
         for topic, count in expected.items():
             got = self.yielded.get(topic, 0)
-            if got != count and salvage is not None and salvage.recovered:
-                if got < count:
-                    salvage.lost_messages = (salvage.lost_messages or 0) + count - got
-                continue
-            if got != count:
+            if got != count and not (salvage is not None and salvage.recovered):
                 raise self._error(
                     f'{got} messages found on {topic}, but the file statistics count {count} '
                     '(damaged message index?)'
                 )
+            shortfall += max(count - got, 0)
+        if salvage is not None and salvage.recovered:
+            salvage.lost_total((salvage.lost_messages or 0) - counted + shortfall)
 
     def records(self, buf: memoryview, pos: int, end: int) -> None:
         """Walk the records of ``buf[pos:end]``; wanted messages go to ``collect``."""
@@ -396,7 +397,7 @@ def scan_mcap(
                     yield from scanner.flush(cut)
                 pos = reader.skip_to_next_chunk(pos, scanner.last_log_ns)
                 if pos < 0:  # the file ends here (cut)
-                    scanner.check_counts(salvage)
+                    scanner.check_counts(salvage, reader.counted)
                     return
                 continue
             body_pos = pos + 9
@@ -404,7 +405,7 @@ def scan_mcap(
             if op in (_OP_CHUNK, _OP_FOOTER) or len(loose) > _LOOSE_BATCH:
                 yield from _walk_loose(scanner, loose)
             if op == _OP_FOOTER:
-                scanner.check_counts(salvage)
+                scanner.check_counts(salvage, reader.counted)
                 return
             if op == _OP_CHUNK:
                 body = reader.read(body_pos, length)
@@ -422,12 +423,16 @@ def scan_mcap(
                     if salvage is None:
                         raise
                     scanner.discard()
-                    pos = reader.skip_chunk(body_pos - 9, body, pos, err)
+                    channels = (set(scanner.wanted), set(scanner.channel_topic))
+                    pos = reader.skip_chunk(body_pos - 9, body, pos, err, channels)
                     continue
                 yield from scanner.flush(records)
             elif op in (_OP_MESSAGE, _OP_CHANNEL):
                 loose += reader.read(body_pos - 9, length + 9)
             # other records (header, schemas, attachments, metadata, indexes) are skipped
+
+
+_Channels = tuple[set[int], set[int]]  # wanted and known channel ids
 
 
 class _DamagedError(Exception):
@@ -470,6 +475,7 @@ class _RecordReader:
             raise ValueError(f'{path}: truncated MCAP file (no trailing magic)')
         self.end = size if self.cut else size - len(MAGIC)  # records lie in [len(MAGIC), end)
         self.read_to = 0  # file offset up to which :meth:`cut_chunk` read uncompressed records
+        self.counted = 0  # messages lost in skipped chunks, counted from their indexes
 
     def read(self, pos: int, size: int) -> bytes:
         """``size`` bytes at ``pos`` (within the records)."""
@@ -530,15 +536,31 @@ class _RecordReader:
             pos += 9 + length
         return indexes, pos
 
-    def skip_chunk(self, chunk_pos: int, body: bytes, after: int, err: Exception) -> int:
-        """Record a damaged chunk as skipped; the offset after it and its message indexes."""
+    def skip_chunk(
+        self, chunk_pos: int, body: bytes, after: int, err: Exception, channels: _Channels
+    ) -> int:
+        """Record a damaged chunk as skipped; the offset after it and its message indexes.
+
+        The messages lost are counted from its Message Index records (``channels``: the
+        wanted and the known channel ids) when they are whole and name known channels only.
+        """
         assert self.salvage is not None
+        wanted, known = channels
         pos = chunk_pos + 9 + len(body)
+        lost: int | None = 0
         while pos + 9 <= self.end:  # its Message Index records, if they look whole
             op, length = _HEADER.unpack(self.read(pos, 9))
             if op != _OP_MESSAGE_INDEX or pos + 9 + length > self.end:
                 break
+            if length >= _INDEX_HEAD.size and lost is not None:
+                cid, nbytes = _INDEX_HEAD.unpack_from(self.read(pos + 9, _INDEX_HEAD.size), 0)
+                if cid not in known or nbytes % 16:
+                    lost = None
+                elif cid in wanted:
+                    lost += nbytes // 16
             pos += 9 + length
+        if pos == chunk_pos + 9 + len(body):
+            lost = None  # no index: how many is not known
         pos = max(pos, after)
         gap = struct.unpack_from('<QQ', body) if len(body) >= 16 else None
         self.salvage.damage(
@@ -546,7 +568,9 @@ class _RecordReader:
             skipped_bytes=pos - chunk_pos,
             chunks=1,
             gap_ns=(int(gap[0]), int(gap[1])) if gap and gap[0] <= gap[1] else None,
+            lost_messages=lost,
         )
+        self.counted += lost or 0
         return pos
 
     def cut_chunk(self, pos: int) -> memoryview | None:

@@ -92,7 +92,7 @@ def reduce_bag(
                 kept.append((chunk.stamps_s, chunk.values))
         progress.close()
         stream.warn_unstamped()
-        if stream.salvage.recovered and on_salvage is not None:
+        if on_salvage is not None and (stream.salvage.recovered or stream.salvage.order_summary()):
             on_salvage(stream.salvage)
         for acc, topic in ((gyro, stream.imu_topic), (temperature, stream.temp_topic)):
             if not acc.samples:

@@ -64,12 +64,13 @@ _DAMAGE = (Ros1FormatError, KeyError, ValueError, OSError, struct.error, Runtime
 
 @dataclass(frozen=True)
 class Ros1Connection:
-    """A connection of the bag: id, topic, message type (``pkg/msg/Name``), definition."""
+    """A connection of the bag: id, topic, message type (``pkg/msg/Name``), definition, MD5."""
 
     id: int
     topic: str
     msgtype: str
     msgdef: str
+    md5sum: str = ''
 
 
 def _fields(header: bytes) -> dict[str, bytes]:
@@ -93,6 +94,7 @@ def _connection(fields: dict[str, bytes], info: dict[str, bytes]) -> Ros1Connect
         '/' + fields['topic'].decode().lstrip('/'),
         _msgtype(info['type'].decode()),
         info.get('message_definition', b'').decode(),
+        info.get('md5sum', b'').decode(),
     )
 
 
@@ -156,6 +158,8 @@ class Ros1Bag:
         self.connections: list[Ros1Connection] = []
         self.chunk_positions: list[int] = []
         self.walked = False  # chunks found by walking the data section (no usable index)
+        #: chunk position -> {connection id: message count}, from the index's chunk infos
+        self.chunk_counts: dict[int, dict[int, int]] = {}
         with self.path.open('rb') as file:
             if file.read(len(MAGIC)) != MAGIC:
                 raise Ros1FormatError(f'{self.path}: not a ROS 1 bag of format 2.0')
@@ -194,11 +198,14 @@ class Ros1Bag:
                 raise Ros1FormatError(f'{self.path}: damaged connection records')
             self.connections.append(_connection(fields, info))
         for _ in range(chunk_count):
-            header, _ = self._record(file)
+            header, data = self._record(file)
             fields = _fields(header)
             if fields.get('op') != bytes([_OP_CHUNK_INFO]):
                 raise Ros1FormatError(f'{self.path}: damaged chunk info records')
-            self.chunk_positions.append(struct.unpack('<Q', fields['chunk_pos'])[0])
+            position = struct.unpack('<Q', fields['chunk_pos'])[0]
+            self.chunk_positions.append(position)
+            pairs = np.frombuffer(data[: len(data) // 8 * 8], dtype='<u4').reshape(-1, 2)
+            self.chunk_counts[position] = {int(c): int(n) for c, n in pairs.tolist()}
 
     def _walk(self, file: BinaryIO) -> None:
         """Find chunks and connections in the data section (no index); records the damage."""
@@ -351,10 +358,14 @@ class Ros1Bag:
                     if self.salvage is None:
                         raise
                     end = min(self._chunk_end(file, position, size), size)
+                    counts = self._lost_counts(file, position, size)
                     self.salvage.damage(
                         f'damaged chunk at byte {position} ({err})',
                         skipped_bytes=end - position,
                         chunks=1,
+                        lost_messages=None
+                        if counts is None
+                        else sum(n for c, n in counts.items() if c in conns),
                     )
                     gap_from = newest if gap_from is None else gap_from
                     continue
@@ -367,6 +378,29 @@ class Ros1Bag:
                     yield batch
         if gap_from is not None and self.salvage is not None:
             self.salvage.gaps_ns.append((gap_from, None))
+
+    def _lost_counts(self, file: BinaryIO, position: int, size: int) -> dict[int, int] | None:
+        """Messages per connection in the chunk at ``position`` (None: not known).
+
+        From the index's chunk info, else from the ``IDXDATA`` records after the chunk.
+        """
+        if position in self.chunk_counts:
+            return self.chunk_counts[position]
+        record = self._head(file, position, size)
+        if record is None or record[1] + record[2] > size:
+            return None
+        counts: dict[int, int] = {}
+        pos = record[1] + record[2]
+        while (head := self._head(file, pos, size)) is not None:
+            fields, body_at, body_len = head
+            if fields.get('op') != bytes([_OP_INDEX_DATA]) or body_at + body_len > size:
+                break
+            if len(fields.get('conn', b'')) != 4 or len(fields.get('count', b'')) != 4:
+                return None
+            conn, count = _U32.unpack(fields['conn'])[0], _U32.unpack(fields['count'])[0]
+            counts[conn] = counts.get(conn, 0) + count
+            pos = body_at + body_len
+        return counts or None
 
     def _chunk_end(self, file: BinaryIO, position: int, size: int) -> int:
         """Offset after the chunk record at ``position`` and its IDXDATA records."""

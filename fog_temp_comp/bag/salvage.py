@@ -43,6 +43,25 @@ class Salvage:
     skipped_chunks: int = 0
     gaps_ns: list[tuple[int, int | None]] = field(default_factory=list)
     lost_messages: int | None = None
+    #: messages were lost that no count covers (``lost_messages`` is then a lower bound)
+    uncounted: bool = False
+    #: stream ('gyro', 'temperature') -> (stamps earlier than one read before, stamps equal
+    #: to the one read just before), in the order read; the readers sort by stamp and keep both
+    disorder: dict[str, tuple[int, int]] = field(default_factory=dict)
+
+    def order_summary(self) -> str:
+        """One line: stamps out of order and duplicate per stream ('' when in order)."""
+        parts = [
+            f'{stream} {late:,} out of order, {same:,} duplicate'
+            for stream, (late, same) in self.disorder.items()
+            if late or same
+        ]
+        if not parts:
+            return ''
+        return (
+            f'{self.path}: stamps not in order: {"; ".join(parts)} (sorted by stamp, '
+            'duplicates kept)'
+        )
 
     @property
     def recovered(self) -> bool:
@@ -71,6 +90,13 @@ class Salvage:
             self.gaps_ns.append(gap_ns)
         if lost_messages is not None:
             self.lost_messages = (self.lost_messages or 0) + lost_messages
+        elif chunks or (gap_ns is not None and gap_ns[1] is None):
+            self.uncounted = True  # a skipped chunk or a cut tail, count not known
+
+    def lost_total(self, count: int) -> None:
+        """Set the messages lost from a count of the whole bag (statistics, metadata)."""
+        self.lost_messages = int(count)
+        self.uncounted = False
 
     def gap_spans_s(self) -> list[tuple[float, float | None]]:
         """The skipped log-time spans in s."""
@@ -87,6 +113,8 @@ class Salvage:
                 else f'log time {start:.3f}-{end:.3f} s ({end - start:.1f} s)'
             )  # fmt: skip
         lost = 'unknown' if self.lost_messages is None else f'{self.lost_messages:,}'
+        if self.lost_messages is not None and self.uncounted:
+            lost = f'at least {lost} (more unknown)'
         parts.append(f'messages lost: {lost}')
         return f'{self.path}: recovered ({"; ".join(self.notes)}): {", ".join(parts)}'
 
@@ -101,6 +129,7 @@ class Salvage:
                 [float(a), None if b is None else float(b)] for a, b in self.gap_spans_s()
             ],
             'messages_lost': self.lost_messages,
+            'messages_lost_is_lower_bound': self.uncounted and self.lost_messages is not None,
         }
 
 

@@ -318,6 +318,30 @@ class BagStream:
     def chunks(self) -> Iterator[Chunk]:
         """Chunks of each stream in bag order; every message appears exactly once.
 
+        Stamps out of order and duplicate are counted in :attr:`salvage` (``disorder``).
+        """
+        newest = {'imu': -np.inf, 'temperature': -np.inf}
+        last = {'imu': np.nan, 'temperature': np.nan}
+        late = {'imu': 0, 'temperature': 0}
+        same = {'imu': 0, 'temperature': 0}
+        for chunk in self._chunks():
+            stamps = chunk.stamps_s
+            if stamps.size:
+                kind = chunk.kind
+                before = np.maximum.accumulate(np.r_[newest[kind], stamps[:-1]])
+                late[kind] += int((stamps < before).sum())
+                same[kind] += int((stamps == np.r_[last[kind], stamps[:-1]]).sum())
+                newest[kind] = max(newest[kind], float(stamps.max()))
+                last[kind] = float(stamps[-1])
+            yield chunk
+        self.salvage.disorder = {
+            'gyro': (late['imu'], same['imu']),
+            'temperature': (late['temperature'], same['temperature']),
+        }
+
+    def _chunks(self) -> Iterator[Chunk]:
+        """Chunks of each stream in bag order; every message appears exactly once.
+
         Within a stream, chunks follow the bag's log-time order (MCAP: chunk by chunk; the
         streams may interleave differently than in the bag). Standard ``sensor_msgs`` messages
         are decoded in batches with :mod:`fog_temp_comp.bag.cdr` (no Python object per message); a
@@ -388,15 +412,28 @@ class BagStream:
         yield from self._scan_files(files, {c.topic: decoders[c.id] for c in conns})
 
     def _scan_files(self, files: list[Path], by_topic: dict[str, Any]) -> Iterator[Chunk]:
-        """Read MCAP files with ``scan_mcap`` (damage recorded in :attr:`salvage`)."""
+        """Read MCAP files with ``scan_mcap`` (damage recorded in :attr:`salvage`).
+
+        Where the loss is not counted otherwise, ``metadata.yaml``'s message counts (a bag
+        directory copied whole, then cut) give it.
+        """
+        read = {'imu': 0, 'temperature': 0}
         try:
             for file in files:
                 batches = scan_mcap(file, set(by_topic), salvage=self.salvage)
-                yield from self._from_spans(batches, by_topic)
+                for chunk in self._from_spans(batches, by_topic):
+                    read[chunk.kind] += chunk.stamps_s.size
+                    yield chunk
         except RecoveryError:
             raise
         except (ValueError, struct.error, RuntimeError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
+        salvage = self.salvage
+        if salvage.recovered and (salvage.lost_messages is None or salvage.uncounted):
+            expected = metadata_counts(self.path) if self.path.is_dir() else {}
+            wanted = {self.imu_topic: read['imu'], self.temp_topic: read['temperature']}
+            if expected and all(t in expected for t in wanted):
+                salvage.lost_total(sum(max(expected[t] - n, 0) for t, n in wanted.items()))
 
     def _kinds(self) -> dict[str, str]:
         """Topic -> chunk kind."""
@@ -475,7 +512,6 @@ class BagStream:
             self.temp_topic: cdr.decode_temperature_cdr,
         }
         counts = dict.fromkeys(topics, 0)
-        receive = self.time_source == 'receive'
         try:
             for file in files:
                 page_size, pages = expected_pages(file)
@@ -506,10 +542,12 @@ class BagStream:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
         if self.salvage.recovered:  # lost: from metadata.yaml's counts, else rows unreadable
             expected = metadata_counts(self.path) if self.path.is_dir() else {}
-            lost = sum(max(expected[t] - n, 0) for t, n in counts.items() if t in expected)
-            lost = lost if expected else self._dropped_rows
-            if lost:
-                self.salvage.lost_messages = (self.salvage.lost_messages or 0) + lost
+            if expected:
+                self.salvage.lost_total(
+                    sum(max(expected[t] - n, 0) for t, n in counts.items() if t in expected)
+                )
+            elif self._dropped_rows:
+                self.salvage.lost_messages = (self.salvage.lost_messages or 0) + self._dropped_rows
 
     def _salvage_sqlite(
         self,
@@ -593,8 +631,10 @@ class BagStream:
         return Chunk(kind, self._stamped(kind, stamps, receive), values)
 
     def _stamped(self, kind: str, stamps: Any, receive: Any) -> Any:
-        """Header stamps, s, with an unset one (0: a driver that never stamps) replaced by
-        the message's receive time; counted in :attr:`unstamped`."""
+        """Header stamps, s; an unset one (0: a driver that never stamps) takes its receive time.
+
+        Counted per topic in :attr:`unstamped`.
+        """
         stamps = np.asarray(stamps, dtype=float)
         unset = stamps == 0.0
         if not unset.any() or receive.size != stamps.size:
@@ -665,7 +705,7 @@ def read_record(
             parts[chunk.kind].append(chunk)
         progress.close()
         stream.warn_unstamped()
-        if stream.salvage.recovered and on_salvage is not None:
+        if on_salvage is not None and (stream.salvage.recovered or stream.salvage.order_summary()):
             on_salvage(stream.salvage)
         for kind, topic in (('imu', stream.imu_topic), ('temperature', stream.temp_topic)):
             if not parts[kind]:

@@ -8,7 +8,7 @@ output depends only on the messages fed before it.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -204,6 +204,27 @@ class Compensator:
         ]
         self._coefficient_rows = model.coefficients.tolist()
         self._horizon_s = 2 * denoise.tdot_period_s + self._guard.temperature_timeout_s
+        self._holes: list[float] = []  # midpoints (s) of spans known lost, not yet passed
+        self._next_hole = math.inf
+
+    def mark_holes(self, spans_s: Sequence[tuple[float, float]]) -> None:
+        """Spans (start, end in s) where input is known lost (a skipped chunk of a bag).
+
+        The first temperature at or after a span's midpoint, when the previous one came before
+        it, restarts the Tdot estimate as a temperature gap does (counted in
+        ``temperature_gaps``): no estimate is bridged across a hole, however short.
+        """
+        self._holes = sorted((a + b) / 2 for a, b in spans_s)
+        self._next_hole = self._holes[0] if self._holes else math.inf
+
+    def _crosses_hole(self, stamp_s: float) -> bool:
+        """Whether a temperature at ``stamp_s`` lies past a hole the previous one was before."""
+        last = self.status.last_temperature_stamp_s
+        crossed = False
+        while self._holes and self._holes[0] <= stamp_s:
+            crossed = crossed or last < self._holes.pop(0)
+        self._next_hole = self._holes[0] if self._holes else math.inf
+        return crossed
 
     @property
     def guard(self) -> GuardSettings:
@@ -250,7 +271,10 @@ class Compensator:
             counters.time_jumps += 1
             self.reset()
             status = self.status
-        elif stamp_s - last > guard.temperature_timeout_s and status.has_temperature:
+        elif status.has_temperature and (
+            stamp_s - last > guard.temperature_timeout_s
+            or (stamp_s >= self._next_hole and self._crosses_hole(stamp_s))
+        ):
             counters.temperature_gaps += 1
             self._restart_estimate()
         elif not self._plausible(stamp_s, temperature_degC):

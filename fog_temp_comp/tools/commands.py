@@ -5,9 +5,8 @@ from __future__ import annotations
 import dataclasses
 import shutil
 import sys
-import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
@@ -18,6 +17,7 @@ import yaml
 from fog_temp_comp.bag import bagio, cdr, mcapwrite
 from fog_temp_comp.bag.bagio import BagError, BagWriter
 from fog_temp_comp.bag.reduce import reduce_record
+from fog_temp_comp.bag.repair import repaired_bag
 from fog_temp_comp.bag.salvage import Salvage, finite_only, split_at_gaps
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.calibration import CalibrationError, CalibrationResult, calibrate_detailed
@@ -48,9 +48,19 @@ class Salvaged:
         self.stderr = stderr
         self.found: dict[Path, Salvage] = {}
         self.non_finite: dict[str, dict[str, int]] = {}  # bag -> samples dropped per stream
+        self.disorder: dict[str, dict[str, dict[str, int]]] = {}  # bag -> stream -> counts
 
     def add(self, salvage: Salvage) -> None:
-        """Called by the readers for a damaged bag (read as far as intact)."""
+        """Called by the readers for a damaged bag (read as far as intact) or unsorted stamps."""
+        order = salvage.order_summary()
+        if order:
+            self.disorder[str(salvage.path)] = {
+                stream: {'out_of_order': late, 'duplicate': same}
+                for stream, (late, same) in salvage.disorder.items()
+            }
+            print(f'WARNING: {order}', file=self.stderr or sys.stderr)
+        if not salvage.recovered:
+            return
         self.found[salvage.path] = salvage
         print(f'WARNING: {salvage.summary()}', file=self.stderr or sys.stderr)
 
@@ -73,6 +83,8 @@ class Salvaged:
             out['recovered_inputs'] = [s.provenance() for s in self.found.values()]
         if self.non_finite:
             out['non_finite_dropped'] = dict(self.non_finite)
+        if self.disorder:
+            out['stamps_not_in_order'] = dict(self.disorder)
         return out
 
 
@@ -513,43 +525,27 @@ def compensate_command(
     if out_bag.exists():
         raise FileExistsError(f'{out_bag}: exists already, not overwriting')
     settings = effective_settings(coeffs, denoise_method)
-    compensator = Compensator(coeffs.model, settings, guard, rest)
-    fmt = bagio.bag_format(in_bag)
     if output_topic and not output_topic.startswith('/'):
         output_topic = '/' + output_topic
-    with (
-        readable_bag(in_bag, out_bag.parent, strict=strict) as source,
-        bagio.open_bag(source) as reader,
-        AtomicOutputs(out_bag) as out,  # complete, or nothing at out_bag
-    ):
+    run = _Compensate(
+        in_bag=in_bag,
+        fmt=bagio.bag_format(in_bag),
+        topics=(gyro_topic, temp_topic, output_topic),
+        new_compensator=lambda: Compensator(coeffs.model, settings, guard, rest),
+        fast=fast,
+    )
+    with AtomicOutputs(out_bag) as out:  # complete, or nothing at out_bag
         target = out.path(out_bag)
-        job = _CompensateJob(
-            reader=reader,
-            in_bag=in_bag,
-            out_bag=target,
-            fmt=fmt,
-            imu_name=bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic'),
-            temp_name=bagio.resolve_topic(
-                reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic'
-            ),
-            output_topic=output_topic,
-            compress=fmt == 'mcap' and _compressed_mcap(source),
-        )
-        if output_topic in reader.topics:
-            raise BagError(f'--output-topic {output_topic}: already in {in_bag}; choose another')
-        mcap = None
-        block = fast and reader.is2 and compensator.rest is None
-        if block and not blockreplay.per_message_compressed(reader):
-            mcap = blockreplay.single_mcap_file(source)
-        result = None
-        if mcap is not None:
-            try:
-                result = job.run(compensator, mcap=mcap)
-            except (blockreplay.UnsupportedError, ValueError):
-                remove_bag(target)  # the per-message path decides (and words any error)
-                compensator = Compensator(coeffs.model, settings, guard, rest)
-        if result is None:
-            result = job.run(compensator, batched=fast)
+        try:
+            with repaired_bag(in_bag, out_bag.parent, strict=strict) as (source, salvage):
+                result, compensator = run.into(target, source, salvage)
+        except ReplayError as err:  # damage that shows only when read: copy what is intact
+            remove_bag(target)
+            with repaired_bag(in_bag, out_bag.parent, strict=strict, failure=err) as (
+                source,
+                salvage,
+            ):
+                result, compensator = run.into(target, source, salvage)
     n_out, counters = result
     print(
         f'wrote {out_bag}: {n_out} corrected Imu on {output_topic} '
@@ -569,6 +565,72 @@ def compensate_command(
             file=stdout,
         )
     return 0
+
+
+class ReplayError(BagError):
+    """Reading the input failed while replaying it (a damaged bag: copied and tried again)."""
+
+
+@dataclass
+class _Compensate:
+    """The settings of one ``compensate`` run, applied to a (possibly repaired) input."""
+
+    in_bag: Path
+    fmt: str
+    topics: tuple[str | None, str | None, str]  # gyro, temperature, output
+    new_compensator: Callable[[], Compensator]
+    fast: bool
+
+    def into(
+        self, target: Path, source: Path, salvage: Salvage | None
+    ) -> tuple[tuple[int, CompensatorCounters], Compensator]:
+        """Write ``target`` from ``source``; (written, counters) and the compensator used.
+
+        ``salvage`` (a repaired copy) is reported on stderr, and the spans it skipped inside
+        the run restart the Tdot estimate (no correction bridged across a hole).
+        """
+        if salvage is not None:
+            Salvaged().add(salvage)
+        holes = [(a, b) for a, b in (salvage.gap_spans_s() if salvage else []) if b is not None]
+        gyro_topic, temp_topic, output_topic = self.topics
+        compensator = self.new_compensator()
+        compensator.mark_holes(holes)
+        opened = ExitStack()
+        try:
+            reader = opened.enter_context(bagio.open_bag(source))
+        except BagError as err:
+            if salvage is not None:
+                raise
+            raise ReplayError(str(err)) from err  # a stale metadata.yaml, ...: copy it
+        with opened:
+            job = _CompensateJob(
+                reader=reader,
+                in_bag=self.in_bag,
+                out_bag=target,
+                fmt=self.fmt,
+                imu_name=bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic'),
+                temp_name=bagio.resolve_topic(
+                    reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic'
+                ),
+                output_topic=output_topic,
+                compress=self.fmt == 'mcap' and _compressed_mcap(source),
+            )
+            if output_topic in reader.topics:
+                raise BagError(
+                    f'--output-topic {output_topic}: already in {self.in_bag}; choose another'
+                )
+            mcap = None
+            block = self.fast and reader.is2 and compensator.rest is None
+            if block and not blockreplay.per_message_compressed(reader):
+                mcap = blockreplay.single_mcap_file(source)
+            if mcap is not None:
+                try:
+                    return job.run(compensator, mcap=mcap), compensator
+                except (blockreplay.UnsupportedError, ValueError):
+                    remove_bag(target)  # the per-message path decides (and words any error)
+                    compensator = self.new_compensator()
+                    compensator.mark_holes(holes)
+            return job.run(compensator, batched=self.fast), compensator
 
 
 def _compressed_mcap(bag: Path) -> bool:
@@ -620,8 +682,8 @@ class _CompensateJob:
                 mcap is not None and isinstance(err, (blockreplay.UnsupportedError, ValueError))
             ):
                 raise
-            raise BagError(
-                f'{self.in_bag}: failed while replaying (truncated bag?): {err}'
+            raise ReplayError(
+                f'{self.in_bag}: failed while replaying (damaged bag?): {err}'
             ) from err
         return n_out, compensator.status.counters
 
@@ -650,41 +712,6 @@ class _CompensateJob:
                 for topic, log_ns, raw in out:
                     writer.write_raw(topic, log_ns, raw)
         return n_out
-
-
-@contextmanager
-def readable_bag(path: Path, scratch: Path, *, strict: bool) -> Iterator[Path]:
-    """``path``, or a repaired copy (in ``scratch``) of an MCAP bag a killed recorder left.
-
-    A cut MCAP file (no trailing magic) or an MCAP bag directory without ``metadata.yaml`` is
-    copied with :func:`fog_temp_comp.bag.repair.repair_mcap` (what is intact, all topics), with
-    a warning on stderr; with ``strict`` it is refused. Other bags are read as they are.
-    """
-    files = [path] if path.suffix == '.mcap' else sorted(path.glob('*.mcap'))
-    cut = [f for f in files if f.is_file() and not _ends_with_magic(f)]
-    bare = path.is_dir() and bool(files) and not (path / 'metadata.yaml').is_file()
-    if not (cut or bare):
-        yield path
-        return
-    from fog_temp_comp.bag.repair import repair_mcap
-
-    salvage = Salvage(path, strict=strict)
-    if bare:
-        salvage.damage('no metadata.yaml (recorder killed?): read the .mcap files')
-    with tempfile.TemporaryDirectory(dir=scratch, prefix=f'.{path.name}.repaired-') as tmp:
-        repaired = repair_mcap(files, Path(tmp) / path.stem, salvage)
-        Salvaged().add(salvage)
-        yield repaired
-
-
-def _ends_with_magic(file: Path) -> bool:
-    """Whether an MCAP file has its trailing magic (a recorder that closed it)."""
-    from fog_temp_comp.bag.mcapscan import MAGIC
-
-    with file.open('rb') as handle:
-        size = handle.seek(0, 2)
-        handle.seek(max(size - len(MAGIC), 0))
-        return size >= 2 * len(MAGIC) and handle.read() == MAGIC
 
 
 def effective_settings(coeffs: Coefficients, denoise_method: str | None) -> DenoiseSettings:
