@@ -1,0 +1,83 @@
+"""A driver that never stamps its messages (header stamp 0): the receive time is used, with a warning."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from fog_temp_comp.bag.bagio import BagWriter, make_imu, make_temperature, s_to_stamp_ns
+from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.tools import cli
+from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig, simulate_run
+
+SMALL = SimulationConfig(
+    imu_hz=0.5,
+    temp_hz=0.5,
+    low_degC=10.0,
+    high_degC=30.0,
+    start_degC=20.0,
+    cycle_soak_s=300.0,
+    soak_duration_s=300.0,
+)
+IMU, TEMP = '/imu/data_raw', '/imu/temperature'
+
+
+@pytest.fixture(scope='module')
+def run() -> SimulatedRun:
+    return simulate_run('cycle', 2.0, SMALL, seed=5)
+
+
+def write(path: Path, fmt: str, run: SimulatedRun, *, unstamped: str = '') -> Path:
+    """The run as a bag, log time = true stamp; ``unstamped`` topic written with stamp 0."""
+    items = [(s, 0, k) for k, s in enumerate(run.temp_stamps_s.tolist())]
+    items += [(s, 1, k) for k, s in enumerate(run.imu_stamps_s.tolist())]
+    with BagWriter(path, fmt) as writer:
+        writer.add_topic(TEMP, 'sensor_msgs/msg/Temperature')
+        writer.add_topic(IMU, 'sensor_msgs/msg/Imu')
+        for stamp_s, which, k in sorted(items):
+            log = s_to_stamp_ns(stamp_s)
+            topic = TEMP if which == 0 else IMU
+            header = 0 if topic == unstamped else log
+            if topic == IMU:
+                writer.write(IMU, log, make_imu(header, 'imu', run.rates_rad_s[k]))
+            else:
+                value = float(run.temperature_degC[k])
+                writer.write(TEMP, log, make_temperature(header, 'imu', value))
+    return path
+
+
+def name(fmt: str, stem: str) -> str:
+    return f'{stem}.bag' if fmt == 'ros1' else stem
+
+
+@pytest.mark.parametrize('fmt', ['mcap', 'sqlite3', 'ros1'])
+@pytest.mark.parametrize('topic', [TEMP, IMU])
+def test_unset_header_stamps_take_the_receive_time(
+    fmt: str, topic: str, run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    good = read_record(write(tmp_path / name(fmt, 'good'), fmt, run))
+    assert 'WARNING' not in capsys.readouterr().err
+    bad = read_record(write(tmp_path / name(fmt, 'bad'), fmt, run, unstamped=topic))
+    err = capsys.readouterr().err
+    count = run.temp_stamps_s.size if topic == TEMP else run.imu_stamps_s.size
+    assert f'{count} messages on {topic} have no header stamp' in err
+    np.testing.assert_array_equal(bad.temp_stamps_s, good.temp_stamps_s)
+    np.testing.assert_array_equal(bad.imu_stamps_s, good.imu_stamps_s)
+    np.testing.assert_array_equal(bad.temperature_degC, good.temperature_degC)
+
+
+def test_calibrate_on_an_unstamped_temperature_equals_the_stamped_one(
+    run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    coeffs = {}
+    for label, unstamped in (('good', ''), ('bad', TEMP)):
+        bag = write(tmp_path / label, 'mcap', run, unstamped=unstamped)
+        out = tmp_path / f'{label}.yaml'
+        args = ['calibrate', str(bag), '-o', str(out), '--terms', 'const,T,Tdot', '--quiet']
+        assert cli.main(args) == 0
+        coeffs[label] = yaml.safe_load(out.read_text())['axes']
+    assert 'have no header stamp' in capsys.readouterr().err
+    assert coeffs['bad'] == coeffs['good']
