@@ -1,4 +1,4 @@
-"""A driver that never stamps its messages (header stamp 0): the receive time is used, with a warning."""
+"""A driver that never stamps (header stamp 0): the receive time is used, with a warning."""
 
 from __future__ import annotations
 
