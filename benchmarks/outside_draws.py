@@ -1,0 +1,120 @@
+"""The default pipeline on gyros outside the accuracy study's draw ranges.
+
+Run by hand (not in CI)::
+
+    .venv/bin/python benchmarks/outside_draws.py                      # plants 100 and 900
+    .venv/bin/python benchmarks/outside_draws.py --plants 103 --variants t_tdot coarse_q
+
+``benchmarks/accuracy.py`` draws its plants from stated ranges; a user's gyro may sit outside
+them. Each variant takes a drawn plant (:func:`fog_temp_comp.tools.plants.draw_plant`) and
+changes one thing beyond those ranges:
+
+- ``t_tdot``: a Tdot sensitivity that changes with temperature (``T * Tdot``; 0.01-0.02
+  deg/h per degC degC/min, i.e. the Tdot coefficient moves by about 1 deg/h/(degC/min) over
+  -40..60 degC), which the study never draws;
+- ``slow_temp``: temperature at 0.1 Hz;
+- ``big_t2``: T^2 of 3e-4 deg/h/degC^2 (5x the study's largest);
+- ``coarse_q``: 0.25 degC quantization;
+- ``imu10``: gyro at 10 Hz;
+- ``noisy_gyro``: 0.1 deg/h 10 s noise (a tactical-grade gyro).
+
+The paper's protocol runs on each with default settings (as ``benchmarks/accuracy.py``), and
+with the paper's terms for comparison; figures are against the oracle.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+from collections.abc import Sequence
+
+import numpy as np
+from accuracy import TRAINING_RUN, metrics
+
+from fog_temp_comp.core.calibration import calibrate
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.evaluate import compensate_record
+from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.model_choice import choose_and_calibrate
+from fog_temp_comp.core.units import RAD_S_PER_DEG_H
+from fog_temp_comp.tools.plants import draw_plant
+from fog_temp_comp.tools.simulate import SimulationConfig, simulate_plan
+
+VARIANTS = ('base', 't_tdot', 'slow_temp', 'big_t2', 'coarse_q', 'imu10', 'noisy_gyro')
+
+
+def variant(name: str, cfg: SimulationConfig) -> SimulationConfig:
+    """``cfg`` with one property moved outside the study's draw ranges."""
+    changes: dict[str, object] = {
+        'base': {},
+        't_tdot': {'t_tdot_coefficients': (0.02, -0.015, 0.01)},
+        'slow_temp': {'temp_hz': 0.1},
+        'big_t2': {'t2_coefficients': tuple(3e-4 * np.sign(v) for v in cfg.t2_coefficients)},
+        'coarse_q': {'temp_quantum_degC': 0.25},
+        'imu10': {'imu_hz': 10.0},
+        'noisy_gyro': {'arw_10s_deg_h': 0.1},
+    }[name]
+    return dataclasses.replace(cfg, **changes)  # type: ignore[arg-type]
+
+
+def study(plant: int, name: str, seed: int = 0) -> dict[str, object]:
+    """Oracle, default and the paper's terms on one variant of one plant."""
+    cfg = variant(name, draw_plant(plant))
+    runs = simulate_plan(cfg, seed=seed)
+    held = {n: r for n, r in runs.items() if n != TRAINING_RUN}
+    train = [runs[TRAINING_RUN].as_record()]
+    rows = {
+        'oracle': metrics(
+            runs,
+            {n: r.rates_rad_s - r.true_drift_deg_h * RAD_S_PER_DEG_H for n, r in held.items()},
+        )
+    }
+    t0 = time.perf_counter()
+    result, _, chosen = choose_and_calibrate(train, RECOMMENDED_SETTINGS)
+    seconds = time.perf_counter() - t0
+    coeffs = result.coefficients
+    rows['default'] = metrics(
+        runs, {n: compensate_record(r.as_record(), coeffs) for n, r in held.items()}
+    )
+    paper = calibrate(train, RECOMMENDED_SETTINGS, terms=PAPER_TERMS)
+    rows['paper terms'] = metrics(
+        runs, {n: compensate_record(r.as_record(), paper) for n, r in held.items()}
+    )
+    return {'rows': rows, 'chosen': chosen.structure.model, 'calibrate_s': seconds}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the variants; print one table."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--plants', type=int, nargs='+', default=[100, 900])
+    parser.add_argument('--variants', nargs='+', choices=VARIANTS, default=list(VARIANTS))
+    args = parser.parse_args(argv)
+    head = (
+        '| plant | variant | chosen | pipeline | 10 s ratio - oracle | 100 s / oracle '
+        '| range cycles - oracle | range soaks - oracle |'
+    )
+    print(head)
+    print('|' + '---|' * 8)
+    for plant in args.plants:
+        for name in args.variants:
+            res = study(plant, name)
+            rows = res['rows']
+            assert isinstance(rows, dict)
+            o = rows['oracle']
+            for label in ('default', 'paper terms'):
+                r = rows[label]
+                first = '| | | '
+                if label == 'default':
+                    first = f'| {plant} | {name} | {res["chosen"]} '
+                print(
+                    f'{first}| {label} | {r["r10"] - o["r10"]:+.4f} | {r["s100"] / o["s100"]:.2f} '
+                    f'| {r["range_cycles"] - o["range_cycles"]:+.3f} '
+                    f'| {r["range_soaks"] - o["range_soaks"]:+.3f} |',
+                    flush=True,
+                )
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
