@@ -197,7 +197,7 @@ def test_settings_are_checked() -> None:
 def replay_forcing(
     sc: Scenario, settings: RestSettings, force_at_s: float
 ) -> tuple[np.ndarray, Compensator]:
-    """Replay ``sc`` calling ``force_next_window`` at ``force_at_s``; error (deg/h), compensator."""
+    """Replay ``sc``, forcing the next window at ``force_at_s``; error (deg/h), compensator."""
     compensator = Compensator(MODEL, DENOISE, rest=settings)
     assert compensator.rest is not None
     cut_imu = int(np.searchsorted(sc.imu_stamps_s, sc.imu_stamps_s[0] + force_at_s))

@@ -433,8 +433,8 @@ class CompensatorShell(_NodeBase):
         response.success = True
         response.message = (
             f'armed: the next {settings.window_s:g} s window is learned without the rest '
-            f'checks, if its residual is within rest_residual_limit_deg_h '
-            f'{settings.residual_limit_deg_h:g}; learned so far {so_far} deg/h (x, y, z) from '
+            f'checks, if its residual is within {settings.residual_limit_deg_h:g} deg/h '
+            f'(rest_residual_limit_deg_h); learned so far {so_far} deg/h (x, y, z) from '
             f'{st.windows_rest} windows; the outcome is logged and in /diagnostics '
             '(rest_forced_outcome)'
         )
@@ -857,6 +857,7 @@ class CompensatorShell(_NodeBase):
         elapsed = max(now - self._last_report_time, 1e-9)
         counters = self.compensator.status.counters
         previous = self._last_counters
+        self._check_forced_window()  # first: the report shows the file it may write
         report = build_report(
             self.compensator.status,
             previous,
@@ -876,7 +877,6 @@ class CompensatorShell(_NodeBase):
             ),
         )
         self._log_console(counters, previous)
-        self._check_forced_window()
         self._last_counters = dataclasses.replace(counters)
         self._last_report_time = now
         status = DiagnosticStatus(
