@@ -851,3 +851,36 @@ def test_calibrate_shows_progress_on_stderr(
     last = capsys.readouterr().err.strip().split('\r')[-1]
     assert last.startswith(f'reading {cal_bag.name}: ')
     assert last.endswith(' s of data')
+
+
+def test_simulate_cli_turn_on_shift_and_rest_motion_phases(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / 'sim'
+    argv = ['simulate', str(out), '--runs', 'soak:20', '--imu-hz', '2', '--seed', '4']
+    argv += ['--turn-on-shift-deg-h', '3,-2,1.5', '--motion-period-s', '120']
+    argv += ['--motion-fraction', '0.25', '--motion-rate-deg-s', '2']
+    assert cli.main(argv) == 0
+    manifest = yaml.safe_load((out / 'manifest.yaml').read_text())
+    assert manifest['turn_on_shift_deg_h'] == {'x': 3.0, 'y': -2.0, 'z': 1.5}
+    assert (manifest['motion_period_s'], manifest['motion_fraction']) == (120.0, 0.25)
+    assert [r['name'] for r in manifest['runs']] == ['soak_20']
+    record = read_record(out / manifest['runs'][0]['bag'])
+    with np.load(out / manifest['runs'][0]['truth']) as npz:
+        truth = {k: npz[k] for k in npz.files}
+    assert_array_equal(truth['turn_on_shift_deg_h'], [3.0, -2.0, 1.5])
+    rotation_deg_h = truth['true_rotation_rad_s'] * DEG_H_PER_RAD_S
+    phase_s = np.mod(record.imu_stamps_s - record.imu_stamps_s[0], 120.0)
+    moving = phase_s >= 90.0
+    # the bag: the rotation during the last quarter of each period only ...
+    assert not rotation_deg_h[~moving].any()
+    assert np.abs(rotation_deg_h[moving]).max() > 0.9 * 2.0 * 3600.0
+    raw_deg_h = record.rates_rad_s * DEG_H_PER_RAD_S
+    assert np.all(raw_deg_h[moving].std(axis=0) > 50 * raw_deg_h[~moving].std(axis=0))
+    # ... and the shift on top of drift and noise everywhere (the chamber calibration's blind spot)
+    residual = raw_deg_h - truth['true_drift_deg_h'] - rotation_deg_h
+    assert_allclose(residual.mean(axis=0), [3.0, -2.0, 1.5], atol=0.3)
+    for bad in (['--turn-on-shift-deg-h', '1,2'], ['--runs', 'bake:20']):
+        with pytest.raises(SystemExit):
+            cli.main(['simulate', str(tmp_path / 'bad'), *bad])
+        assert 'expected' in capsys.readouterr().err

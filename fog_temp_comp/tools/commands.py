@@ -92,12 +92,18 @@ def simulate_command(
     compress: bool = True,
     runs: Sequence[tuple[str, float]] | None = None,
     config: SimulationConfig | None = None,
+    vehicle: dict[str, Any] | None = None,
     stdout: TextIO | None = None,
 ) -> int:
-    """Write the paper's chamber runs as bags plus ``<run>.truth.npz`` and ``manifest.yaml``."""
+    """Write the paper's chamber runs as bags plus ``<run>.truth.npz`` and ``manifest.yaml``.
+
+    ``vehicle`` overrides :class:`SimulationConfig` fields of the vehicle (turn-on shift in
+    deg/h, rest/motion phases); the truth files then hold ``turn_on_shift_deg_h`` and
+    ``true_rotation_rad_s`` too (the oracle: rate minus drift, shift and rotation is noise).
+    """
     stdout = stdout or sys.stdout
     base = REALISTIC if realistic else SimulationConfig()
-    cfg = config or dataclasses.replace(base, imu_hz=imu_hz, temp_hz=temp_hz)
+    cfg = config or dataclasses.replace(base, imu_hz=imu_hz, temp_hz=temp_hz, **(vehicle or {}))
     out_dir.mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
         'description': 'synthetic thermal-chamber runs (fog_temp_comp simulate)',
@@ -113,6 +119,10 @@ def simulate_command(
             for j, axis in enumerate(AXES)
         },
         'coil_lag_s': float(cfg.coil_lag_s),
+        'turn_on_shift_deg_h': dict(zip(AXES, map(float, cfg.turn_on_shift_deg_h), strict=True)),
+        'motion_period_s': float(cfg.motion_period_s),
+        'motion_fraction': float(cfg.motion_fraction),
+        'motion_rate_deg_s': float(cfg.motion_rate_deg_s),
         'runs': [],
     }
     with AtomicOutputs() as outputs:  # all files appear at the end, or none
@@ -135,6 +145,12 @@ def simulate_command(
                 true_drift_deg_h=run.true_drift_deg_h,
                 true_temperature_degC=run.true_temperature_degC,
                 true_tdot_degC_per_min=run.true_tdot_degC_per_min,
+                turn_on_shift_deg_h=run.turn_on_shift_deg_h,
+                true_rotation_rad_s=(
+                    np.zeros_like(run.rates_rad_s)
+                    if run.true_rotation_rad_s is None
+                    else run.true_rotation_rad_s
+                ),
             )
             unit = 'degC_per_min' if kind == 'cycle' else 'degC'
             manifest['runs'].append(
