@@ -34,6 +34,7 @@ from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.denoise import METHODS
 from fog_temp_comp.core.evaluate import compensate_record
 from fog_temp_comp.core.model import PAPER_TERMS, coefficient_key
+from fog_temp_comp.core.restfile import file_sha256, read_learned_bias
 from fog_temp_comp.core.units import AXES, DEG_H_PER_RAD_S
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.simulate import (
@@ -529,6 +530,31 @@ def test_compensate_rest_learning_removes_a_turn_on_shift(
     removed_deg_h = (out[False] - out[True]) * DEG_H_PER_RAD_S
     assert_array_equal(removed_deg_h[:100], 0.0)  # Tdot filter still warming up: untouched
     assert_allclose(removed_deg_h[-600:].mean(axis=0), shift_deg_h, atol=0.3)
+
+    # the learned bias kept for the next replay: applied from the first corrected message on
+    learned = tmp_path / 'learned_bias.yaml'
+    base = ['compensate', str(in_bag), '--coeffs', str(coeffs_yaml), '--rest-learning']
+    assert cli.main([*base, '-o', str(tmp_path / 'a'), '--rest-bias-out', str(learned)]) == 0
+    saved = read_learned_bias(learned)
+    assert_allclose(saved.bias_deg_h, shift_deg_h, atol=0.3)
+    assert saved.coefficients_sha256 == file_sha256(coeffs_yaml)
+    assert cli.main([*base, '-o', str(tmp_path / 'b'), '--rest-bias-in', str(learned)]) == 0
+    assert 'rest learning: starting from' in capsys.readouterr().out
+    started = (out[False] - rates_of(plain_read(tmp_path / 'b')['/imu/data'])) * DEG_H_PER_RAD_S
+    first = int(np.argmax(np.any(out[False] != rates_of(plain_read(in_bag)['/imu/data_raw']), 1)))
+    assert_allclose(started[first], saved.bias_deg_h, rtol=1e-9)  # from the first correction
+    assert_allclose(started[-600:].mean(axis=0), shift_deg_h, atol=0.3)
+
+    # refused: the file of other coefficients, or without --rest-learning
+    other = tmp_path / 'other.yaml'
+    other.write_text(coeffs_yaml.read_text() + '# recalibrated\n')
+    argv = ['compensate', str(in_bag), '--coeffs', str(other), '--rest-learning']
+    assert cli.main([*argv, '-o', str(tmp_path / 'c'), '--rest-bias-in', str(learned)]) == 1
+    assert 'learned with other coefficients' in capsys.readouterr().err
+    argv = ['compensate', str(in_bag), '--coeffs', str(coeffs_yaml), '-o', str(tmp_path / 'd')]
+    assert cli.main([*argv, '--rest-bias-out', str(learned)]) == 1
+    assert 'need --rest-learning' in capsys.readouterr().err
+    assert not (tmp_path / 'c').exists() and not (tmp_path / 'd').exists()
 
 
 def copy_prefix(src: Path, dst: Path, cut_ns: int) -> int:

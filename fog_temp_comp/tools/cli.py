@@ -107,6 +107,19 @@ def _add_rest(parser: argparse.ArgumentParser) -> None:
             metavar='X',
             help=f'{unit}; default %(default)s',
         )
+    g.add_argument(
+        '--rest-bias-in',
+        type=Path,
+        metavar='LEARNED.yaml',
+        help="start from this learned bias (the node's rest_bias_file; refused if learned "
+        'with other coefficients)',
+    )
+    g.add_argument(
+        '--rest-bias-out',
+        type=Path,
+        metavar='LEARNED.yaml',
+        help='write the bias learned in this replay (for the node or the next replay)',
+    )
 
 
 def _rest(args: argparse.Namespace) -> RestSettings | None:
@@ -549,6 +562,8 @@ def run(args: argparse.Namespace) -> int:
             guard=_guard(args),
             strict=args.strict,
             rest=_rest(args),
+            rest_bias_in=args.rest_bias_in,
+            rest_bias_out=args.rest_bias_out,
         )
     if args.command == 'evaluate':
         return commands.evaluate_command(

@@ -30,6 +30,13 @@ from fog_temp_comp.core.fitstats import format_fits
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, coefficient_key
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.rest import RestSettings
+from fog_temp_comp.core.restfile import (
+    check_learned_bias,
+    file_sha256,
+    learned_bias_from_status,
+    read_learned_bias,
+    write_learned_bias,
+)
 from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
 from fog_temp_comp.core.units import AXES
 from fog_temp_comp.tools import blockreplay
@@ -512,6 +519,8 @@ def compensate_command(
     guard: GuardSettings | None = None,
     strict: bool = False,
     rest: RestSettings | None = None,
+    rest_bias_in: Path | None = None,
+    rest_bias_out: Path | None = None,
     stdout: TextIO | None = None,
     fast: bool = True,
 ) -> int:
@@ -522,7 +531,10 @@ def compensate_command(
     (:mod:`~fog_temp_comp.tools.blockreplay`), other bags through ``AnyReader`` and
     :meth:`BagWriter.write_many`; ``fast=False`` writes through rosbags one message at a time.
     Both give the same bag. With ``rest`` (enabled) the bias learner at rest runs too, fed the
-    Imu's accelerometer (through ``AnyReader``: the MCAP block path decodes rates only).
+    Imu's accelerometer (through ``AnyReader``: the MCAP block path decodes rates only); it
+    starts from the learned-bias file ``rest_bias_in`` (refused with an error if learned with
+    other coefficients) and writes what it learned to ``rest_bias_out``
+    (:mod:`~fog_temp_comp.core.restfile`, as the node's ``rest_bias_file``).
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
@@ -530,6 +542,10 @@ def compensate_command(
         raise FileExistsError(f'{out_bag}: exists already, not overwriting')
     settings = effective_settings(coeffs, denoise_method)
     compensator = Compensator(coeffs.model, settings, guard, rest)
+    if (rest_bias_in or rest_bias_out) and compensator.rest is None:
+        raise ValueError('--rest-bias-in/--rest-bias-out need --rest-learning')
+    if rest_bias_in is not None:
+        _start_rest_from(compensator, rest_bias_in, coeffs_path, stdout)
     fmt = bagio.bag_format(in_bag)
     if output_topic and not output_topic.startswith('/'):
         output_topic = '/' + output_topic
@@ -584,7 +600,36 @@ def compensate_command(
             + ' deg/h',
             file=stdout,
         )
+        if rest_bias_out is not None:
+            bias = learned_bias_from_status(
+                st,
+                compensator.rest.settings,
+                coefficients_file=str(coeffs_path),
+                coefficients_sha256=file_sha256(coeffs_path),
+            )
+            if bias is None:
+                print(f'rest learning: nothing learned, {rest_bias_out} not written', file=stdout)
+            else:
+                write_learned_bias(rest_bias_out, bias)
+                print(f'wrote {rest_bias_out} (learned bias)', file=stdout)
     return 0
+
+
+def _start_rest_from(compensator: Compensator, path: Path, coeffs_path: Path, out: TextIO) -> None:
+    """Start the bias learner from a learned-bias file; ValueError if it does not fit."""
+    assert compensator.rest is not None
+    bias = read_learned_bias(path)
+    check_learned_bias(
+        bias,
+        coefficients_sha256=file_sha256(coeffs_path),
+        earth_rate_body_deg_h=compensator.rest.settings.earth_rate_body_deg_h,
+        path=path,
+    )
+    reason = compensator.rest.start_from(bias.bias_deg_h)
+    if reason is not None:
+        raise ValueError(f'{path}: {reason}')
+    text = ', '.join(f'{v:.3f}' for v in bias.bias_deg_h)
+    print(f'rest learning: starting from {text} deg/h (x, y, z), {path}', file=out)
 
 
 def _compressed_mcap(bag: Path) -> bool:
