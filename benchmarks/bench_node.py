@@ -23,6 +23,8 @@ The pacing thread shares the GIL with the executor: when the executor thread is 
 thread may wake late and publish the missed messages in a burst (Python's default 5 ms switch
 interval), which a keep-last-5 queue can turn into drops even below the max throughput.
 ``--executor events`` runs the same cases on ``rclpy.experimental.EventsExecutor`` (C++).
+``--rest-learning`` turns the compensator's bias learning at rest on (``rest_learning:=true``,
+the accelerometer of each message fed to it too).
 
 ``--dut-process`` runs the DUT in a process of its own, as on a robot (driver and compensator
 are separate processes): the compensator is ``fog_temp_comp.ros.node.main``, what ``ros2 run
@@ -155,6 +157,10 @@ class Sink(Node):
             self.on_receive()
 
 
+#: extra compensator parameters (``--rest-learning``), name -> value
+EXTRA_PARAMETERS: dict[str, Any] = {}
+
+
 def serve(kind: str, executor_name: str, namespace: str) -> None:
     """Child process of ``--dut-process``: spin the relay, or run the compensator's main()."""
     if kind == 'compensator':
@@ -170,6 +176,11 @@ def serve(kind: str, executor_name: str, namespace: str) -> None:
                     f'coefficients_file:={COEFFICIENTS}',
                     '-p',
                     f'executor:={executor_name}',
+                    *[
+                        a
+                        for n, v in EXTRA_PARAMETERS.items()
+                        for a in ('-p', f'{n}:={v!s}'.lower())
+                    ],
                 ]
             )
         )
@@ -194,6 +205,8 @@ class DutProcess:
 
     def __init__(self, kind: str, executor_name: str) -> None:
         command = [sys.executable, __file__, '--serve', kind, '--executor', executor_name]
+        if EXTRA_PARAMETERS.get('rest_learning'):
+            command.append('--rest-learning')
         self.proc = subprocess.Popen(
             [*command, '--namespace', NS], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
         )
@@ -221,7 +234,10 @@ def make_dut(kind: str, context: Context) -> Node:
     return CompensatorNode(
         namespace=NS,
         context=context,
-        parameter_overrides=[Parameter('coefficients_file', value=str(COEFFICIENTS))],
+        parameter_overrides=[
+            Parameter('coefficients_file', value=str(COEFFICIENTS)),
+            *[Parameter(n, value=v) for n, v in EXTRA_PARAMETERS.items()],
+        ],
     )
 
 
@@ -450,7 +466,12 @@ def main() -> None:
     parser.add_argument('--namespace', default=NS, help=argparse.SUPPRESS)
     parser.add_argument('--rate', type=float, help=argparse.SUPPRESS)
     parser.add_argument('--with-temperature', action='store_true', help=argparse.SUPPRESS)
+    parser.add_argument(
+        '--rest-learning', action='store_true', help='compensator with bias learning at rest on'
+    )
     args = parser.parse_args()
+    if args.rest_learning:
+        EXTRA_PARAMETERS['rest_learning'] = True
     if args.serve == 'pacer':
         serve_pacer(args.rate, args.duration, args.with_temperature, args.namespace)
         return
@@ -463,7 +484,7 @@ def main() -> None:
     print(
         f'# bench_node: {rounds} x {duration:g} s per case, executor {args.executor}, '
         f'DUT in {"its own process" if args.dut_process else "this process"}, '
-        f'rmw {rmw}; {machine()}'
+        f'rmw {rmw}, rest learning {"on" if args.rest_learning else "off"}; {machine()}'
     )
     runs: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for round_ in range(rounds):  # round robin, DUT order alternating: load hits both alike

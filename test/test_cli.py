@@ -34,6 +34,7 @@ from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.denoise import METHODS
 from fog_temp_comp.core.evaluate import compensate_record
 from fog_temp_comp.core.model import PAPER_TERMS, coefficient_key
+from fog_temp_comp.core.restfile import file_sha256, read_learned_bias
 from fog_temp_comp.core.units import AXES, DEG_H_PER_RAD_S
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.simulate import (
@@ -530,6 +531,31 @@ def test_compensate_rest_learning_removes_a_turn_on_shift(
     assert_array_equal(removed_deg_h[:100], 0.0)  # Tdot filter still warming up: untouched
     assert_allclose(removed_deg_h[-600:].mean(axis=0), shift_deg_h, atol=0.3)
 
+    # the learned bias kept for the next replay: applied from the first corrected message on
+    learned = tmp_path / 'learned_bias.yaml'
+    base = ['compensate', str(in_bag), '--coeffs', str(coeffs_yaml), '--rest-learning']
+    assert cli.main([*base, '-o', str(tmp_path / 'a'), '--rest-bias-out', str(learned)]) == 0
+    saved = read_learned_bias(learned)
+    assert_allclose(saved.bias_deg_h, shift_deg_h, atol=0.3)
+    assert saved.coefficients_sha256 == file_sha256(coeffs_yaml)
+    assert cli.main([*base, '-o', str(tmp_path / 'b'), '--rest-bias-in', str(learned)]) == 0
+    assert 'rest learning: starting from' in capsys.readouterr().out
+    started = (out[False] - rates_of(plain_read(tmp_path / 'b')['/imu/data'])) * DEG_H_PER_RAD_S
+    first = int(np.argmax(np.any(out[False] != rates_of(plain_read(in_bag)['/imu/data_raw']), 1)))
+    assert_allclose(started[first], saved.bias_deg_h, rtol=1e-9)  # from the first correction
+    assert_allclose(started[-600:].mean(axis=0), shift_deg_h, atol=0.3)
+
+    # refused: the file of other coefficients, or without --rest-learning
+    other = tmp_path / 'other.yaml'
+    other.write_text(coeffs_yaml.read_text() + '# recalibrated\n')
+    argv = ['compensate', str(in_bag), '--coeffs', str(other), '--rest-learning']
+    assert cli.main([*argv, '-o', str(tmp_path / 'c'), '--rest-bias-in', str(learned)]) == 1
+    assert 'learned with other coefficients' in capsys.readouterr().err
+    argv = ['compensate', str(in_bag), '--coeffs', str(coeffs_yaml), '-o', str(tmp_path / 'd')]
+    assert cli.main([*argv, '--rest-bias-out', str(learned)]) == 1
+    assert 'need --rest-learning' in capsys.readouterr().err
+    assert not (tmp_path / 'c').exists() and not (tmp_path / 'd').exists()
+
 
 def copy_prefix(src: Path, dst: Path, cut_ns: int) -> int:
     """Copy the messages logged before ``cut_ns`` into a new MCAP bag; return how many."""
@@ -851,3 +877,36 @@ def test_calibrate_shows_progress_on_stderr(
     last = capsys.readouterr().err.strip().split('\r')[-1]
     assert last.startswith(f'reading {cal_bag.name}: ')
     assert last.endswith(' s of data')
+
+
+def test_simulate_cli_turn_on_shift_and_rest_motion_phases(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / 'sim'
+    argv = ['simulate', str(out), '--runs', 'soak:20', '--imu-hz', '2', '--seed', '4']
+    argv += ['--turn-on-shift-deg-h', '3,-2,1.5', '--motion-period-s', '120']
+    argv += ['--motion-fraction', '0.25', '--motion-rate-deg-s', '2']
+    assert cli.main(argv) == 0
+    manifest = yaml.safe_load((out / 'manifest.yaml').read_text())
+    assert manifest['turn_on_shift_deg_h'] == {'x': 3.0, 'y': -2.0, 'z': 1.5}
+    assert (manifest['motion_period_s'], manifest['motion_fraction']) == (120.0, 0.25)
+    assert [r['name'] for r in manifest['runs']] == ['soak_20']
+    record = read_record(out / manifest['runs'][0]['bag'])
+    with np.load(out / manifest['runs'][0]['truth']) as npz:
+        truth = {k: npz[k] for k in npz.files}
+    assert_array_equal(truth['turn_on_shift_deg_h'], [3.0, -2.0, 1.5])
+    rotation_deg_h = truth['true_rotation_rad_s'] * DEG_H_PER_RAD_S
+    phase_s = np.mod(record.imu_stamps_s - record.imu_stamps_s[0], 120.0)
+    moving = phase_s >= 90.0
+    # the bag: the rotation during the last quarter of each period only ...
+    assert not rotation_deg_h[~moving].any()
+    assert np.abs(rotation_deg_h[moving]).max() > 0.9 * 2.0 * 3600.0
+    raw_deg_h = record.rates_rad_s * DEG_H_PER_RAD_S
+    assert np.all(raw_deg_h[moving].std(axis=0) > 50 * raw_deg_h[~moving].std(axis=0))
+    # ... and the shift on top of drift and noise everywhere (the chamber calibration's blind spot)
+    residual = raw_deg_h - truth['true_drift_deg_h'] - rotation_deg_h
+    assert_allclose(residual.mean(axis=0), [3.0, -2.0, 1.5], atol=0.3)
+    for bad in (['--turn-on-shift-deg-h', '1,2'], ['--runs', 'bake:20']):
+        with pytest.raises(SystemExit):
+            cli.main(['simulate', str(tmp_path / 'bad'), *bad])
+        assert 'expected' in capsys.readouterr().err

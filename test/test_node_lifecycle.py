@@ -5,15 +5,18 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetState
-from numpy.testing import assert_array_equal
+from numpy.testing import assert_allclose, assert_array_equal
 from rclpy.parameter import Parameter
 from rosharness import Harness, rate_of
 
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.compensator import Compensator
+from fog_temp_comp.core.restfile import read_learned_bias
+from fog_temp_comp.core.units import DEG_H_PER_RAD_S, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.lifecycle_node import CompensatorLifecycleNode
 
 EXAMPLE = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
@@ -147,3 +150,68 @@ def test_output_only_while_active_and_tdot_state_kept_across_deactivate(managed:
     assert node.compensator is None
     harness.spin_until(lambda: node.count_subscribers('/imu/data_raw') == 0)
     assert node.count_publishers('/imu/data') == 0
+
+
+def test_learned_bias_kept_across_deactivate_and_written_at_cleanup(
+    ros_context: object, tmp_path: Path
+) -> None:
+    bias_file = tmp_path / 'learned_bias.yaml'
+    shift_rad_s = np.array([4.0, -3.0, 2.0]) * RAD_S_PER_DEG_H
+    node = CompensatorLifecycleNode(
+        context=ros_context,
+        parameter_overrides=[
+            Parameter('coefficients_file', value=str(EXAMPLE)),
+            Parameter('rest_learning', value=True),
+            Parameter('rest_window_s', value=2.0),
+            Parameter('rest_time_constant_s', value=0.5),
+            Parameter('rest_bias_file', value=str(bias_file)),
+        ],
+    )
+    harness = Harness(ros_context, node, connect=False)
+    model = load(EXAMPLE).model
+    still = model.drift_deg_h(20.0, 0.0) * RAD_S_PER_DEG_H + shift_rad_s
+
+    def drive(start_s: float, seconds: int) -> list[np.ndarray]:
+        out = []
+        for k in range(seconds):
+            harness.send_temperature(start_s + k, 20.0)
+            for i in range(5):
+                msg = harness.send_imu(start_s + k + 0.1 + 0.2 * i, still)
+                if msg is not None:
+                    out.append(rate_of(msg) * DEG_H_PER_RAD_S)
+        return out
+
+    try:
+        manager = Manager(harness)
+        assert manager.transition(Transition.TRANSITION_CONFIGURE)
+        assert manager.transition(Transition.TRANSITION_ACTIVATE)
+        harness.connect()
+        learner = node.compensator.rest
+        assert learner is not None
+        drive(1000.0, 150)  # warm-up, then rest windows
+        learned = learner.finish().learned_deg_h
+        assert_allclose(learned, np.degrees(shift_rad_s) * 3600.0, atol=0.05)
+
+        # deactivate: the learner is kept (and the file written), output resumes corrected
+        assert manager.transition(Transition.TRANSITION_DEACTIVATE)
+        assert read_learned_bias(bias_file).bias_deg_h == learned
+        assert manager.transition(Transition.TRANSITION_ACTIVATE)
+        assert node.compensator.rest is learner
+        out = drive(1150.0, 1)
+        assert_allclose(out[0], 0.0, atol=0.05)  # the shift stays removed, no relearning
+
+        # cleanup releases the learner and writes the file again
+        assert manager.transition(Transition.TRANSITION_DEACTIVATE)
+        bias_file.unlink()
+        assert manager.transition(Transition.TRANSITION_CLEANUP)
+        assert node.compensator is None
+        saved = read_learned_bias(bias_file)
+        assert saved.bias_deg_h == learned and saved.windows == learner.status.windows_rest
+
+        # configure again: a new learner that starts from the file
+        assert manager.transition(Transition.TRANSITION_CONFIGURE)
+        assert node.compensator.rest is not learner
+        assert node.compensator.rest is not None
+        assert node.compensator.rest.status.initial_deg_h == learned
+    finally:
+        harness.close()

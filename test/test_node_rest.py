@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -10,8 +11,15 @@ from numpy.testing import assert_allclose
 from rclpy.parameter import Parameter
 from rosharness import Harness, rate_of
 from std_msgs.msg import Bool
+from std_srvs.srv import Trigger
 
 from fog_temp_comp.core.coefficients import load
+from fog_temp_comp.core.restfile import (
+    LearnedBias,
+    file_sha256,
+    read_learned_bias,
+    write_learned_bias,
+)
 from fog_temp_comp.core.units import DEG_H_PER_RAD_S, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.ros.params import ParameterError
@@ -98,3 +106,138 @@ def test_rest_learning_is_off_by_default_and_checked(ros_context: object) -> Non
         node.destroy_node()
     with pytest.raises(ParameterError, match='source'):
         rest_node(ros_context, rest_source='vehicle')
+
+
+def call_learn_now(harness: Harness) -> Trigger.Response:
+    client = harness.peer.create_client(Trigger, '/fog_temp_compensator/learn_bias_now')
+    harness.spin_until(client.service_is_ready)
+    future = client.call_async(Trigger.Request())
+    harness.spin_until(future.done)
+    response = future.result()
+    harness.peer.destroy_client(client)
+    return response
+
+
+def test_learn_now_service_forces_one_window_and_writes_the_file(
+    ros_context: object, tmp_path: Path
+) -> None:
+    bias_file = tmp_path / 'learned_bias.yaml'
+    # external source and no flag: no window passes the checks; only "learn now" can learn
+    node = rest_node(ros_context, rest_source='external', rest_bias_file=str(bias_file))
+    harness = Harness(ros_context, node)
+    try:
+        drive_at_rest(harness, 1000.0, 20)
+        early = call_learn_now(harness)  # not warmed up: refused, and says why
+        assert not early.success and 'not warmed up' in early.message
+        drive_at_rest(harness, 1020.0, 140)
+        assert values(harness)['rest_windows_rest'] == '0'
+        armed = call_learn_now(harness)
+        assert armed.success, armed.message
+        assert (
+            armed.message.startswith('armed: the next 2 s window') and '20 deg/h' in armed.message
+        )
+        assert values(harness)['rest_force_pending'] == 'True'
+        out = drive_at_rest(harness, 1160.0, 6)
+        diag = values(harness)  # the diagnostics timer logs the outcome and writes the file
+    finally:
+        harness.close()
+    assert diag['rest_windows_forced'] == '1' and diag['rest_windows_rest'] == '1'
+    assert diag['rest_force_pending'] == 'False'
+    assert 'learned' in diag['rest_forced_outcome']
+    assert_allclose(learned_deg_h(diag), SHIFT_DEG_H, atol=0.05)
+    assert_allclose(out[-1] * DEG_H_PER_RAD_S, 0.0, atol=0.1)  # applied within 3 s (tau 0.5 s)
+    assert diag['rest_bias_file'] == str(bias_file)
+    assert diag['rest_bias_file_state'].startswith('written (learn_bias_now)')
+    saved = read_learned_bias(bias_file)
+    assert_allclose(saved.bias_deg_h, SHIFT_DEG_H, atol=0.05)
+    assert saved.windows == 1 and saved.temperature_degC == TEMPERATURE_DEGC
+    assert saved.coefficients_sha256 == file_sha256(EXAMPLE)
+
+
+def test_no_learn_now_service_without_rest_learning(ros_context: object) -> None:
+    node = CompensatorNode(
+        context=ros_context,
+        parameter_overrides=[Parameter('coefficients_file', value=str(EXAMPLE))],
+    )
+    try:
+        names = [
+            name for name, _ in node.get_service_names_and_types_by_node(node.get_name(), '/')
+        ]
+        assert '/fog_temp_compensator/learn_bias_now' not in names
+    finally:
+        node.destroy_node()
+
+
+def saved_bias(**changes: object) -> LearnedBias:
+    fields: dict[str, object] = {
+        'bias_deg_h': tuple(SHIFT_DEG_H.tolist()),
+        'std_deg_h': (0.01, 0.01, 0.01),
+        'samples': 100,
+        'windows': 10,
+        'learned_at_stamp_s': 900.0,
+        'temperature_degC': 19.0,
+        'earth_rate_subtracted_deg_h': (0.0, 0.0, 0.0),
+        'coefficients_file': str(EXAMPLE),
+        'coefficients_sha256': file_sha256(EXAMPLE),
+    }
+    fields.update(changes)
+    return LearnedBias(**fields)  # type: ignore[arg-type]
+
+
+def test_node_starts_from_the_bias_file_and_writes_it_on_shutdown(
+    ros_context: object, tmp_path: Path
+) -> None:
+    bias_file = tmp_path / 'learned_bias.yaml'
+    write_learned_bias(bias_file, saved_bias())
+    before = bias_file.read_text(encoding='utf-8')
+    harness = Harness(ros_context, rest_node(ros_context, rest_bias_file=str(bias_file)))
+    try:
+        out = drive_at_rest(harness, 1000.0, 5)  # long before warm-up: no window learned yet
+        diag = values(harness)
+    finally:
+        harness.close()  # shutdown: nothing learned in this run, the file is left alone
+    assert diag['rest_bias_file_state'].startswith('loaded: 4.000, -3.000, 2.000')
+    assert [float(diag[f'rest_initial_{a}_deg_h']) for a in 'xyz'] == SHIFT_DEG_H.tolist()
+    # the turn-on shift is removed from the first corrected message on
+    assert_allclose(out[0] * DEG_H_PER_RAD_S, 0.0, atol=0.5)
+    assert bias_file.read_text(encoding='utf-8') == before
+
+    # a run that learns writes its own value on shutdown
+    bias_file.unlink()
+    harness = Harness(ros_context, rest_node(ros_context, rest_bias_file=str(bias_file)))
+    try:
+        assert values(harness)['rest_bias_file_state'] == 'absent: starting from zero'
+        drive_at_rest(harness, 1000.0, 150)
+    finally:
+        harness.close()
+    saved = read_learned_bias(bias_file)
+    assert saved.windows >= 2 and saved.learned_at_stamp_s > 1140.0
+    assert_allclose(saved.bias_deg_h, SHIFT_DEG_H, atol=0.05)
+
+
+@pytest.mark.parametrize(
+    ('content', 'state'),
+    [
+        (saved_bias(coefficients_sha256='0' * 64), 'refused: .*learned with other coefficients'),
+        (saved_bias(earth_rate_subtracted_deg_h=(0, 10, 5)), 'refused: .*Earth rate'),
+        (saved_bias(bias_deg_h=(30.0, 0.0, 0.0)), 'refused: .*exceeds residual_limit_deg_h 20'),
+        ('learned_bias_deg_h: [1, 2\n', 'refused: .*not YAML at line 2'),
+    ],
+)
+def test_bias_file_refused_with_the_reason(
+    ros_context: object, tmp_path: Path, content: object, state: str
+) -> None:
+    bias_file = tmp_path / 'learned_bias.yaml'
+    if isinstance(content, LearnedBias):
+        write_learned_bias(bias_file, content)
+    else:
+        bias_file.write_text(str(content), encoding='utf-8')
+    harness = Harness(ros_context, rest_node(ros_context, rest_bias_file=str(bias_file)))
+    try:
+        out = drive_at_rest(harness, 1000.0, 3)
+        diag = values(harness)
+    finally:
+        harness.close()
+    assert re.match(state, diag['rest_bias_file_state']), diag['rest_bias_file_state']
+    assert diag['rest_initial_x_deg_h'] == 'none'
+    assert_allclose(out[0] * DEG_H_PER_RAD_S, SHIFT_DEG_H, atol=0.5)  # started from zero

@@ -192,3 +192,62 @@ def test_settings_are_checked() -> None:
     with pytest.raises(ValueError, match='earth_rate_body_deg_h'):
         RestSettings(earth_rate_body_deg_h=(0.0, float('nan'), 0.0))
     assert Compensator(MODEL, DENOISE, rest=RestSettings()).rest is None  # off by default
+
+
+def replay_forcing(
+    sc: Scenario, settings: RestSettings, force_at_s: float
+) -> tuple[np.ndarray, Compensator]:
+    """Replay ``sc``, forcing the next window at ``force_at_s``; error (deg/h), compensator."""
+    compensator = Compensator(MODEL, DENOISE, rest=settings)
+    assert compensator.rest is not None
+    cut_imu = int(np.searchsorted(sc.imu_stamps_s, sc.imu_stamps_s[0] + force_at_s))
+    cut_temp = int(np.searchsorted(sc.temp_stamps_s, sc.imu_stamps_s[cut_imu]))
+    outputs = []
+    for imu, temp in (
+        (slice(0, cut_imu), slice(0, cut_temp)),
+        (slice(cut_imu, None), slice(cut_temp, None)),
+    ):
+        if imu.start:
+            compensator.rest.force_next_window()
+            assert compensator.rest.status.force_pending
+        outputs.append(
+            replay(
+                compensator,
+                sc.imu_stamps_s[imu],
+                sc.rates_rad_s[imu],
+                sc.temp_stamps_s[temp],
+                sc.temperature_degC[temp],
+                sc.accel_m_s2[imu],
+            )
+        )
+    error = (np.concatenate(outputs) - sc.true_rate_rad_s) * DEG_H_PER_RAD_S
+    return error, compensator
+
+
+def test_forced_window_is_learned_without_the_rest_checks() -> None:
+    # a gyro threshold below the noise: no window passes the checks, the forced one is learned
+    strict = RestSettings(enabled=True, gyro_std_max_deg_h=1.0, source='external')
+    sc = scenario([(200, 'rest')], seed=21)
+    _, compensator = replay_forcing(sc, strict, force_at_s=120.0)
+    assert compensator.rest is not None
+    status = compensator.rest.finish()
+    assert status.windows_forced == 1 and status.windows_rest == 1
+    assert status.windows_motion > 5 and not status.force_pending
+    window_noise = NOISE_DEG_H / np.sqrt(status.samples_learned)
+    assert np.all(np.abs(np.array(status.learned_deg_h) - SHIFT_DEG_H) < 4 * window_noise)
+    assert status.forced_outcome.startswith(f'forced window of {status.samples_learned} samples')
+    assert 'learned' in status.forced_outcome
+    assert 120.0 < status.learned_at_stamp_s - sc.imu_stamps_s[0] <= 140.0
+
+
+def test_forced_window_while_turning_is_bounded_by_the_residual_limit() -> None:
+    sc = scenario([(200, 'yaw')], seed=22, rate_deg_h=50.0)  # "still", says the operator
+    error_off, _ = run(sc, None)
+    error_on, compensator = replay_forcing(sc, LEARN, force_at_s=120.0)
+    assert compensator.rest is not None
+    status = compensator.rest.finish()
+    assert status.windows_forced == 0 and status.windows_rest == 0
+    assert (
+        'refused' in status.forced_outcome and 'residual_limit_deg_h 20' in status.forced_outcome
+    )
+    assert_array_equal(error_on, error_off)  # nothing applied

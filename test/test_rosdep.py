@@ -28,6 +28,7 @@ ROS_PACKAGES = {
     'sensor_msgs',
     'std_msgs',
     'lifecycle_msgs',
+    'std_srvs',
 }
 DEPEND_TAGS = (
     'depend',

@@ -284,6 +284,8 @@ class Compensator:
         status.has_temperature = True
         status.temperature_stale = False
         self._last_temperature = temperature_degC
+        if self.rest is not None:
+            self.rest.temperature_degC = temperature_degC
         if self._estimator.add(stamp_s, temperature_degC):
             estimate = self._estimator.estimate
             assert estimate is not None

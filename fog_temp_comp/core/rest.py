@@ -24,6 +24,11 @@ bounded by it. The learned value is the mean over all accepted windows since sta
 bias is constant for a turn-on); the value applied follows it with a first-order lag of
 ``time_constant_s`` (no step in the output).
 
+Two more ways in: :meth:`RestLearner.start_from` starts from a value learned at an earlier turn-on
+(``restfile.py``: the file it is kept in), replaced by this turn-on's first accepted window; and
+:meth:`RestLearner.force_next_window` accepts the next window without the rest checks (a
+known-still moment, "learn now"), still bounded by ``residual_limit_deg_h``.
+
 Earth rate: with ``earth_rate_body_deg_h`` left at zero it is learned into the constant. That is
 right while the unit keeps the orientation it had at rest, and wrong by up to the Earth rate
 (15 deg/h, split over the axes by the orientation) once it turns; give it (``earth.py``:
@@ -91,6 +96,12 @@ class RestStatus:
     learned_std_deg_h: Vector = (math.nan, math.nan, math.nan)  # its noise (std / sqrt(n))
     applied_deg_h: Vector = (0.0, 0.0, 0.0)  # subtracted now (follows learned_deg_h)
     samples_learned: int = 0
+    learned_at_stamp_s: float = math.nan  # end of the last accepted window (sensor time, s)
+    learned_temperature_degC: float = math.nan  # temperature then
+    initial_deg_h: Vector | None = None  # started from (start_from), until a window is learned
+    force_pending: bool = False  # force_next_window() called, its window not judged yet
+    windows_forced: int = 0  # forced windows learned from
+    forced_outcome: str = ''  # what the last forced window gave
 
 
 @dataclass
@@ -102,6 +113,7 @@ class _Window:
     accel_n: list[int] = field(default_factory=lambda: [0, 0])  # per half
     accel: list[float] = field(default_factory=lambda: [0.0] * 12)  # half 1/2 sums, squares
     flagged: bool = True
+    forced: bool = False  # accepted without the rest checks (force_next_window)
 
 
 class RestLearner:
@@ -116,21 +128,60 @@ class RestLearner:
 
     def __init__(self, settings: RestSettings) -> None:
         self.settings = settings
+        #: temperature (degC) of the latest sample, kept by the compensator (for the record)
+        self.temperature_degC = math.nan
+        self._initial: Vector | None = None  # deg/h, from start_from
         self._clear()
 
     def reset(self) -> None:
-        """Forget everything learned (a time jump: another run)."""
+        """Forget everything learned in this run (a time jump: another run); keep the start."""
         self._clear()
 
     def _clear(self) -> None:
         self.status = RestStatus()
         self._window = _Window()
         self._external = False
-        self._applied = [0.0, 0.0, 0.0]  # rad/s
-        self._target = [0.0, 0.0, 0.0]  # rad/s
+        self._force = False
+        start = self._initial or (0.0, 0.0, 0.0)
+        self._applied = [v * RAD_S_PER_DEG_H for v in start]  # rad/s
+        self._target = list(self._applied)  # rad/s
         self._last_stamp_s = math.nan
         self._sums = [0.0, 0.0, 0.0]  # deg/h, over accepted windows
         self._sq_sums = [0.0, 0.0, 0.0]
+        if self._initial is not None:
+            self.status.initial_deg_h = self._initial
+            self.status.learned_deg_h = self._initial
+
+    def start_from(self, bias_deg_h: Vector) -> str | None:
+        """Start from a residual learned earlier (deg/h): applied at once, until replaced.
+
+        Call before the first sample. The first window accepted in this run replaces it (the
+        turn-on shift is new at every power-on). Bounded like a window: a value above
+        ``residual_limit_deg_h`` (or not finite) is not used. Returns None when applied, else
+        the reason it was not.
+        """
+        values = tuple(float(v) for v in bias_deg_h)
+        limit = self.settings.residual_limit_deg_h
+        if len(values) != 3 or not all(math.isfinite(v) for v in values):
+            return f'initial bias {values} deg/h is not 3 finite numbers: not used'
+        if any(abs(v) > limit for v in values):
+            return (
+                f'initial bias {tuple(round(v, 3) for v in values)} deg/h exceeds '
+                f'residual_limit_deg_h {limit:g}: not used'
+            )
+        self._initial = (values[0], values[1], values[2])
+        self._clear()
+        return None
+
+    def force_next_window(self) -> None:
+        """A known-still moment ("learn now"): accept the next window without the rest checks.
+
+        The next window that starts after this call is learned from whatever the gyro and
+        accelerometer variance (or the external flag) say; its residual is still bounded by
+        ``residual_limit_deg_h``. The outcome is in ``status.forced_outcome``.
+        """
+        self._force = True
+        self.status.force_pending = True
 
     def set_external_rest(self, at_rest: bool) -> None:
         """The vehicle's "at rest" signal; a false value spoils the current window."""
@@ -154,6 +205,7 @@ class RestLearner:
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             return self.applied_rad_s
         if not stamp_s > last or stamp_s - last > settings.window_s:  # start, gap or step back
+            self._force = self._force or window.forced  # a forced window cut short: re-armed
             self._start_window(stamp_s, x, y, z)
             window = self._window
         elif stamp_s - window.start_s >= settings.window_s:
@@ -192,7 +244,10 @@ class RestLearner:
         return self.applied_rad_s
 
     def _start_window(self, stamp_s: float, x: float, y: float, z: float) -> None:
-        self._window = _Window(start_s=stamp_s, gyro_ref=(x, y, z), flagged=self._external)
+        self._window = _Window(
+            start_s=stamp_s, gyro_ref=(x, y, z), flagged=self._external, forced=self._force
+        )
+        self._force = False
 
     def _close_window(self) -> None:
         """Judge the finished window; learn from it if it is rest within the bound."""
@@ -200,29 +255,50 @@ class RestLearner:
         n = window.n
         status.at_rest = False
         if n < 2:
+            if window.forced:  # too short to learn from: stay armed for the next one
+                self._force = True
             return
         g = window.gyro
         means = [0.0, 0.0, 0.0]
         for j in range(3):
             mean_shift = g[j] / n
             var = max(g[3 + j] / n - mean_shift * mean_shift, 0.0) * n / (n - 1)
-            if math.sqrt(var) * DEG_H_PER_RAD_S > settings.gyro_std_max_deg_h:
+            if (
+                not window.forced
+                and math.sqrt(var) * DEG_H_PER_RAD_S > settings.gyro_std_max_deg_h
+            ):
                 status.windows_motion += 1
                 return
             means[j] = (window.gyro_ref[j] + mean_shift) * DEG_H_PER_RAD_S
-        if not self._accel_quiet(window):
-            return
-        if settings.source == 'external' and not (window.flagged and self._external):
-            status.windows_not_flagged += 1
-            return
+        if not window.forced:
+            if not self._accel_quiet(window):
+                return
+            if settings.source == 'external' and not (window.flagged and self._external):
+                status.windows_not_flagged += 1
+                return
         earth = settings.earth_rate_body_deg_h
         residual = (means[0] - earth[0], means[1] - earth[1], means[2] - earth[2])
         status.last_residual_deg_h = residual
         status.residual_over_limit = any(abs(v) > settings.residual_limit_deg_h for v in residual)
+        text = ', '.join(f'{v:.3f}' for v in residual)
+        if window.forced:
+            status.force_pending = self._force
         if status.residual_over_limit:
             status.windows_over_limit += 1
+            if window.forced:
+                status.forced_outcome = (
+                    f'forced window of {n} samples refused: residual {text} deg/h (x, y, z) '
+                    f'exceeds residual_limit_deg_h {settings.residual_limit_deg_h:g} (moving?)'
+                )
             return
+        if window.forced:
+            status.windows_forced += 1
+            status.forced_outcome = (
+                f'forced window of {n} samples learned: residual {text} deg/h (x, y, z)'
+            )
         status.at_rest = True
+        status.learned_at_stamp_s = self._last_stamp_s
+        status.learned_temperature_degC = self.temperature_degC
         status.windows_rest += 1
         status.samples_learned += n
         for j in range(3):

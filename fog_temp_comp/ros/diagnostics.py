@@ -49,8 +49,12 @@ def build_report(
     frame_mismatches: int = 0,
     require_frame_match: bool = False,
     rest: RestStatus | None = None,
+    rest_bias_file: tuple[str, str] | None = None,
 ) -> Report:
-    """Summarise ``status``; ``previous`` are the counters at the last report (for deltas)."""
+    """Summarise ``status``; ``previous`` are the counters at the last report (for deltas).
+
+    ``rest_bias_file`` is (path, what happened to it: loaded, refused and why, written, ...).
+    """
     counters = status.counters
     reasons: list[tuple[int, str]] = []
     if not status.has_temperature:
@@ -119,6 +123,11 @@ def build_report(
     values += [(name, str(value)) for name, value in dataclasses.asdict(counters).items()]
     if rest is not None:
         values += _rest_values(rest)
+    if rest_bias_file is not None:
+        values += [
+            ('rest_bias_file', rest_bias_file[0]),
+            ('rest_bias_file_state', rest_bias_file[1]),
+        ]
     return Report(level, message, values)
 
 
@@ -134,6 +143,9 @@ def _rest_values(rest: RestStatus) -> list[tuple[str, str]]:
             'windows_not_flagged',
             'windows_over_limit',
             'residual_over_limit',
+            'windows_forced',
+            'force_pending',
+            'forced_outcome',
         )
     ]
     for name in ('learned_deg_h', 'learned_std_deg_h', 'applied_deg_h', 'last_residual_deg_h'):
@@ -143,6 +155,15 @@ def _rest_values(rest: RestStatus) -> list[tuple[str, str]]:
             (f'rest_{prefix}_{axis}_deg{unit}', _num(float(vector[j])))
             for j, axis in enumerate(AXES)
         ]
+    initial = rest.initial_deg_h
+    values += [
+        (f'rest_initial_{axis}_deg_h', 'none' if initial is None else _num(initial[j]))
+        for j, axis in enumerate(AXES)
+    ]
+    values += [
+        ('rest_learned_at_stamp_s', _num(rest.learned_at_stamp_s)),
+        ('rest_learned_temperature_degC', _num(rest.learned_temperature_degC)),
+    ]
     return values
 
 

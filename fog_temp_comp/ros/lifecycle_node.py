@@ -8,9 +8,12 @@ parameters, topics, diagnostics), driven by the lifecycle transitions instead of
   stays *unconfigured* and the reason is logged;
 - **activate** enables the corrected output (a lifecycle publisher on ``imu/data``);
 - **deactivate** stops the output; the compensator is kept, and temperature keeps feeding the
-  Tdot filter, so re-activation resumes warm (no new warm-up);
+  Tdot filter, so re-activation resumes warm (no new warm-up) with the bias learned at rest;
 - **cleanup** releases the compensator, subscriptions and publishers (back to unconfigured);
 - **shutdown** releases them too.
+
+With ``rest_learning`` and ``rest_bias_file``, the learned bias is read at configure and written
+at deactivate, cleanup and shutdown (and after a ``~/learn_bias_now`` window).
 
 ``/diagnostics`` is a plain publisher, published while configured (active or not).
 """
@@ -70,15 +73,18 @@ class CompensatorLifecycleNode(CompensatorShell, LifecycleNode):
     def on_deactivate(self, state: State) -> TransitionCallbackReturn:
         """Stop the output; keep the compensator (Tdot filter state) and temperature input."""
         self.output_enabled = False
+        self.save_learned_bias('deactivate')
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: State) -> TransitionCallbackReturn:
-        """Release the compensator, subscriptions and publishers."""
+        """Write the learned bias; release the compensator, subscriptions and publishers."""
+        self.save_learned_bias('cleanup')
         self._release()
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: State) -> TransitionCallbackReturn:
-        """Release everything from any primary state."""
+        """Write the learned bias; release everything from any primary state."""
+        self.save_learned_bias('shutdown')
         self._release()
         return TransitionCallbackReturn.SUCCESS
 

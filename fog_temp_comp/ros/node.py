@@ -6,9 +6,11 @@ is published on ``/diagnostics``.
 
 Topics (remappable): ``imu/data_raw`` (sensor_msgs/Imu, in), ``imu/temperature``
 (sensor_msgs/Temperature, in), ``imu/data`` (sensor_msgs/Imu, out), ``/diagnostics``
-(diagnostic_msgs/DiagnosticArray, out). Sensor-data QoS on the data topics, except that the gyro
-input keeps the newest :data:`IMU_INPUT_DEPTH` messages, not 5; reliability and depth can be
-overridden per topic with the standard ``qos_overrides`` parameters.
+(diagnostic_msgs/DiagnosticArray, out); with ``rest_learning`` also ``imu/at_rest``
+(std_msgs/Bool, in) and the service ``~/learn_bias_now`` (std_srvs/Trigger). Sensor-data QoS on
+the data topics, except that the gyro input keeps the newest :data:`IMU_INPUT_DEPTH` messages,
+not 5; reliability and depth can be overridden per topic with the standard ``qos_overrides``
+parameters.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, Temperature
 from std_msgs.msg import Bool
+from std_srvs.srv import Trigger
 
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load
 from fog_temp_comp.core.compensator import STALE_POLICIES, Compensator, GuardSettings
@@ -55,6 +58,14 @@ from fog_temp_comp.core.denoise import (
 )
 from fog_temp_comp.core.earth import earth_rate_body_deg_h, parse_orientation
 from fog_temp_comp.core.rest import REST_SOURCES, RestSettings
+from fog_temp_comp.core.restfile import (
+    LearnedBiasError,
+    check_learned_bias,
+    file_sha256,
+    learned_bias_from_status,
+    read_learned_bias,
+    write_learned_bias,
+)
 from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.diagnostics import build_report
 from fog_temp_comp.ros.params import (
@@ -206,6 +217,13 @@ REST_EARTH_PARAMETERS: dict[str, tuple[Any, str]] = {
         'enu',
         'sensor axes in ENU at rest, for rest_earth_rate: enu, ned, nwu, ..., as calibrate',
     ),
+    'rest_bias_file': (
+        '',
+        'YAML keeping the learned bias for the next start (empty = none): read at start / '
+        'configure as the initial value (refused if learned with other coefficients or Earth '
+        'rate, or above rest_residual_limit_deg_h), written on shutdown, deactivate, cleanup '
+        'and after a learn_bias_now window',
+    ),
 }
 
 
@@ -218,6 +236,7 @@ class Config:
     settings: DenoiseSettings
     guard: GuardSettings
     rest: RestSettings
+    rest_bias_file: str = ''
 
 
 def resolve_path(path: str) -> str:
@@ -319,6 +338,140 @@ class CompensatorShell(_NodeBase):
             self.config.rest,
         )
         self._warm_up_start_s = None
+        self._load_learned_bias()
+
+    # ------------------------------------------------------------------ learned bias file
+    def _load_learned_bias(self) -> None:
+        """Start the bias learner from ``rest_bias_file`` if it holds a value for this model."""
+        path = self.config.rest_bias_file
+        self._rest_bias_state = ''
+        self._forced_seen = 0
+        self._forced_outcome_seen = ''
+        rest = self.compensator.rest
+        if rest is None or not path:
+            return
+        log = self.get_logger()
+        if not os.path.exists(path):
+            self._rest_bias_state = 'absent: starting from zero'
+            log.info(f'rest_bias_file {path} does not exist yet: starting from zero')
+            return
+        try:
+            bias = read_learned_bias(path)
+            check_learned_bias(
+                bias,
+                coefficients_sha256=self._coefficients_sha256(),
+                earth_rate_body_deg_h=self.config.rest.earth_rate_body_deg_h,
+                path=path,
+            )
+        except (LearnedBiasError, OSError) as err:
+            self._rest_bias_state = f'refused: {err}'
+            log.warning(f'rest_bias_file not used, starting from zero: {err}')
+            return
+        reason = rest.start_from(bias.bias_deg_h)
+        if reason is not None:
+            self._rest_bias_state = f'refused: {reason}'
+            log.warning(f'rest_bias_file {path}: {reason}; starting from zero')
+            return
+        text = ', '.join(f'{v:.3f}' for v in bias.bias_deg_h)
+        self._rest_bias_state = f'loaded: {text} deg/h (x, y, z)'
+        log.info(
+            f'rest_bias_file {path}: starting from the learned bias {text} deg/h (x, y, z), '
+            f'{bias.windows} windows at {bias.temperature_degC:.2f} degC'
+        )
+
+    def _coefficients_sha256(self) -> str:
+        return file_sha256(resolve_path(self.config.coefficients_file))
+
+    def save_learned_bias(self, why: str) -> bool:
+        """Write what was learned in this run to ``rest_bias_file``; whether a file was written.
+
+        Nothing is written without a file, without learning, or before a window was learned
+        in this run (the file keeps the last turn-on's value). An error is logged, not raised.
+        """
+        rest = self.compensator.rest if self.configured else None
+        path = self.config.rest_bias_file if self.configured else ''
+        if rest is None or not path:
+            return False
+        try:
+            bias = learned_bias_from_status(
+                rest.finish(),
+                self.config.rest,
+                coefficients_file=self.config.coefficients_file,
+                coefficients_sha256=self._coefficients_sha256(),
+            )
+            if bias is None:
+                return False
+            write_learned_bias(path, bias)
+        except OSError as err:
+            self._rest_bias_state = f'write failed ({why}): {err}'
+            self.get_logger().error(f'rest_bias_file {path}: cannot write it ({why}): {err}')
+            return False
+        text = ', '.join(f'{v:.3f}' for v in bias.bias_deg_h)
+        self._rest_bias_state = f'written ({why}): {text} deg/h (x, y, z)'
+        self.get_logger().info(f'rest_bias_file {path} written ({why}): {text} deg/h (x, y, z)')
+        return True
+
+    def destroy_node(self) -> None:
+        """Write the learned bias (shutdown), then destroy the node."""
+        self.save_learned_bias('shutdown')
+        super().destroy_node()
+
+    # ------------------------------------------------------------------ learn now
+    def _on_learn_now(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        """``~/learn_bias_now``: accept the next rest window without the rest checks."""
+        reason = self._learn_now_refusal()
+        if reason:
+            response.success = False
+            response.message = reason
+            return response
+        rest = self.compensator.rest
+        assert rest is not None
+        rest.force_next_window()
+        st = rest.finish()
+        settings = self.config.rest
+        so_far = ', '.join(f'{v:.3f}' for v in st.learned_deg_h)
+        response.success = True
+        response.message = (
+            f'armed: the next {settings.window_s:g} s window is learned without the rest '
+            f'checks, if its residual is within {settings.residual_limit_deg_h:g} deg/h '
+            f'(rest_residual_limit_deg_h); learned so far {so_far} deg/h (x, y, z) from '
+            f'{st.windows_rest} windows; the outcome is logged and in /diagnostics '
+            '(rest_forced_outcome)'
+        )
+        self.get_logger().info(f'learn_bias_now: {response.message}')
+        return response
+
+    def _learn_now_refusal(self) -> str:
+        """Why "learn now" cannot be armed ('' if it can)."""
+        if not self.configured or self.compensator.rest is None:
+            return 'not configured'
+        if not self.output_enabled:
+            return 'inactive: no gyro is processed; activate the node first'
+        status = self.compensator.status
+        if not status.has_temperature or not status.estimator_ready:
+            return (
+                'the Tdot filter is not warmed up yet: the drift-corrected rate the bias is '
+                'learned from is not available; call again once diagnostics say filter_ready'
+            )
+        if status.temperature_stale:
+            return 'temperature stale: the drift-corrected rate is not available'
+        return ''
+
+    def _check_forced_window(self) -> None:
+        """Log and save once a "learn now" window has been judged (diagnostics timer)."""
+        rest = self.compensator.rest
+        if rest is None:
+            return
+        st = rest.status
+        if st.forced_outcome and st.forced_outcome != self._forced_outcome_seen:
+            self._forced_outcome_seen = st.forced_outcome
+            log = self.get_logger()
+            if st.windows_forced > self._forced_seen:
+                log.info(f'learn_bias_now: {st.forced_outcome}')
+                self.save_learned_bias('learn_bias_now')
+            else:
+                log.warning(f'learn_bias_now: {st.forced_outcome}')
+        self._forced_seen = st.windows_forced
 
     def _create_output(self, *args: Any, **kwargs: Any) -> Publisher:
         """The publisher of ``imu/data`` (the lifecycle node makes it a lifecycle publisher)."""
@@ -352,8 +505,10 @@ class CompensatorShell(_NodeBase):
             qos_overriding_options=qos_options,
         )
         self._rest_sub = None
+        self._learn_srv = None
         if self.config.rest.enabled:
             self._rest_sub = self.create_subscription(Bool, 'imu/at_rest', self._on_at_rest, 10)
+            self._learn_srv = self.create_service(Trigger, '~/learn_bias_now', self._on_learn_now)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._last_counters = dataclasses.replace(self.compensator.status.counters)
         self._last_report_time = time.monotonic()
@@ -368,6 +523,8 @@ class CompensatorShell(_NodeBase):
         self.destroy_publisher(self._diag_pub)
         if self._rest_sub is not None:
             self.destroy_subscription(self._rest_sub)
+        if self._learn_srv is not None:
+            self.destroy_service(self._learn_srv)
         self._destroy_output(self._publisher)
 
     # ------------------------------------------------------------------ parameters
@@ -506,7 +663,8 @@ class CompensatorShell(_NodeBase):
             )
         settings = dataclasses.replace(coefficients.denoise, **overrides)
         guard = GuardSettings(**{name: self._value(name, changes) for name in GUARD_PARAMETERS})
-        return Config(path, coefficients, settings, guard, self._rest_settings())
+        rest_bias_file = str(self._value('rest_bias_file', {}) or '')
+        return Config(path, coefficients, settings, guard, self._rest_settings(), rest_bias_file)
 
     def _rest_settings(self) -> RestSettings:
         """Bias learning at rest from its (read-only) parameters; raises ValueError."""
@@ -537,6 +695,8 @@ class CompensatorShell(_NodeBase):
             config = self._build_config(changes)
         except (CoefficientsError, ValueError, TypeError) as err:
             return SetParametersResult(successful=False, reason=str(err))
+        if rebuild:  # the learned bias belongs to the old coefficients: keep it in the file
+            self.save_learned_bias('reconfigure')
         self.config = config
         if rebuild:
             counters = self.compensator.status.counters
@@ -544,6 +704,7 @@ class CompensatorShell(_NodeBase):
                 config.coefficients.model, config.settings, config.guard, config.rest
             )
             self.compensator.status.counters = counters
+            self._load_learned_bias()
             self.reconfigurations += 1
             self._log_config(f'reconfigured ({", ".join(sorted(rebuild))})')
         else:
@@ -696,6 +857,7 @@ class CompensatorShell(_NodeBase):
         elapsed = max(now - self._last_report_time, 1e-9)
         counters = self.compensator.status.counters
         previous = self._last_counters
+        self._check_forced_window()  # first: the report shows the file it may write
         report = build_report(
             self.compensator.status,
             previous,
@@ -708,6 +870,11 @@ class CompensatorShell(_NodeBase):
             frame_mismatches=self.frame_mismatches,
             require_frame_match=self._require_frame_match,
             rest=None if self.compensator.rest is None else self.compensator.rest.finish(),
+            rest_bias_file=(
+                (self.config.rest_bias_file, self._rest_bias_state)
+                if self.compensator.rest is not None and self.config.rest_bias_file
+                else None
+            ),
         )
         self._log_console(counters, previous)
         self._last_counters = dataclasses.replace(counters)

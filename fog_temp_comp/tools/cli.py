@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -106,6 +107,19 @@ def _add_rest(parser: argparse.ArgumentParser) -> None:
             metavar='X',
             help=f'{unit}; default %(default)s',
         )
+    g.add_argument(
+        '--rest-bias-in',
+        type=Path,
+        metavar='LEARNED.yaml',
+        help="start from this learned bias (the node's rest_bias_file; refused if learned "
+        'with other coefficients)',
+    )
+    g.add_argument(
+        '--rest-bias-out',
+        type=Path,
+        metavar='LEARNED.yaml',
+        help='write the bias learned in this replay (for the node or the next replay)',
+    )
 
 
 def _rest(args: argparse.Namespace) -> RestSettings | None:
@@ -209,6 +223,75 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         help='with --fleet: fraction of faulty units (missing, damaged or short bags, a bad '
         'coil; default 0.1)',
     )
+    p.add_argument(
+        '--runs',
+        type=_runs,
+        metavar='KIND:SETPOINT,...',
+        help="runs to write instead of the paper's plan, e.g. soak:20,cycle:1.0 (soak setpoint "
+        'in degC, cycle rate in degC/min)',
+    )
+    g = p.add_argument_group(
+        'vehicle (to judge bias learning at rest; the truth files hold the shift and rotation)'
+    )
+    g.add_argument(
+        '--turn-on-shift-deg-h',
+        type=_vector3,
+        default=(0.0, 0.0, 0.0),
+        metavar='X,Y,Z',
+        help='constant bias of this power-on, not in the true coefficients (deg/h per axis; '
+        'default 0,0,0)',
+    )
+    g.add_argument(
+        '--motion-period-s',
+        type=float,
+        default=0.0,
+        metavar='S',
+        help='rest/motion cycle: each period the unit rests, then moves (default 0: always at '
+        'rest, a chamber)',
+    )
+    g.add_argument(
+        '--motion-fraction',
+        type=float,
+        default=0.5,
+        metavar='F',
+        help='moving part of each period, the end of it (0..1; default 0.5)',
+    )
+    g.add_argument(
+        '--motion-rate-deg-s',
+        type=float,
+        default=5.0,
+        metavar='R',
+        help='amplitude of the 0.5 Hz shaking rotation while moving, each axis (deg/s; default 5)',
+    )
+
+
+def _vector3(text: str) -> tuple[float, float, float]:
+    """``'1,-2,0.5'`` -> three floats (argparse type)."""
+    parts = text.split(',')
+    try:
+        values = [float(v) for v in parts]
+    except ValueError:
+        values = []
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f'expected X,Y,Z (three numbers), got {text!r}')
+    return (values[0], values[1], values[2])
+
+
+def _runs(text: str) -> list[tuple[str, float]]:
+    """``'soak:20,cycle:1'`` -> [('soak', 20.0), ('cycle', 1.0)] (argparse type)."""
+    runs = []
+    for item in text.split(','):
+        kind, _, setpoint = item.partition(':')
+        try:
+            value = float(setpoint)
+        except ValueError:
+            value = math.nan
+        if kind not in ('soak', 'cycle') or not math.isfinite(value):
+            raise argparse.ArgumentTypeError(
+                f'expected soak:<degC> or cycle:<degC/min>, comma separated; got {item!r}'
+            )
+        runs.append((kind, value))
+    return runs
 
 
 def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -453,6 +536,13 @@ def run(args: argparse.Namespace) -> int:
             temp_hz=args.temp_hz,
             seed=args.seed,
             realistic=args.realistic,
+            runs=args.runs,
+            vehicle={
+                'turn_on_shift_deg_h': args.turn_on_shift_deg_h,
+                'motion_period_s': args.motion_period_s,
+                'motion_fraction': args.motion_fraction,
+                'motion_rate_deg_s': args.motion_rate_deg_s,
+            },
         )
     if args.command == 'calibrate':
         return commands.calibrate_command(args.bags, args.output, options=calibrate_options(args))
@@ -472,6 +562,8 @@ def run(args: argparse.Namespace) -> int:
             guard=_guard(args),
             strict=args.strict,
             rest=_rest(args),
+            rest_bias_in=args.rest_bias_in,
+            rest_bias_out=args.rest_bias_out,
         )
     if args.command == 'evaluate':
         return commands.evaluate_command(

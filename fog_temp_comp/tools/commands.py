@@ -30,6 +30,13 @@ from fog_temp_comp.core.fitstats import format_fits
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, coefficient_key
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.rest import RestSettings
+from fog_temp_comp.core.restfile import (
+    check_learned_bias,
+    file_sha256,
+    learned_bias_from_status,
+    read_learned_bias,
+    write_learned_bias,
+)
 from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
 from fog_temp_comp.core.units import AXES
 from fog_temp_comp.tools import blockreplay
@@ -104,12 +111,18 @@ def simulate_command(
     compress: bool = True,
     runs: Sequence[tuple[str, float]] | None = None,
     config: SimulationConfig | None = None,
+    vehicle: dict[str, Any] | None = None,
     stdout: TextIO | None = None,
 ) -> int:
-    """Write the paper's chamber runs as bags plus ``<run>.truth.npz`` and ``manifest.yaml``."""
+    """Write the paper's chamber runs as bags plus ``<run>.truth.npz`` and ``manifest.yaml``.
+
+    ``vehicle`` overrides :class:`SimulationConfig` fields of the vehicle (turn-on shift in
+    deg/h, rest/motion phases); the truth files then hold ``turn_on_shift_deg_h`` and
+    ``true_rotation_rad_s`` too (the oracle: rate minus drift, shift and rotation is noise).
+    """
     stdout = stdout or sys.stdout
     base = REALISTIC if realistic else SimulationConfig()
-    cfg = config or dataclasses.replace(base, imu_hz=imu_hz, temp_hz=temp_hz)
+    cfg = config or dataclasses.replace(base, imu_hz=imu_hz, temp_hz=temp_hz, **(vehicle or {}))
     out_dir.mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
         'description': 'synthetic thermal-chamber runs (fog_temp_comp simulate)',
@@ -125,6 +138,10 @@ def simulate_command(
             for j, axis in enumerate(AXES)
         },
         'coil_lag_s': float(cfg.coil_lag_s),
+        'turn_on_shift_deg_h': dict(zip(AXES, map(float, cfg.turn_on_shift_deg_h), strict=True)),
+        'motion_period_s': float(cfg.motion_period_s),
+        'motion_fraction': float(cfg.motion_fraction),
+        'motion_rate_deg_s': float(cfg.motion_rate_deg_s),
         'runs': [],
     }
     with AtomicOutputs() as outputs:  # all files appear at the end, or none
@@ -147,6 +164,12 @@ def simulate_command(
                 true_drift_deg_h=run.true_drift_deg_h,
                 true_temperature_degC=run.true_temperature_degC,
                 true_tdot_degC_per_min=run.true_tdot_degC_per_min,
+                turn_on_shift_deg_h=run.turn_on_shift_deg_h,
+                true_rotation_rad_s=(
+                    np.zeros_like(run.rates_rad_s)
+                    if run.true_rotation_rad_s is None
+                    else run.true_rotation_rad_s
+                ),
             )
             unit = 'degC_per_min' if kind == 'cycle' else 'degC'
             manifest['runs'].append(
@@ -508,6 +531,8 @@ def compensate_command(
     guard: GuardSettings | None = None,
     strict: bool = False,
     rest: RestSettings | None = None,
+    rest_bias_in: Path | None = None,
+    rest_bias_out: Path | None = None,
     stdout: TextIO | None = None,
     fast: bool = True,
 ) -> int:
@@ -518,20 +543,34 @@ def compensate_command(
     (:mod:`~fog_temp_comp.tools.blockreplay`), other bags through ``AnyReader`` and
     :meth:`BagWriter.write_many`; ``fast=False`` writes through rosbags one message at a time.
     Both give the same bag. With ``rest`` (enabled) the bias learner at rest runs too, fed the
-    Imu's accelerometer (through ``AnyReader``: the MCAP block path decodes rates only).
+    Imu's accelerometer (through ``AnyReader``: the MCAP block path decodes rates only); it
+    starts from the learned-bias file ``rest_bias_in`` (refused with an error if learned with
+    other coefficients) and writes what it learned to ``rest_bias_out``
+    (:mod:`~fog_temp_comp.core.restfile`, as the node's ``rest_bias_file``).
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
     if out_bag.exists():
         raise FileExistsError(f'{out_bag}: exists already, not overwriting')
     settings = effective_settings(coeffs, denoise_method)
+    learning = Compensator(coeffs.model, settings, guard, rest).rest is not None
+    if (rest_bias_in or rest_bias_out) and not learning:
+        raise ValueError('--rest-bias-in/--rest-bias-out need --rest-learning')
+
+    def new_compensator(out: TextIO | None = None) -> Compensator:
+        compensator = Compensator(coeffs.model, settings, guard, rest)
+        if rest_bias_in is not None:
+            _start_rest_from(compensator, rest_bias_in, coeffs_path, out)
+        return compensator
+
+    new_compensator(stdout)  # refuse a learned-bias file that does not fit, before reading
     if output_topic and not output_topic.startswith('/'):
         output_topic = '/' + output_topic
     run = _Compensate(
         in_bag=in_bag,
         fmt=bagio.bag_format(in_bag),
         topics=(gyro_topic, temp_topic, output_topic),
-        new_compensator=lambda: Compensator(coeffs.model, settings, guard, rest),
+        new_compensator=new_compensator,
         fast=fast,
     )
     with AtomicOutputs(out_bag) as out:  # complete, or nothing at out_bag
@@ -564,6 +603,18 @@ def compensate_command(
             + ' deg/h',
             file=stdout,
         )
+        if rest_bias_out is not None:
+            bias = learned_bias_from_status(
+                st,
+                compensator.rest.settings,
+                coefficients_file=str(coeffs_path),
+                coefficients_sha256=file_sha256(coeffs_path),
+            )
+            if bias is None:
+                print(f'rest learning: nothing learned, {rest_bias_out} not written', file=stdout)
+            else:
+                write_learned_bias(rest_bias_out, bias)
+                print(f'wrote {rest_bias_out} (learned bias)', file=stdout)
     return 0
 
 
@@ -631,6 +682,26 @@ class _Compensate:
                     compensator = self.new_compensator()
                     compensator.mark_holes(holes)
             return job.run(compensator, batched=self.fast), compensator
+
+
+def _start_rest_from(
+    compensator: Compensator, path: Path, coeffs_path: Path, out: TextIO | None
+) -> None:
+    """Start the bias learner from a learned-bias file; ValueError if it does not fit."""
+    assert compensator.rest is not None
+    bias = read_learned_bias(path)
+    check_learned_bias(
+        bias,
+        coefficients_sha256=file_sha256(coeffs_path),
+        earth_rate_body_deg_h=compensator.rest.settings.earth_rate_body_deg_h,
+        path=path,
+    )
+    reason = compensator.rest.start_from(bias.bias_deg_h)
+    if reason is not None:
+        raise ValueError(f'{path}: {reason}')
+    if out is not None:
+        text = ', '.join(f'{v:.3f}' for v in bias.bias_deg_h)
+        print(f'rest learning: starting from {text} deg/h (x, y, z), {path}', file=out)
 
 
 def _compressed_mcap(bag: Path) -> bool:
