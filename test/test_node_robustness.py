@@ -6,6 +6,7 @@ All cases run the real node in an in-process executor and talk to it over topics
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -361,6 +362,26 @@ def test_frame_id_mismatch(
         status = h.diagnose()
         assert 'frame_id differs' in status.message
         assert status.level == (ERROR if require else WARN)
+    finally:
+        h.close()
+
+
+def test_unset_header_stamps_are_timed_by_the_node_clock(
+    ros_context: object, coeffs_file: Path, coefficients: Coefficients
+) -> None:
+    """A temperature driver that never stamps (stamp 0): corrected anyway, with a WARN."""
+    h = Harness(ros_context, start(ros_context, coeffs_file))
+    try:
+        for _ in range(3):
+            h.send_temperature(0.0, 25.0)
+        assert h.node.unstamped == 3
+        out = h.send_imu(time.time(), RATE)
+        assert out is not None
+        assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0))
+        status = h.diagnose()
+        assert 'without a header stamp' in status.message
+        assert status.level == WARN
+        assert dict((v.key, v.value) for v in status.values)['unstamped_messages'] == '3'
     finally:
         h.close()
 

@@ -307,6 +307,8 @@ class CompensatorShell(_NodeBase):
         self._forget_compensator()
         self.reconfigurations = 0
         self.frame_mismatches = 0
+        #: messages with an unset (0) header stamp, timed by the node clock instead
+        self.unstamped = 0
         self._require_frame_match = bool(self.get_parameter('require_frame_id_match').value)
         self._inflate_covariance = bool(self.get_parameter('inflate_covariance').value)
         self._throttle_s = float(self.get_parameter('log_throttle_s').value)
@@ -719,9 +721,14 @@ class CompensatorShell(_NodeBase):
         )
 
     # ------------------------------------------------------------------ data
+    def _unset_stamp_s(self) -> float:
+        """The node clock's time, s, for a message whose driver left the stamp unset (0)."""
+        self.unstamped += 1
+        return self.get_clock().now().nanoseconds * 1e-9
+
     def _on_temperature(self, msg: Temperature) -> None:
         stamp = msg.header.stamp
-        stamp_s = stamp.sec + stamp.nanosec * 1e-9
+        stamp_s = stamp.sec + stamp.nanosec * 1e-9 or self._unset_stamp_s()
         was_ready = self.compensator.status.estimator_ready
         if self.compensator.add_temperature(stamp_s, msg.temperature):
             self._track_warm_up(stamp_s, was_ready)
@@ -757,13 +764,12 @@ class CompensatorShell(_NodeBase):
                 self._publisher.publish(msg)
                 return
         compensator = self.compensator
+        stamp_s = stamp.sec + stamp.nanosec * 1e-9 or self._unset_stamp_s()
         if compensator.rest is None:
-            rate = compensator.correct_xyz(stamp.sec + stamp.nanosec * 1e-9, w.x, w.y, w.z)
+            rate = compensator.correct_xyz(stamp_s, w.x, w.y, w.z)
         else:
             a = msg.linear_acceleration
-            rate = compensator.correct_xyz(
-                stamp.sec + stamp.nanosec * 1e-9, w.x, w.y, w.z, (a.x, a.y, a.z)
-            )
+            rate = compensator.correct_xyz(stamp_s, w.x, w.y, w.z, (a.x, a.y, a.z))
         if rate is None:  # duplicate stamp: dropped and counted
             return
         w.x, w.y, w.z = rate
@@ -868,6 +874,7 @@ class CompensatorShell(_NodeBase):
             temperature_rate_hz=(counters.temperature_total - previous.temperature_total)
             / elapsed,
             frame_mismatches=self.frame_mismatches,
+            unstamped=self.unstamped,
             require_frame_match=self._require_frame_match,
             rest=None if self.compensator.rest is None else self.compensator.rest.finish(),
             rest_bias_file=(
