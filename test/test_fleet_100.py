@@ -52,6 +52,7 @@ def test_hundred_units_equal_calibrate_alone_and_faults_reported(tmp_path: Path)
     good = [u for u in truth if u not in failing]
     assert all(rows[u]['status'] == 'ok' for u in good)
     units = yaml.safe_load(manifest.read_text())['units']
+    (tmp_path / 'alone').mkdir()
     for unit in good:  # bad_coil units calibrate: they are outliers, not failures
         bags = [str(units_dir / b) for b in units[unit]['bags']]
         alone = tmp_path / 'alone' / f'{unit}.yaml'
