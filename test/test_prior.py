@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from fog_temp_comp.core.calibration import CalibrationError, calibrate_detailed
+from fog_temp_comp.core.calibration import CalibrationError, GridTable, calibrate_detailed
 from fog_temp_comp.core.coefficients import Coefficients
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
@@ -20,6 +20,7 @@ from fog_temp_comp.core.prior import (
     FleetPrior,
     PriorError,
     calibrate_with_prior,
+    coverage,
     estimate_prior,
     load_prior,
     posterior,
@@ -127,6 +128,9 @@ def test_short_run_with_the_prior() -> None:
     result = calibrate_with_prior([short], dataclasses.replace(prior, settings=SETTINGS))
     coeffs = result.coefficients
     assert coeffs.provenance['prior']['weight'] in PRIOR_WEIGHTS
+    covered = coeffs.provenance['prior']['coverage']
+    assert covered['temperature_fraction'] < 0.5 and not covered['tdot_both_signs']
+    assert len(result.warnings) == 2 and 'T slope is extrapolated' in result.warnings[0]
     truth = np.asarray(unit.coefficients)
     for fit in result.fits:
         j = 'xyz'.index(fit.axis)
@@ -135,6 +139,27 @@ def test_short_run_with_the_prior() -> None:
         weight = coeffs.provenance['prior']['weight']
         prior_sd = np.sqrt(np.diag(prior.covariance[j]) / weight)
         assert np.all(fit.se_hac < prior_sd)  # the unit's own data narrowed every coefficient
+
+
+def test_coverage_of_the_fleet_range() -> None:
+    """A cycle over the fleet's range passes; its first ramp alone is warned about twice."""
+    prior = FleetPrior(
+        PAPER_TERMS, SETTINGS, np.zeros((3, 3)), np.stack([np.eye(3)] * 3),
+        temperature_range_degC=Range(-40.0, 60.0),
+    )  # fmt: skip
+    t = np.concatenate(
+        [np.linspace(20, 60, 40), np.linspace(60, -40, 100), np.linspace(-40, 20, 60)]
+    )
+    tdot = np.gradient(t)
+
+    def table(rows: slice) -> GridTable:
+        return GridTable(t[rows], tdot[rows], np.zeros((t[rows].size, 3)))
+
+    full, warnings = coverage(table(slice(None)), prior)
+    assert full == {'temperature_fraction': 1.0, 'tdot_both_signs': True} and warnings == []
+    first, warnings = coverage(table(slice(0, 40)), prior)
+    assert first == {'temperature_fraction': 0.4, 'tdot_both_signs': False}
+    assert 'spans 20..60 degC, 40 %' in warnings[0] and 'both signs' in warnings[1]
 
 
 def test_a_full_run_is_led_by_its_own_data() -> None:

@@ -8,6 +8,10 @@ prior (ridge toward the fleet mean, weighted by the fleet covariance): a short c
 alone cannot identify T or T^2 borrows them from the fleet, and the posterior standard deviations
 say how much the unit's own data added. The prior's weight is chosen on held-out contiguous time
 blocks of the unit's own run(s), among :data:`PRIOR_WEIGHTS`.
+
+The prior is the unit-to-unit spread: it cannot tell one unit's T slope better than that, so
+the short run must still span the fleet's temperature range with ramps of both signs (a fast
+full cycle, not the first hours of a slow one); :func:`coverage` warns when it does not.
 """
 
 from __future__ import annotations
@@ -50,6 +54,13 @@ MIN_OUTLIER_UNITS = 5
 PRIOR_WEIGHTS = (0.25, 1.0, 4.0)
 #: contiguous time blocks of the unit's rows held out in turn to choose the weight
 CV_BLOCKS = 5
+#: a run spanning less than this fraction of the fleet's calibrated temperature range leaves
+#: the unit's T slope to be extrapolated (a warning): the prior's T spread is the unit-to-unit
+#: one, and nothing but the unit's own swing narrows it
+MIN_TEMPERATURE_COVERAGE = 0.8
+#: Tdot (degC/min) that the 5 % and 95 % quantiles of a run must pass, below and above, for
+#: ramps of both signs (Tdot and the coil lag told apart from a constant)
+MIN_RAMP_DEGC_PER_MIN = 0.05
 
 
 class PriorError(ValueError):
@@ -398,7 +409,10 @@ def calibrate_with_prior(
     deviations (the residual's autocorrelation taken into account). A run too short to identify
     the model alone is accepted: the prior supplies what it lacks, and the calibrated range is
     the run's widened to the fleet's. With ``fit_coil_lag``, the unit's own sensor-to-coil lag
-    is searched near the fleet's (:func:`unit_coil_lag`).
+    is searched near the fleet's (:func:`unit_coil_lag`). The result's warnings say when the
+    run covers too little of the fleet's range (:func:`coverage`, also in
+    ``provenance.prior.coverage``): the prior narrows nothing beyond the unit-to-unit spread,
+    so a T slope from a narrow swing is extrapolated.
     """
     if not records:
         raise CalibrationError('no records to calibrate on')
@@ -415,6 +429,7 @@ def calibrate_with_prior(
             f'{table.rate_deg_h.shape[0]} grid rows: too short even with a prior'
         )
     weight, scores = choose_weight(table, prior, weights)
+    covered, warnings = coverage(table, prior)
     a = table.design(prior.terms)
     fits = []
     for j, axis in enumerate(AXES):
@@ -464,11 +479,42 @@ def calibrate_with_prior(
                 'coil_lag_s': {'fleet': fleet_lag, 'unit': prior.settings.coil_lag_s},
                 'heldout_rms_deg_h': {str(w): s for w, s in scores.items()},
                 'choice': f'prior weight chosen on {CV_BLOCKS} contiguous held-out blocks',
+                'coverage': covered,
             },
             **(provenance or {}),
         },
     )
-    return CalibrationResult(coefficients, table, fits, [])
+    return CalibrationResult(coefficients, table, fits, warnings)
+
+
+def coverage(table: GridTable, prior: FleetPrior) -> tuple[dict[str, Any], list[str]]:
+    """How much of the fleet's range a run covers, and the warnings when too little.
+
+    Returns ``{'temperature_fraction': f, 'tdot_both_signs': bool}`` (f: the run's share of the
+    fleet's calibrated temperature range; 1 without one) and a warning per shortfall.
+    """
+    t, tdot = table.temperature_degC, table.tdot_degC_per_min
+    fleet = prior.temperature_range_degC
+    fraction = 1.0
+    if fleet is not None and fleet.high > fleet.low:
+        inside = min(float(t.max()), fleet.high) - max(float(t.min()), fleet.low)
+        fraction = max(0.0, inside) / (fleet.high - fleet.low)
+    low, high = np.quantile(tdot, [0.05, 0.95])
+    both = bool(low < -MIN_RAMP_DEGC_PER_MIN and high > MIN_RAMP_DEGC_PER_MIN)
+    warnings = []
+    if fraction < MIN_TEMPERATURE_COVERAGE and fleet is not None:
+        warnings.append(
+            f'the run spans {float(t.min()):.0f}..{float(t.max()):.0f} degC, '
+            f'{100 * fraction:.0f} % of the fleet range {fleet.low:.0f}..{fleet.high:.0f} '
+            'degC: the T slope is extrapolated (a short run for a prior should cover the '
+            'full range, e.g. a fast cycle)'
+        )
+    if not both:
+        warnings.append(
+            'the run has no ramps of both signs (Tdot 5-95 % quantiles '
+            f'{low:+.2f}..{high:+.2f} degC/min): Tdot and the coil lag rest on the prior'
+        )
+    return {'temperature_fraction': round(fraction, 3), 'tdot_both_signs': both}, warnings
 
 
 def _union(values: FloatArray, fleet: Range | None) -> Range:
@@ -507,6 +553,7 @@ __all__ = [
     'FleetPrior',
     'PriorError',
     'calibrate_with_prior',
+    'coverage',
     'estimate_prior',
     'load_prior',
     'posterior',

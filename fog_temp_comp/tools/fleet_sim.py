@@ -129,6 +129,27 @@ def simulate_fleet_command(
     return 0
 
 
+def short_cycle(base: SimulationConfig, hours: float) -> tuple[SimulationConfig, float]:
+    """A full-range chamber cycle compressed into ``hours``: the short run for a fleet prior.
+
+    The cycle of :func:`~fog_temp_comp.tools.simulate.chamber_profile` (start, high, low,
+    start; half a soak at each end, a soak at each extreme) with soaks of ``hours / 8`` (at
+    most 1 h) and the ramp rate that fits the rest:
+    every temperature of the cycle, ramps of both signs. Returns the configuration (soaks
+    changed) and the rate, degC/min, for ``simulate_run('cycle', rate, cfg)``.
+    """
+    soak_s = min(3600.0, hours * 3600.0 / 8)
+    swing_degC = (
+        abs(base.high_degC - base.start_degC)
+        + abs(base.high_degC - base.low_degC)
+        + abs(base.start_degC - base.low_degC)
+    )
+    ramp_min = (hours * 3600.0 - 3 * soak_s) / 60.0
+    if not ramp_min > 0:
+        raise ValueError(f'a cycle of {hours} h has no time left for its ramps')
+    return dataclasses.replace(base, cycle_soak_s=soak_s), swing_degC / ramp_min
+
+
 def cut_run(run: SimulatedRun, duration_s: float) -> SimulatedRun:
     """The first ``duration_s`` seconds of ``run`` (a chamber run stopped early)."""
     imu = run.imu_stamps_s < run.imu_stamps_s[0] + duration_s
