@@ -19,7 +19,6 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import optimize, signal
 
 FloatArray = NDArray[np.float64]
 
@@ -149,6 +148,8 @@ def coil_lag(stamps_s: ArrayLike, values: ArrayLike, time_constant_s: float) -> 
             raise ValueError(f'coil_lag_s must be a finite number >= 0 s, got {tau!r}')
         a, b = foh_lag_coefficients(step, tau)
         # y[k] = a y[k-1] + b x[k] + (1 - a - b) x[k-1], y[0] = x[0]
+        from scipy import signal  # here: scipy.signal costs ~1 s of start-up
+
         y, _ = signal.lfilter([b, 1.0 - a - b], [1.0, -a], x, zi=[(1.0 - b) * x[0]])
         return np.asarray(y, dtype=np.float64)
     return CoilLag(tau).update_block(t, x)
@@ -207,6 +208,8 @@ def search_time_constant(
     lo = grid[max(best - 1, 0)]
     hi = grid[min(best + 1, len(grid) - 1)]
     if hi > lo:
+        from scipy import optimize
+
         result = optimize.minimize_scalar(
             f, bounds=(lo, hi), method='bounded', options={'xatol': tolerance_s}
         )

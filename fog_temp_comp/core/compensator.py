@@ -1,8 +1,11 @@
 """The compensator: the one object that turns raw gyro rates into corrected ones.
 
-Both the ROS node and the offline ``compensate`` / ``evaluate`` commands drive this class, one
-message at a time, so a bag replay measures exactly what runs on the robot. It is causal: an
-output depends only on the messages fed before it.
+Both the ROS node and the offline ``compensate`` / ``evaluate`` commands drive this class, so a
+bag replay measures exactly what runs on the robot. It is causal: an output depends only on the
+messages fed before it. The node feeds it one message at a time (:meth:`Compensator.correct_xyz`);
+the offline tools feed it the gyro messages between two temperature samples as one block
+(:meth:`Compensator.correct_block`), which gives the same output, bit for bit, and the same
+counters and status, without a Python call per message.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from fog_temp_comp.core.tdot import TdotEstimate, TdotEstimator, make_estimator
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H, S_PER_MIN
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 STALE_POLICIES = ('hold', 'none')
 
 
@@ -382,6 +386,181 @@ class Compensator:
         else:
             bx, by, bz = self.rest.applied_rad_s
         return (x - bx, y - by, z - bz)
+
+    # ------------------------------------------------------------------ gyro, a block at a time
+    def correct_block(
+        self,
+        stamps_s: ArrayLike,
+        rates_rad_s: ArrayLike,
+        accel_m_s2: ArrayLike | None = None,
+    ) -> tuple[FloatArray, BoolArray]:
+        """:meth:`correct_xyz` on ``N`` gyro samples in a row, with no temperature between them.
+
+        Feed temperature samples with :meth:`add_temperature` between blocks, in the order they
+        arrive (a block is the gyro messages between two temperature samples, or any part of
+        them). The output, the counters and the status are those of ``N`` calls to
+        :meth:`correct_xyz`, bit for bit (tested): between two temperature samples the Tdot
+        estimate is fixed, and the extrapolation, the clamps and the model are evaluated with
+        the same IEEE operations in the same order, on arrays.
+
+        Blocks the array path does not cover (with bias learning at rest, a stamp that is not
+        finite and positive, a stamp not later than the one before, which includes duplicates,
+        out-of-order messages and time jumps) go through :meth:`correct_xyz` one message at a
+        time, so every case behaves exactly as on the node.
+
+        Parameters
+        ----------
+        stamps_s : array_like, shape (N,)
+            Gyro stamps, s.
+        rates_rad_s : array_like, shape (N, 3)
+            Angular rates, rad/s.
+        accel_m_s2 : array_like, shape (N, 3), optional
+            Accelerometer, m/s^2 (used by the bias learner at rest only).
+
+        Returns
+        -------
+        corrected : ndarray, shape (N, 3)
+            Corrected rates, rad/s; rows of dropped samples (repeated stamp) are NaN.
+        kept : ndarray of bool, shape (N,)
+            False where :meth:`correct_xyz` would have returned None (dropped).
+
+        """
+        t = np.asarray(stamps_s, dtype=np.float64).reshape(-1)
+        rates = np.asarray(rates_rad_s, dtype=np.float64).reshape(-1, 3)
+        if rates.shape[0] != t.size:
+            raise ValueError(f'{t.size} stamps but {rates.shape[0]} rates')
+        accel = None if accel_m_s2 is None else np.asarray(accel_m_s2, np.float64).reshape(-1, 3)
+        if t.size == 0:
+            return np.empty((0, 3)), np.ones(0, dtype=np.bool_)
+        last = self.status.last_imu_stamp_s
+        increasing = bool(np.all(np.isfinite(t))) and t[0] > 0 and t[0] > last
+        if increasing and t.size > 1:
+            increasing = bool(np.all(t[1:] > t[:-1]))
+        if self.rest is not None or not increasing:
+            return self._correct_each(t, rates, accel)
+        return self._correct_increasing(t, rates), np.ones(t.size, dtype=np.bool_)
+
+    def _correct_each(
+        self, t: FloatArray, rates: FloatArray, accel: FloatArray | None
+    ) -> tuple[FloatArray, BoolArray]:
+        """:meth:`correct_block` one message at a time (the cases the array path leaves)."""
+        out = np.full((t.size, 3), np.nan)
+        kept = np.ones(t.size, dtype=np.bool_)
+        accel_rows = [None] * t.size if accel is None else [tuple(a) for a in accel.tolist()]
+        for k, (stamp, (x, y, z), acc) in enumerate(
+            zip(t.tolist(), rates.tolist(), accel_rows, strict=True)
+        ):
+            corrected = self.correct_xyz(stamp, x, y, z, acc)
+            if corrected is None:
+                kept[k] = False
+            else:
+                out[k] = corrected
+        return out, kept
+
+    def _correct_increasing(self, t: FloatArray, rates: FloatArray) -> FloatArray:
+        """:meth:`correct_block` for finite, positive, strictly increasing stamps, no learner.
+
+        Mirrors :meth:`correct_xyz` and :meth:`_update_correction` step by step; a comment
+        names the scalar statement each array statement stands for.
+        """
+        n = t.size
+        status = self.status
+        counters = status.counters
+        guard = self._guard
+        status.last_imu_stamp_s = float(t[-1])
+        counters.imu_nonfinite += int(np.count_nonzero(~np.isfinite(rates).all(axis=1)))
+        if not status.has_temperature:
+            counters.imu_uncorrected += n
+            self._set_correction((0.0, 0.0, 0.0))
+            return rates.copy()
+        # abs(stamp_s - status.last_temperature_stamp_s) > guard.temperature_timeout_s
+        stale = np.abs(t - status.last_temperature_stamp_s) > guard.temperature_timeout_s
+        n_stale = int(np.count_nonzero(stale))
+        status.temperature_stale = bool(stale[-1])
+        if guard.stale_policy == 'none':
+            counters.imu_uncorrected += n_stale
+        else:
+            counters.imu_held += n_stale
+        counters.imu_corrected += n - n_stale
+        fresh = np.flatnonzero(~stale)
+        carried_deg_h = status.correction_deg_h
+        carried = np.array(self._correction)
+        rad_s = self._corrections_rad_s(t[fresh]) if fresh.size else None
+        if rad_s is None:  # no estimate yet, or all stale: the carried correction throughout
+            applied = np.broadcast_to(carried, (n, 3))
+            self._correction = tuple(carried.tolist())
+            status.correction_deg_h = carried_deg_h
+        else:
+            # a stale message holds the correction of the last fresh one before it
+            source = np.full(n, -1)
+            source[fresh] = np.arange(fresh.size)
+            source = np.maximum.accumulate(source)
+            table = np.vstack([rad_s, carried])  # index -1: the carried correction
+            applied = table[source]
+        out = rates - applied
+        if guard.stale_policy == 'none':
+            out[stale] = rates[stale]
+        return out
+
+    def _corrections_rad_s(self, t: FloatArray) -> FloatArray | None:
+        """:meth:`_update_correction` at each of the (fresh) stamps ``t``; the rad/s rows.
+
+        None when there is no estimate yet (the correction stays as it was). Leaves the status,
+        the counters and the current correction as the last of the calls would.
+        """
+        estimate: TdotEstimate | None = self._estimator.estimate
+        if estimate is None:
+            return None
+        status = self.status
+        counters = status.counters
+        guard = self._guard
+        tdot = estimate.tdot_degC_per_min
+        tdot_lag = estimate.tdot_lag_degC_per_min
+        if math.isnan(tdot_lag):
+            tdot_lag = tdot
+        # min(max(stamp_s - estimate.stamp_s, 0.0), self._horizon_s)
+        elapsed_s = np.minimum(np.maximum(t - estimate.stamp_s, 0.0), self._horizon_s)
+        temperature = estimate.temperature_degC + tdot * elapsed_s / S_PER_MIN
+        t_range, r_range = self.model.temperature_range_degC, self.model.tdot_range_degC_per_min
+        t_low, t_high, r_low, r_high = t_range.low, t_range.high, r_range.low, r_range.high
+        t_out = ~((t_low <= temperature) & (temperature <= t_high))
+        r_out = not r_low <= tdot <= r_high
+        if guard.clamp_temperature:
+            t_used = np.minimum(np.maximum(temperature, t_low), t_high)
+        else:
+            t_used = temperature
+        if not guard.clamp_tdot:
+            r_high = guard.tdot_limit_degC_per_min
+            r_low = -r_high
+        r_used = min(max(tdot, r_low), r_high)
+        rl_used = min(max(tdot_lag, r_low), r_high)
+        t_clamped = t_used != temperature
+        r_clamped = r_used != tdot or rl_used != tdot_lag
+        counters.imu_temperature_clamped += int(np.count_nonzero(t_clamped))
+        if r_clamped:
+            counters.imu_tdot_clamped += t.size
+        elif r_out:
+            counters.imu_tdot_extrapolated += t.size
+        status.temperature_out_of_range = bool(t_out[-1])
+        status.tdot_out_of_range = r_out
+        status.temperature_clamped = bool(t_clamped[-1])
+        status.tdot_clamped = r_clamped
+        status.temperature_used_degC = float(t_used[-1])
+        status.tdot_used_degC_per_min = r_used
+        status.tdot_lag_used_degC_per_min = rl_used
+        # cx = 0.0; cx += term(t_used, r_used, rl_used) * row[0]; ... in the terms' order
+        zero = np.zeros(t.size)
+        cx: FloatArray = zero
+        cy: FloatArray = zero
+        cz: FloatArray = zero
+        for term, row in zip(self._term_functions, self._coefficient_rows, strict=True):
+            value = term(t_used, r_used, rl_used)  # type: ignore[arg-type]
+            cx = cx + value * row[0]
+            cy = cy + value * row[1]
+            cz = cz + value * row[2]
+        deg_h = np.stack(np.broadcast_arrays(cx, cy, cz), axis=1)
+        self._set_correction(tuple(deg_h[-1].tolist()))
+        return deg_h * RAD_S_PER_DEG_H
 
     def _set_correction(self, correction_deg_h: tuple[float, float, float]) -> None:
         self.status.correction_deg_h = correction_deg_h

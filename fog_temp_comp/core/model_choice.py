@@ -35,7 +35,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize
 
 from fog_temp_comp.core.calibration import (
     CalibrationError,
@@ -504,6 +503,8 @@ def refine_time_constant(
         if score.criterion < best.criterion:
             best = score
         return score.criterion
+
+    from scipy import optimize  # here: not every calibration needs it (start-up)
 
     optimize.minimize_scalar(
         objective,

@@ -10,7 +10,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 import yaml
@@ -35,7 +35,9 @@ from fog_temp_comp.core.units import AXES
 from fog_temp_comp.tools import blockreplay
 from fog_temp_comp.tools.atomic import AtomicOutputs
 from fog_temp_comp.tools.excitation import identifiable_terms
-from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
+
+if TYPE_CHECKING:
+    from fog_temp_comp.tools.simulate import SimulationConfig
 
 #: errors that end a command with one ``ERROR:`` line and exit code 1
 USER_ERRORS = (BagError, CalibrationError, CoefficientsError, FileExistsError, ValueError)
@@ -95,6 +97,9 @@ def simulate_command(
     stdout: TextIO | None = None,
 ) -> int:
     """Write the paper's chamber runs as bags plus ``<run>.truth.npz`` and ``manifest.yaml``."""
+    # here, not at the top: the simulator needs scipy.signal (~1 s), no other command does
+    from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
+
     stdout = stdout or sys.stdout
     base = REALISTIC if realistic else SimulationConfig()
     cfg = config or dataclasses.replace(base, imu_hz=imu_hz, temp_hz=temp_hz)
