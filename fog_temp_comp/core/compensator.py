@@ -624,8 +624,10 @@ def replay(
 ) -> FloatArray:
     """Feed recorded streams through ``compensator`` in stamp order, as the node would see them.
 
-    Messages are merged by stamp (temperature first on equal stamps) and fed one at a time;
-    ``accel_m_s2`` (shape (N, 3), optional) goes with each gyro sample to the bias learner.
+    Messages are merged by stamp (temperature first on equal stamps); the gyro samples between
+    two temperatures go in as one :meth:`Compensator.correct_block` (the output of one message
+    at a time, bit for bit); ``accel_m_s2`` (shape (N, 3), optional) goes with each gyro sample
+    to the bias learner.
 
     Returns
     -------
@@ -641,16 +643,21 @@ def replay(
     n_imu = imu_t.size
     order = np.lexsort((np.r_[np.ones(n_imu), np.zeros(temp_t.size)], np.r_[imu_t, temp_t]))
     out = np.full_like(rates, np.nan)
-    imu_list, temp_list, temp_values = imu_t.tolist(), temp_t.tolist(), temps.tolist()
     accel = None if accel_m_s2 is None else np.asarray(accel_m_s2, np.float64).reshape(-1, 3)
-    for k in order.tolist():
-        if k < n_imu:
-            corrected = compensator.correct(
-                imu_list[k], rates[k], None if accel is None else accel[k]
+    temp_list, temp_values = temp_t.tolist(), temps.tolist()
+    # runs of gyro samples between two temperatures, each corrected as one block
+    is_temp = order >= n_imu
+    cuts = np.flatnonzero(is_temp)
+    start = 0
+    for cut in [*cuts.tolist(), order.size]:
+        if cut > start:
+            rows = order[start:cut]
+            corrected, kept = compensator.correct_block(
+                imu_t[rows], rates[rows], None if accel is None else accel[rows]
             )
-            if corrected is not None:
-                out[k] = corrected
-        else:
-            j = k - n_imu
+            out[rows[kept]] = corrected[kept]
+        if cut < order.size:
+            j = int(order[cut]) - n_imu
             compensator.add_temperature(temp_list[j], temp_values[j])
+        start = cut + 1
     return out

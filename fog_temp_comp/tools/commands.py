@@ -742,31 +742,29 @@ class ChunkReplayer:
         temp = [k for k, (c, _, _) in enumerate(chunk) if c.topic == self.temp_topic]
         imu_batch = self._decode([chunk[k] for k in imu], imu=True)
         temp_batch = self._decode([chunk[k] for k in temp], imu=False)
-        rates = imu_batch.angular_velocity_rad_s.tolist() if imu else []
-        accel = imu_batch.linear_acceleration.tolist() if imu and self.with_accel else None
-        imu_stamps = imu_batch.stamps_s.tolist() if imu else []
+        n_imu = len(imu)
+        rates = imu_batch.angular_velocity_rad_s if imu else np.empty((0, 3))
+        accel = imu_batch.linear_acceleration if imu and self.with_accel else None
+        imu_stamps = imu_batch.stamps_s if imu else np.empty(0)
         temp_stamps = temp_batch.stamps_s.tolist() if temp else []
         temps = temp_batch.temperature_degC.tolist() if temp else []
-        kind = {k: ('imu', j) for j, k in enumerate(imu)}
-        kind.update({k: ('temp', j) for j, k in enumerate(temp)})
-        corrected: list[tuple[float, float, float] | None] = []
+        # the Imu between two temperatures (in chunk order) go in as one block
+        stops = [*np.searchsorted(imu, temp).tolist(), n_imu]
+        corrected = np.empty((n_imu, 3))
+        kept = np.ones(n_imu, dtype=np.bool_)
         compensator = self.compensator
-        for k in range(len(chunk)):
-            what = kind.get(k)
-            if what is None:
-                continue
-            j = what[1]
-            if what[0] == 'temp':
+        done = 0
+        for j, stop in enumerate(stops):
+            if stop > done:
+                part = slice(done, stop)
+                corrected[part], kept[part] = compensator.correct_block(
+                    imu_stamps[part], rates[part], None if accel is None else accel[part]
+                )
+                done = stop
+            if j < len(temps):
                 compensator.add_temperature(temp_stamps[j], temps[j])
-            else:
-                x, y, z = rates[j]
-                if accel is None:
-                    corrected.append(compensator.correct_xyz(imu_stamps[j], x, y, z))
-                else:
-                    ax, ay, az = accel[j]
-                    corrected.append(compensator.correct_xyz(imu_stamps[j], x, y, z, (ax, ay, az)))
-        keep = [j for j, c in enumerate(corrected) if c is not None]
-        patched = self._patch([chunk[imu[j]] for j in keep], [corrected[j] for j in keep])
+        keep = np.flatnonzero(kept).tolist()
+        patched = self._patch([chunk[imu[j]] for j in keep], corrected[kept].tolist())
         out_of = dict(zip((imu[j] for j in keep), patched, strict=True))
         out: list[tuple[str | None, int, bytes]] = []
         for k, (conn, log_ns, raw) in enumerate(chunk):
