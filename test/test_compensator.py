@@ -277,35 +277,62 @@ def _awkward_stream(seed: int) -> list[Event]:
     return events
 
 
-def _drive(comp: Compensator, events: list[Event], block: bool, seed: int = 0) -> np.ndarray:
-    """Every gyro output (NaN row: dropped), per message or in random-length blocks."""
+def _drive(comp: Compensator, events: list[Event], mode: str, seed: int = 0) -> np.ndarray:
+    """Every gyro output (NaN row: dropped), fed in one of three ways.
+
+    ``'each'`` message alone, random ``'block'`` s of the gyro messages between two
+    temperatures, or random runs of both streams ``'interleaved'``.
+    """
     rng = np.random.default_rng(seed)
     out: list[np.ndarray] = []
-    pending: list[Event] = []
 
-    def flush() -> None:
-        while pending:
-            n = int(rng.integers(1, 120))
-            part, pending[:] = pending[:n], pending[n:]
-            stamps = [e[1] for e in part]
-            rates = [e[2][:3] for e in part]
-            accel = [e[2][3:] for e in part] if len(part[0][2]) > 3 else None
-            corrected, kept = comp.correct_block(stamps, rates, accel)
-            assert_array_equal(np.isnan(corrected).all(axis=1) & ~kept, ~kept)
-            out.extend(corrected)
+    def gyro(part: list[Event]) -> tuple[list[float], list[tuple[float, ...]], object]:
+        accel = [e[2][3:] for e in part] if part and len(part[0][2]) > 3 else None
+        return [e[1] for e in part], [e[2][:3] for e in part], accel
 
-    for event in events:
-        if event[0] == 'T':
-            flush()
-            comp.add_temperature(event[1], event[2][0])
-        elif block:
-            pending.append(event)
-        else:
-            x, y, z = event[2][:3]
-            accel = tuple(event[2][3:]) if len(event[2]) > 3 else None
-            got = comp.correct_xyz(event[1], x, y, z, accel)  # type: ignore[arg-type]
+    def collect(corrected: np.ndarray, kept: np.ndarray) -> None:
+        assert_array_equal(np.isnan(corrected).all(axis=1) & ~kept, ~kept)
+        out.extend(corrected)
+
+    if mode == 'each':
+        for kind, stamp, values in events:
+            if kind == 'T':
+                comp.add_temperature(stamp, values[0])
+                continue
+            accel = tuple(values[3:]) if len(values) > 3 else None
+            got = comp.correct_xyz(stamp, *values[:3], accel)  # type: ignore[arg-type, misc]
             out.append(np.full(3, np.nan) if got is None else np.array(got))
-    flush()
+    elif mode == 'block':
+        pending: list[Event] = []
+        for event in [*events, ('end', math.nan, ())]:
+            if event[0] == 'G':
+                pending.append(event)
+                continue
+            while pending:
+                n = int(rng.integers(1, 120))
+                part, pending = pending[:n], pending[n:]
+                collect(*comp.correct_block(*gyro(part)))  # type: ignore[arg-type]
+            if event[0] == 'T':
+                comp.add_temperature(event[1], event[2][0])
+    else:
+        start = 0
+        while start < len(events):
+            run = events[start : start + int(rng.integers(1, 5000))]
+            start += len(run)
+            part = [e for e in run if e[0] == 'G']
+            temps = [e for e in run if e[0] == 'T']
+            before = np.cumsum([e[0] == 'G' for e in run])[[e[0] == 'T' for e in run]]
+            stamps, rates, accel = gyro(part)
+            collect(
+                *comp.correct_interleaved(
+                    stamps,
+                    np.reshape(rates, (-1, 3)),
+                    [e[1] for e in temps],
+                    [e[2][0] for e in temps],
+                    before,
+                    accel,  # type: ignore[arg-type]
+                )
+            )
     return np.array(out)
 
 
@@ -340,10 +367,13 @@ def test_correct_block_equals_correct_xyz_bit_for_bit(
     events = _awkward_stream(seed=len(terms) + len(guard))
     one = Compensator(model, settings, GuardSettings(**guard))  # type: ignore[arg-type]
     blocks = Compensator(model, settings, GuardSettings(**guard))  # type: ignore[arg-type]
-    expected = _drive(one, events, block=False)
-    got = _drive(blocks, events, block=True, seed=len(guard))
+    expected = _drive(one, events, 'each')
+    got = _drive(blocks, events, 'block', seed=len(guard))
     assert_array_equal(got, expected)  # NaN where NaN: same drops, same non-finite rows
     _assert_same_state(one, blocks)
+    mixed = Compensator(model, settings, GuardSettings(**guard))  # type: ignore[arg-type]
+    assert_array_equal(_drive(mixed, events, 'interleaved', seed=len(terms)), expected)
+    _assert_same_state(one, mixed)
     counters = blocks.status.counters
     # the stream exercises what it claims to
     assert counters.imu_duplicate and counters.imu_out_of_order and counters.imu_zero_stamp
@@ -370,10 +400,14 @@ def test_correct_block_with_rest_learning_equals_correct_xyz() -> None:
     rest = RestSettings(enabled=True)
     one = Compensator(model, settings, rest=rest)
     blocks = Compensator(model, settings, rest=rest)
-    assert_array_equal(_drive(blocks, events, block=True), _drive(one, events, block=False))
+    expected = _drive(one, events, 'each')
+    assert_array_equal(_drive(blocks, events, 'block'), expected)
     _assert_same_state(one, blocks)
     assert one.rest is not None and blocks.rest is not None
     assert repr(one.rest.finish()) == repr(blocks.rest.finish())
+    mixed = Compensator(model, settings, rest=rest)
+    assert_array_equal(_drive(mixed, events, 'interleaved'), expected)
+    _assert_same_state(one, mixed)
 
 
 def test_correct_block_on_a_simulated_run(short_cycle: SimulatedRun) -> None:
@@ -391,9 +425,14 @@ def test_correct_block_on_a_simulated_run(short_cycle: SimulatedRun) -> None:
     events.sort(key=lambda e: (e[1], e[0] != 'T'))
     one = Compensator(true_model(), settings)
     blocks = Compensator(true_model(), settings)
+    mixed = Compensator(true_model(), settings)
     calls = []
-    original = blocks._correct_each
-    blocks._correct_each = lambda *a: calls.append(a) or original(*a)  # type: ignore[method-assign]
-    assert_array_equal(_drive(blocks, events, block=True), _drive(one, events, block=False))
+    for comp in (blocks, mixed):
+        original = comp.correct_xyz
+        comp.correct_xyz = lambda *a, f=original: calls.append(a) or f(*a)  # type: ignore[method-assign]
+    expected = _drive(one, events, 'each')
+    assert_array_equal(_drive(blocks, events, 'block'), expected)
     _assert_same_state(one, blocks)
-    assert not calls
+    assert_array_equal(_drive(mixed, events, 'interleaved'), expected)
+    _assert_same_state(one, mixed)
+    assert not calls  # every gyro sample took the array path

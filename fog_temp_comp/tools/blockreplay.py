@@ -188,29 +188,19 @@ def _compensate(
     """Feed the messages in order; corrected rates (N_imu, 3) and which Imu were not dropped.
 
     ``kind`` is the chunk's merged order; Imu and temperatures each come in their batch's
-    order in it, so the Imu between two temperatures are a slice, corrected as one block
-    (:meth:`Compensator.correct_block`).
+    order in it, so the chunk goes in as one :meth:`Compensator.correct_interleaved`.
     """
     n_imu = len(spans[imu_topic]) if imu_topic in spans else 0
-    rates = np.empty((n_imu, 3))
-    keep = np.ones(n_imu, dtype=np.bool_)
     if n_imu:
         imu = cdr.decode_imu_rates_cdr(spans[imu_topic])
-        stamps, raw = imu.stamps_s, imu.angular_velocity_rad_s
+        stamps, rates = imu.stamps_s, imu.angular_velocity_rad_s
+    else:
+        stamps, rates = np.empty(0), np.empty((0, 3))
     # Imu before each temperature, in the merged order
     fed = kind[kind != _OTHER]
-    before = np.cumsum(fed == _IMU)[fed == _TEMP].tolist()
-    stops = [*before, n_imu]
-    temps: list[tuple[float, float]] = []
-    if before:
+    before = np.cumsum(fed == _IMU)[fed == _TEMP]
+    temp_stamps, temps = np.empty(0), np.empty(0)
+    if before.size:
         temp = cdr.decode_temperature_cdr(spans[temp_topic])
-        temps = list(zip(temp.stamps_s.tolist(), temp.temperature_degC.tolist(), strict=True))
-    done = 0
-    for k, stop in enumerate(stops):
-        if stop > done:
-            part = slice(done, stop)
-            rates[part], keep[part] = compensator.correct_block(stamps[part], raw[part])
-            done = stop
-        if k < len(temps):
-            compensator.add_temperature(*temps[k])
-    return rates, keep
+        temp_stamps, temps = temp.stamps_s, temp.temperature_degC
+    return compensator.correct_interleaved(stamps, rates, temp_stamps, temps, before)

@@ -742,27 +742,16 @@ class ChunkReplayer:
         temp = [k for k, (c, _, _) in enumerate(chunk) if c.topic == self.temp_topic]
         imu_batch = self._decode([chunk[k] for k in imu], imu=True)
         temp_batch = self._decode([chunk[k] for k in temp], imu=False)
-        n_imu = len(imu)
         rates = imu_batch.angular_velocity_rad_s if imu else np.empty((0, 3))
         accel = imu_batch.linear_acceleration if imu and self.with_accel else None
         imu_stamps = imu_batch.stamps_s if imu else np.empty(0)
-        temp_stamps = temp_batch.stamps_s.tolist() if temp else []
-        temps = temp_batch.temperature_degC.tolist() if temp else []
-        # the Imu between two temperatures (in chunk order) go in as one block
-        stops = [*np.searchsorted(imu, temp).tolist(), n_imu]
-        corrected = np.empty((n_imu, 3))
-        kept = np.ones(n_imu, dtype=np.bool_)
-        compensator = self.compensator
-        done = 0
-        for j, stop in enumerate(stops):
-            if stop > done:
-                part = slice(done, stop)
-                corrected[part], kept[part] = compensator.correct_block(
-                    imu_stamps[part], rates[part], None if accel is None else accel[part]
-                )
-                done = stop
-            if j < len(temps):
-                compensator.add_temperature(temp_stamps[j], temps[j])
+        temp_stamps = temp_batch.stamps_s if temp else np.empty(0)
+        temps = temp_batch.temperature_degC if temp else np.empty(0)
+        # how many Imu (in chunk order) come before each temperature
+        before = np.searchsorted(imu, temp) if imu else np.zeros(len(temp), dtype=np.int64)
+        corrected, kept = self.compensator.correct_interleaved(
+            imu_stamps, rates, temp_stamps, temps, before, accel
+        )
         keep = np.flatnonzero(kept).tolist()
         patched = self._patch([chunk[imu[j]] for j in keep], corrected[kept].tolist())
         out_of = dict(zip((imu[j] for j in keep), patched, strict=True))
