@@ -405,6 +405,10 @@ def cross_validate(
     """
     period = base.tdot_period_s
     cache: dict[float, tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
+    # the series through each coil lag and shaping, shared by the structures that differ in
+    # the rest (terms, fit): the same arrays, computed once
+    lagged: dict[tuple[float, float], tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
+    shaped: dict[tuple[float, ...], tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
     scores = []
     for structure in structures:
         result = StructureScore(structure)
@@ -425,14 +429,21 @@ def cross_validate(
             continue
         try:
             coil, shrink = structure.coil_lag_s, structure.shrink_sigmas
-            tables = [
-                table_of(r, s.lagged(coil).shaped(shrink, lag), period)
-                for r, s in zip(records, train_series, strict=True)
-            ]
-            tests = [
-                table_of(r, s.lagged(coil).shaped(shrink, lag), period)
-                for r, s in zip(heldout, test_series, strict=True)
-            ]
+            if (structure.walk, coil) not in lagged:
+                lagged[structure.walk, coil] = (
+                    [s.lagged(coil) for s in train_series],
+                    [s.lagged(coil) for s in test_series],
+                )
+            key = (structure.walk, coil, shrink, lag)
+            if key not in shaped:
+                train_lagged, test_lagged = lagged[structure.walk, coil]
+                shaped[key] = (
+                    [s.shaped(shrink, lag) for s in train_lagged],
+                    [s.shaped(shrink, lag) for s in test_lagged],
+                )
+            train_shaped, test_shaped = shaped[key]
+            tables = [table_of(r, s, period) for r, s in zip(records, train_shaped, strict=True)]
+            tests = [table_of(r, s, period) for r, s in zip(heldout, test_shaped, strict=True)]
             # a structure the final fit would refuse (e.g. a coil lag so long that the lagged
             # temperature no longer swings) is not a candidate
             check_identifiable(GridTable.concatenate(tables), structure.terms)
