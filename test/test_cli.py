@@ -860,6 +860,20 @@ def test_compensate_with_the_kalman_estimator_does_not_import_scipy_signal(
     assert 'scipy.signal' not in _imported(code)
 
 
+def test_calibrate_with_the_defaults_does_not_import_scipy_signal(
+    tmp_path: Path, cal_bag: Path
+) -> None:
+    """The default calibration (Kalman, cross-validated model choice) needs no scipy.signal."""
+    code = (
+        'from fog_temp_comp.tools import cli\n'
+        f"assert cli.main(['calibrate', {str(cal_bag)!r}, '-o', {str(tmp_path / 'c.yaml')!r},"
+        " '--quiet']) == 0\n"
+    )
+    imported = _imported(code)
+    assert 'scipy.signal' not in imported
+    assert 'scipy.ndimage' not in imported
+
+
 @pytest.mark.parametrize(
     ('method', 'module'), [('iir', 'scipy.signal'), ('wavelet', 'pywt'), ('kalman', None)]
 )
