@@ -72,16 +72,14 @@ compensate_command(Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3]), fast
 IO_ONLY = """
 import sys
 from pathlib import Path
+import numpy as np
 from fog_temp_comp.bag.bagio import BagWriter, open_bag
 from fog_temp_comp.tools import blockreplay
 
 
 class NoOp:
-    def add_temperature(self, stamp_s, temperature_degC):
-        return True
-
-    def correct_xyz(self, stamp_s, x, y, z):
-        return (x, y, z)
+    def correct_interleaved(self, stamps, rates, temp_stamps, temps, before):
+        return np.array(rates, dtype=float), np.ones(len(stamps), dtype=bool)
 
 
 bag, out = Path(sys.argv[1]), Path(sys.argv[2])
