@@ -145,8 +145,10 @@ def timed(argv: list[str], cleanup: Path | None = None) -> float:
     t0 = time.perf_counter()
     done = subprocess.run(argv, capture_output=True, text=True, check=False)
     elapsed = time.perf_counter() - t0
-    if cleanup is not None and cleanup.exists():
+    if cleanup is not None and cleanup.is_dir():
         shutil.rmtree(cleanup)
+    elif cleanup is not None and cleanup.exists():
+        cleanup.unlink()
     if done.returncode != 0:
         raise SystemExit(f'{argv[:3]} failed: {done.stderr.strip()}')
     return elapsed
@@ -167,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     cases: dict[str, tuple[list[str], Path | None]] = {
         'python -c pass': ([sys.executable, '-c', 'pass'], None),
         'rosbags: read + deserialize': ([sys.executable, '-c', ROSBAGS, str(bag)], None),
-        'calibrate': ([tool, 'calibrate', str(bag), '-o', str(coeffs), '--quiet'], None),
+        'calibrate': ([tool, 'calibrate', str(bag), '-o', str(coeffs), '--quiet'], coeffs),
         'compensate': (
             [tool, 'compensate', str(bag), '--coeffs', str(COEFFS), '-o', str(out)],
             out,
