@@ -26,6 +26,7 @@ block is judged on what the node would output there.
 
 from __future__ import annotations
 
+import contextvars
 import dataclasses
 import itertools
 import math
@@ -228,7 +229,27 @@ class StructureScore:
     parts: list[float] = field(default_factory=list)
 
 
+#: the Kalman series of :func:`_series` while :func:`choose_and_calibrate` runs (it asks for
+#: the same records and walk several times); keyed by the records' ids, which it keeps alive
+_SERIES_CACHE: contextvars.ContextVar[dict[Any, Any] | None] = contextvars.ContextVar(
+    '_SERIES_CACHE', default=None
+)
+
+
 def _series(
+    records: Sequence[ChamberRecord], base: DenoiseSettings, walk: float
+) -> list[EstimateSeries]:
+    cache = _SERIES_CACHE.get()
+    key = (tuple(id(r) for r in records), base, walk)
+    if cache is not None and key in cache:
+        return list(cache[key][1])
+    series = _compute_series(records, base, walk)
+    if cache is not None:
+        cache[key] = (list(records), series)
+    return list(series)
+
+
+def _compute_series(
     records: Sequence[ChamberRecord], base: DenoiseSettings, walk: float
 ) -> list[EstimateSeries]:
     settings = dataclasses.replace(
@@ -590,6 +611,25 @@ def choose_and_calibrate(
     """
     if not records:
         raise CalibrationError('no records to calibrate on')
+    token = _SERIES_CACHE.set({})
+    try:
+        return _choose_and_calibrate(
+            records, base, heldout, structures, tolerance, hac_lag, provenance
+        )
+    finally:
+        _SERIES_CACHE.reset(token)
+
+
+def _choose_and_calibrate(
+    records: Sequence[ChamberRecord],
+    base: DenoiseSettings,
+    heldout: Sequence[ChamberRecord],
+    structures: Sequence[Structure] | None,
+    tolerance: float,
+    hac_lag: int | None,
+    provenance: dict[str, Any] | None,
+) -> tuple[CalibrationResult, list[StructureScore], StructureScore]:
+    """:func:`choose_and_calibrate` with the series cache set."""
     noise = sensor_noise(records)
     base = noise.apply(dataclasses.replace(base, method='kalman', coil_lag_s=0.0))
     candidates = list(structures) if structures is not None else default_structures()
