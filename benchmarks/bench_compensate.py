@@ -72,16 +72,14 @@ compensate_command(Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3]), fast
 IO_ONLY = """
 import sys
 from pathlib import Path
+import numpy as np
 from fog_temp_comp.bag.bagio import BagWriter, open_bag
 from fog_temp_comp.tools import blockreplay
 
 
 class NoOp:
-    def add_temperature(self, stamp_s, temperature_degC):
-        return True
-
-    def correct_xyz(self, stamp_s, x, y, z):
-        return (x, y, z)
+    def correct_interleaved(self, stamps, rates, temp_stamps, temps, before):
+        return np.array(rates, dtype=float), np.ones(len(stamps), dtype=bool)
 
 
 bag, out = Path(sys.argv[1]), Path(sys.argv[2])
@@ -147,8 +145,10 @@ def timed(argv: list[str], cleanup: Path | None = None) -> float:
     t0 = time.perf_counter()
     done = subprocess.run(argv, capture_output=True, text=True, check=False)
     elapsed = time.perf_counter() - t0
-    if cleanup is not None and cleanup.exists():
+    if cleanup is not None and cleanup.is_dir():
         shutil.rmtree(cleanup)
+    elif cleanup is not None and cleanup.exists():
+        cleanup.unlink()
     if done.returncode != 0:
         raise SystemExit(f'{argv[:3]} failed: {done.stderr.strip()}')
     return elapsed
@@ -169,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     cases: dict[str, tuple[list[str], Path | None]] = {
         'python -c pass': ([sys.executable, '-c', 'pass'], None),
         'rosbags: read + deserialize': ([sys.executable, '-c', ROSBAGS, str(bag)], None),
-        'calibrate': ([tool, 'calibrate', str(bag), '-o', str(coeffs), '--quiet'], None),
+        'calibrate': ([tool, 'calibrate', str(bag), '-o', str(coeffs), '--quiet'], coeffs),
         'compensate': (
             [tool, 'compensate', str(bag), '--coeffs', str(COEFFS), '-o', str(out)],
             out,

@@ -1,4 +1,4 @@
-"""Start-up time: ``fog-temp-comp --help``, a bad argument, and importing the node, as ratios.
+"""Start-up time: ``fog-temp-comp --help``, a bad argument, the node's and commands' imports.
 
 Run by hand (not in CI)::
 
@@ -51,6 +51,12 @@ def main(argv: list[str] | None = None) -> int:
             '-c',
             'import fog_temp_comp.ros.node',
         ],
+        'import fog_temp_comp.tools.commands (calibrate, compensate)': [
+            sys.executable,
+            '-c',
+            'import fog_temp_comp.tools.commands',
+        ],
+        'import scipy.signal (for comparison)': [sys.executable, '-c', 'import scipy.signal'],
     }
     results = {name: median_s(cmd, args.runs) for name, cmd in cases.items()}
     floor = results['python -c pass (floor)']

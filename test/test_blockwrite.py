@@ -1,4 +1,4 @@
-"""Block writing (bag.mcapwrite, bag.sqlitewrite) and compensate's block path (tools.blockreplay).
+"""Block writing (bag.mcapwrite, sqlitewrite, ros1write) and compensate's block path.
 
 Every check compares with rosbags' writer used one message at a time (``write_raw``,
 ``compensate_command(..., fast=False)``): the same files, or the same messages read back with
@@ -17,7 +17,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from fog_temp_comp.bag import cdr, mcapwrite
+from fog_temp_comp.bag import cdr, mcapwrite, ros1write
 from fog_temp_comp.bag.bagio import (
     IMU_TYPE,
     TEMPERATURE_TYPE,
@@ -144,6 +144,28 @@ def test_mcap_block_writer_only_on_rosbags_mcap(tmp_path: Path) -> None:
         assert not mcapwrite.supports(writer._writer)
         with pytest.raises(ValueError, match='not a rosbags MCAP writer'):
             mcapwrite.McapBlockWriter(writer._writer)
+
+
+def test_ros1_block_writer_is_used_and_refuses_other_writers(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """write_many on ROS 1 takes ros1write (not rosbags' write per message)."""
+    with BagWriter(tmp_path / 'db', 'sqlite3') as writer:
+        assert not ros1write.supports(writer._writer)
+    with BagWriter(tmp_path / 'b.bag', 'ros1') as writer:
+        assert ros1write.supports(writer._writer)
+        writer.add_topic('/notes', STRING_TYPE)
+
+        def refuse(*args: object) -> None:
+            raise AssertionError('per-message write')
+
+        monkeypatch.setattr(writer._writer, 'write', refuse)
+        raw = typestore().serialize_ros1(typestore().types[STRING_TYPE](data='x'), STRING_TYPE)
+        writer.write_many([('/notes', T0_NS + k, raw) for k in range(10)])
+    with pytest.raises(ValueError, match='uint32 seconds'):
+        ros1write.write_block(
+            None, np.zeros(1, np.int64), np.array([2**32 * 10**9]), Spans.join([b'x'])
+        )
 
 
 def test_write_raw_after_a_block_goes_through_the_block_writer(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import io
 import os
@@ -834,6 +835,97 @@ def test_help_and_argument_errors_import_nothing_heavy(argv: list[str]) -> None:
         [sys.executable, '-c', code], capture_output=True, text=True, timeout=60, check=False
     )
     assert 'IMPORTED []' in proc.stdout, proc.stdout + proc.stderr
+
+
+def _imported(code: str) -> list[str]:
+    """Run ``code`` in a fresh interpreter; the heavy optional modules it imported."""
+    code += (
+        "\nheavy = ('scipy.signal', 'scipy.optimize', 'scipy.ndimage', 'scipy.stats', 'pywt')"
+        "\nprint('IMPORTED', sorted(m for m in heavy if m in sys.modules))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, '-c', 'import sys\n' + code],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    line = next(x for x in proc.stdout.splitlines() if x.startswith('IMPORTED'))
+    return list(ast.literal_eval(line.removeprefix('IMPORTED ')))
+
+
+def test_the_compensator_and_the_node_do_not_import_scipy_signal() -> None:
+    """Importing the core, the node and the commands, and a Kalman compensator, cost no scipy.
+
+    scipy.signal alone takes about 1 s to import; the default estimator does not need it.
+    """
+    code = (
+        'from fog_temp_comp.core.compensator import Compensator\n'
+        'from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS\n'
+        'from fog_temp_comp.core.coefficients import load\n'
+        'import fog_temp_comp.ros.node, fog_temp_comp.tools.commands\n'
+        f'coeffs = load({str(REPO / "config" / "example_coefficients.yaml")!r})\n'
+        'c = Compensator(coeffs.model, coeffs.denoise)\n'
+        'c.add_temperature(1.0, 20.0)\n'
+        'c.correct_block([1.5, 2.0], [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])\n'
+    )
+    assert _imported(code) == ['pywt']  # settings validation asks PyWavelets (~0.05 s)
+
+
+def test_compensate_with_the_kalman_estimator_does_not_import_scipy_signal(
+    tmp_path: Path, cal_bag: Path
+) -> None:
+    """``compensate`` with the default estimator never imports scipy.signal (start-up)."""
+    coeffs = REPO / 'config' / 'example_coefficients.yaml'
+    code = (
+        'from fog_temp_comp.tools import cli\n'
+        f"assert cli.main(['compensate', {str(cal_bag)!r}, '--coeffs', {str(coeffs)!r},"
+        f" '-o', {str(tmp_path / 'out')!r}]) == 0\n"
+    )
+    assert 'scipy.signal' not in _imported(code)
+
+
+def test_calibrate_with_the_defaults_does_not_import_scipy_signal(
+    tmp_path: Path, cal_bag: Path
+) -> None:
+    """The default calibration (Kalman, cross-validated model choice) needs no scipy.signal."""
+    code = (
+        'from fog_temp_comp.tools import cli\n'
+        f"assert cli.main(['calibrate', {str(cal_bag)!r}, '-o', {str(tmp_path / 'c.yaml')!r},"
+        " '--quiet']) == 0\n"
+    )
+    imported = _imported(code)
+    assert 'scipy.signal' not in imported
+    assert 'scipy.ndimage' not in imported
+
+
+@pytest.mark.parametrize(
+    ('method', 'module'), [('iir', 'scipy.signal'), ('wavelet', 'pywt'), ('kalman', None)]
+)
+def test_an_estimator_imports_what_it_needs_when_built(method: str, module: str | None) -> None:
+    """The lazy imports are there when an estimator needs them (and only then)."""
+    code = (
+        'import dataclasses\n'
+        'from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS\n'
+        'from fog_temp_comp.core.tdot import make_estimator\n'
+        f'e = make_estimator(dataclasses.replace(RECOMMENDED_SETTINGS, method={method!r}))\n'
+        'for k in range(100):\n'
+        '    e.add(10.0 * k, 20.0 + 0.01 * k)\n'
+    )
+    imported = _imported(code)
+    assert 'scipy.signal' not in imported or module == 'scipy.signal'
+    if module is not None:
+        assert module in imported
+
+
+def test_boundary_modes_are_pywavelets_modes() -> None:
+    """``BOUNDARY_MODES`` is spelt out (no pywt import at module level): it must stay true."""
+    import pywt
+
+    from fog_temp_comp.core.denoise import BOUNDARY_MODES
+
+    assert tuple(pywt.Modes.modes) == BOUNDARY_MODES
 
 
 def test_single_gyro_commands_and_the_node_never_import_dask(

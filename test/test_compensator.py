@@ -256,3 +256,216 @@ def test_a_marked_hole_restarts_the_tdot_estimate_however_short(model: DriftMode
     holed.mark_holes([(t0 + 10.0, t0 + 11.0)])  # a hole already passed changes nothing
     holed.add_temperature(t0 + 600, 5.0)
     assert holed.status.counters.temperature_gaps == 1
+
+
+# --------------------------------------------------------------------------------------------
+# correct_block: the same as correct_xyz one message at a time, bit for bit
+# --------------------------------------------------------------------------------------------
+
+Event = tuple[str, float, tuple[float, ...]]
+
+
+def _awkward_stream(seed: int) -> list[Event]:
+    """A 50 Hz gyro and a 1 Hz temperature over ~40 min with everything a bag can hold.
+
+    Gyro before the first temperature, a steady ramp and a fast one (Tdot clamped or
+    extrapolated), temperatures beyond the calibrated range (clamped), a temperature gap (stale,
+    restart), a glitch and a confirmed step, NaN rates and temperatures, duplicate, zero and
+    out-of-order stamps, a time jump back (reset), temperature stamps running ahead of the gyro.
+    """
+    rng = np.random.default_rng(seed)
+    events: list[Event] = []
+    t0 = 1.7e9
+    temp = 20.0
+    for k in range(2400):
+        stamp = t0 + k
+        rate = 0.01 if k < 1200 else (1.5 if k < 1500 else -0.3)  # degC/min
+        temp += rate / 60.0
+        if 300 <= k < 330:  # a gap: no temperature for 30 s
+            pass
+        elif k == 600:
+            events.append(('T', stamp, (temp + 8.0,)))  # a glitch
+        elif 900 <= k < 910:
+            events.append(('T', stamp, (temp + 5.0,)))  # a step, confirmed
+        elif k == 1000:
+            events.append(('T', stamp, (math.nan,)))
+        elif 1600 <= k < 1700:
+            events.append(('T', stamp + 15.0, (temp,)))  # ahead of the gyro
+        elif k > 5:
+            events.append(('T', stamp, (temp + rng.normal(0, 0.02),)))
+        for j in range(50):
+            s = stamp + j / 50 + rng.normal(0, 1e-4)
+            xyz = tuple(rng.normal(0, 1e-4, 3).tolist())
+            if rng.random() < 0.002:
+                xyz = (math.nan, xyz[1], math.inf)
+            if rng.random() < 0.001 and events and events[-1][0] == 'G':
+                s = events[-1][1]  # duplicate stamp
+            elif rng.random() < 0.001:
+                s = s - 0.3  # out of order
+            elif rng.random() < 0.0005:
+                s = 0.0  # no stamp
+            events.append(('G', s, xyz))
+        if k == 2000:  # the bag loops: a time jump back
+            t0 -= 500.0
+    return events
+
+
+def _drive(comp: Compensator, events: list[Event], mode: str, seed: int = 0) -> np.ndarray:
+    """Every gyro output (NaN row: dropped), fed in one of three ways.
+
+    ``'each'`` message alone, random ``'block'`` s of the gyro messages between two
+    temperatures, or random runs of both streams ``'interleaved'``.
+    """
+    rng = np.random.default_rng(seed)
+    out: list[np.ndarray] = []
+
+    def gyro(part: list[Event]) -> tuple[list[float], list[tuple[float, ...]], object]:
+        accel = [e[2][3:] for e in part] if part and len(part[0][2]) > 3 else None
+        return [e[1] for e in part], [e[2][:3] for e in part], accel
+
+    def collect(corrected: np.ndarray, kept: np.ndarray) -> None:
+        assert_array_equal(np.isnan(corrected).all(axis=1) & ~kept, ~kept)
+        out.extend(corrected)
+
+    if mode == 'each':
+        for kind, stamp, values in events:
+            if kind == 'T':
+                comp.add_temperature(stamp, values[0])
+                continue
+            accel = tuple(values[3:]) if len(values) > 3 else None
+            got = comp.correct_xyz(stamp, *values[:3], accel)  # type: ignore[arg-type, misc]
+            out.append(np.full(3, np.nan) if got is None else np.array(got))
+    elif mode == 'block':
+        pending: list[Event] = []
+        for event in [*events, ('end', math.nan, ())]:
+            if event[0] == 'G':
+                pending.append(event)
+                continue
+            while pending:
+                n = int(rng.integers(1, 120))
+                part, pending = pending[:n], pending[n:]
+                collect(*comp.correct_block(*gyro(part)))  # type: ignore[arg-type]
+            if event[0] == 'T':
+                comp.add_temperature(event[1], event[2][0])
+    else:
+        start = 0
+        while start < len(events):
+            run = events[start : start + int(rng.integers(1, 5000))]
+            start += len(run)
+            part = [e for e in run if e[0] == 'G']
+            temps = [e for e in run if e[0] == 'T']
+            before = np.cumsum([e[0] == 'G' for e in run])[[e[0] == 'T' for e in run]]
+            stamps, rates, accel = gyro(part)
+            collect(
+                *comp.correct_interleaved(
+                    stamps,
+                    np.reshape(rates, (-1, 3)),
+                    [e[1] for e in temps],
+                    [e[2][0] for e in temps],
+                    before,
+                    accel,  # type: ignore[arg-type]
+                )
+            )
+    return np.array(out)
+
+
+def _assert_same_state(a: Compensator, b: Compensator) -> None:
+    # repr: exact for floats, and NaN compares equal to NaN
+    assert repr(a.status) == repr(b.status)
+    assert a._correction == b._correction
+
+
+@pytest.mark.parametrize(
+    ('method', 'terms', 'guard'),
+    [
+        ('kalman', PAPER_TERMS, {}),
+        ('kalman', PAPER_TERMS, {'stale_policy': 'none'}),
+        ('kalman', (*PAPER_TERMS, 'T2', 'T_Tdot', 'Tdot_lag'), {'clamp_tdot': True}),
+        ('kalman', PAPER_TERMS, {'clamp_temperature': False, 'tdot_limit_degC_per_min': 1.0}),
+        ('iir', (*PAPER_TERMS, 'T2'), {}),
+        ('none', PAPER_TERMS, {'stale_policy': 'none', 'temperature_timeout_s': 2.0}),
+        ('wavelet', PAPER_TERMS, {}),
+        ('llr', ('const', 'T', 'T_Tdot'), {}),
+    ],
+)
+def test_correct_block_equals_correct_xyz_bit_for_bit(
+    method: str, terms: tuple[str, ...], guard: dict[str, object]
+) -> None:
+    from fog_temp_comp.core.compensator import GuardSettings
+
+    rng = np.random.default_rng(3)
+    coeffs = rng.normal(0, 1, (len(terms), 3)) * np.array([[10.0], *[[1e-2]] * (len(terms) - 1)])
+    model = DriftModel(terms, coeffs, Range(15.0, 25.0), Range(-0.5, 0.5))  # the ramp leaves it
+    settings = DenoiseSettings(method=method, tdot_lag_s=120.0 if 'Tdot_lag' in terms else 0.0)
+    events = _awkward_stream(seed=len(terms) + len(guard))
+    one = Compensator(model, settings, GuardSettings(**guard))  # type: ignore[arg-type]
+    blocks = Compensator(model, settings, GuardSettings(**guard))  # type: ignore[arg-type]
+    expected = _drive(one, events, 'each')
+    got = _drive(blocks, events, 'block', seed=len(guard))
+    assert_array_equal(got, expected)  # NaN where NaN: same drops, same non-finite rows
+    _assert_same_state(one, blocks)
+    mixed = Compensator(model, settings, GuardSettings(**guard))  # type: ignore[arg-type]
+    assert_array_equal(_drive(mixed, events, 'interleaved', seed=len(terms)), expected)
+    _assert_same_state(one, mixed)
+    counters = blocks.status.counters
+    # the stream exercises what it claims to
+    assert counters.imu_duplicate and counters.imu_out_of_order and counters.imu_zero_stamp
+    assert counters.time_jumps and counters.temperature_gaps and counters.imu_nonfinite
+    assert counters.imu_corrected and counters.imu_uncorrected
+    assert counters.imu_held or counters.imu_uncorrected > 300
+    assert counters.imu_temperature_clamped or not one.guard.clamp_temperature
+    assert counters.imu_tdot_clamped + counters.imu_tdot_extrapolated
+
+
+def test_correct_block_with_rest_learning_equals_correct_xyz() -> None:
+    """With the bias learner at rest the block goes one message at a time: the same output."""
+    from fog_temp_comp.core.rest import RestSettings
+
+    model = true_model()
+    settings = DenoiseSettings(method='kalman')
+    rng = np.random.default_rng(5)
+    events = [
+        (e[0], e[1], e[2] + tuple((np.array([0.0, 0.0, 9.81]) + rng.normal(0, 1e-3, 3)).tolist()))
+        if e[0] == 'G'
+        else e
+        for e in _awkward_stream(seed=1)
+    ]
+    rest = RestSettings(enabled=True)
+    one = Compensator(model, settings, rest=rest)
+    blocks = Compensator(model, settings, rest=rest)
+    expected = _drive(one, events, 'each')
+    assert_array_equal(_drive(blocks, events, 'block'), expected)
+    _assert_same_state(one, blocks)
+    assert one.rest is not None and blocks.rest is not None
+    assert repr(one.rest.finish()) == repr(blocks.rest.finish())
+    mixed = Compensator(model, settings, rest=rest)
+    assert_array_equal(_drive(mixed, events, 'interleaved'), expected)
+    _assert_same_state(one, mixed)
+
+
+def test_correct_block_on_a_simulated_run(short_cycle: SimulatedRun) -> None:
+    """A clean run in blocks: every block takes the array path, with correct_xyz's output."""
+    run = short_cycle
+    settings = DenoiseSettings(method='kalman')
+    events: list[Event] = [
+        ('T', t, (v,))
+        for t, v in zip(run.temp_stamps_s.tolist(), run.temperature_degC.tolist(), strict=True)
+    ]
+    events += [
+        ('G', t, tuple(r))
+        for t, r in zip(run.imu_stamps_s.tolist(), run.rates_rad_s.tolist(), strict=True)
+    ]
+    events.sort(key=lambda e: (e[1], e[0] != 'T'))
+    one = Compensator(true_model(), settings)
+    blocks = Compensator(true_model(), settings)
+    mixed = Compensator(true_model(), settings)
+    calls = []
+    for comp in (blocks, mixed):
+        original = comp.correct_xyz
+        comp.correct_xyz = lambda *a, f=original: calls.append(a) or f(*a)  # type: ignore[method-assign]
+    expected = _drive(one, events, 'each')
+    assert_array_equal(_drive(blocks, events, 'block'), expected)
+    _assert_same_state(one, blocks)
+    assert_array_equal(_drive(mixed, events, 'interleaved'), expected)
+    _assert_same_state(one, mixed)
+    assert not calls  # every gyro sample took the array path

@@ -94,3 +94,44 @@ def test_accumulator_in_chunks_equals_bin_means(rng: np.random.Generator) -> Non
     scalar.add(stamps, values[:, 0])
     assert_allclose(scalar.result()[2], mean[:, 0], rtol=1e-12, atol=1e-15)
     assert scalar.result()[2].shape == (index.size,)
+
+
+@pytest.mark.parametrize('shuffled', [False, True])
+def test_accumulator_append_path_is_the_general_merge_bit_for_bit(
+    shuffled: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Sorted chunks (a bag's) skip the sort and the merge: the same sums, bit for bit."""
+    rng = np.random.default_rng(4)
+    t = 1.7e9 + np.sort(rng.uniform(0, 3000, 9000))
+    if shuffled:
+        t = rng.permutation(t)
+    x = rng.normal(0, 1, (t.size, 3))
+    x[rng.random(t.size) < 0.02] = -0.0
+    cuts = np.sort(rng.integers(0, t.size, 40))  # chunks share bins at their ends
+
+    def accumulate() -> tuple[np.ndarray, ...]:
+        acc = GridAccumulator(10.0)
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, t.size], strict=True):
+            acc.add(t[a:b], x[a:b])
+        return acc.result()
+
+    fast = accumulate()
+    monkeypatch.setattr(GridAccumulator, '_append', lambda *args: False)
+    general = accumulate()
+    assert [a.tobytes() for a in fast] == [b.tobytes() for b in general]
+
+
+def test_unique_inverse_is_numpys() -> None:
+    from fog_temp_comp.core.grid import _unique_inverse
+
+    rng = np.random.default_rng(5)
+    for idx in (
+        np.sort(rng.integers(0, 50, 300)),
+        rng.integers(0, 50, 300),
+        np.array([7]),
+        np.array([3, 3, 3]),
+    ):
+        unique, inverse = _unique_inverse(idx)
+        expected_unique, expected_inverse = np.unique(idx, return_inverse=True)
+        assert_array_equal(unique, expected_unique)
+        assert_array_equal(inverse, expected_inverse)

@@ -9,7 +9,13 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from fog_temp_comp.core.coil import CoilLag, coil_lag, foh_lag_coefficients, search_time_constant
+from fog_temp_comp.core.coil import (
+    CoilLag,
+    coil_lag,
+    first_order_lfilter,
+    foh_lag_coefficients,
+    search_time_constant,
+)
 from fog_temp_comp.core.denoise import DenoiseSettings, SlidingWaveletDenoiser, denoise_offline
 from fog_temp_comp.core.grid import temperature_grid
 from fog_temp_comp.core.tdot import (
@@ -353,3 +359,31 @@ def test_search_time_constant_finds_interior_and_zero_minima() -> None:
     assert tau0 == 0.0
     with pytest.raises(ValueError, match='bounds'):
         search_time_constant(lambda x: x, (10.0, 5.0))
+
+
+def test_first_order_lfilter_is_lfilter_bit_for_bit() -> None:
+    """coil_lag filters short series in Python (no scipy.signal import): the same bits."""
+    from scipy import signal
+
+    rng = np.random.default_rng(12)
+    for _ in range(200):
+        n = int(rng.integers(1, 3000))
+        x = rng.normal(0, 10, n).cumsum() * rng.uniform(1e-3, 1e3)
+        a, b = foh_lag_coefficients(rng.uniform(0.1, 30.0), rng.uniform(1.0, 3000.0))
+        zi = (1.0 - b) * x[0]
+        expected, _ = signal.lfilter([b, 1.0 - a - b], [1.0, -a], x, zi=[zi])
+        assert_array_equal(first_order_lfilter(b, 1.0 - a - b, a, x, zi), expected)
+
+
+def test_coil_lag_is_the_same_within_and_beyond_the_loop_budget(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from fog_temp_comp.core import coil
+
+    t = 1.7e9 + 10.0 * np.arange(5000)
+    x = 20.0 + np.cumsum(np.random.default_rng(2).normal(0, 0.01, t.size))
+    monkeypatch.setattr(coil, '_looped', [0])
+    loop = coil_lag(t, x, 600.0)
+    monkeypatch.setattr(coil, '_looped', [0])
+    monkeypatch.setattr(coil, '_LOOP_BUDGET_SAMPLES', 100)
+    assert_array_equal(coil_lag(t, x, 600.0), loop)

@@ -1,7 +1,8 @@
 """Bag input and output: read chamber runs from ROS 1 and ROS 2 bags, write bags.
 
 ``cdr`` (vectorised CDR / ROS 1 codecs), ``mcapscan``, ``sqlitescan`` and ``ros1scan`` (fast
-readers), ``bagio`` (rosbags-based reading and writing, message builders), ``stream``
+readers), ``bagio`` (rosbags-based reading and writing, message builders), ``mcapwrite``,
+``sqlitewrite`` and ``ros1write`` (blocks of messages into rosbags' writers), ``stream``
 (:class:`~fog_temp_comp.bag.stream.BagStream`: one bag's gyro and temperature in chunks, and
 ``read_record``) and ``reduce`` (a bag to 10 s grid means while streaming).
 

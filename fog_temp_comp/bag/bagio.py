@@ -23,7 +23,7 @@ from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlu
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
-from fog_temp_comp.bag import mcapwrite, sqlitewrite
+from fog_temp_comp.bag import mcapwrite, ros1write, sqlitewrite
 from fog_temp_comp.bag.cdr import Spans
 from fog_temp_comp.bag.names import FORMATS
 from fog_temp_comp.core.units import NS_PER_S
@@ -221,12 +221,16 @@ class BagWriter:
 
         The same bag as :meth:`write_raw` per message, written a block at a time where the
         format allows: MCAP chunks assembled with numpy (:mod:`~fog_temp_comp.bag.mcapwrite`),
-        sqlite3 rows with one ``executemany`` (:mod:`~fog_temp_comp.bag.sqlitewrite`).
+        sqlite3 rows with one ``executemany`` (:mod:`~fog_temp_comp.bag.sqlitewrite`), ROS 1
+        message records assembled with numpy (:mod:`~fog_temp_comp.bag.ros1write`).
         """
         if self.fmt == 'sqlite3' and self._blocks is None and sqlitewrite.supports(self._writer):
             conns = self._connections
             sqlitewrite.write_rows(self._writer, [(conns[t].id, ns, d) for t, ns, d in messages])
-        elif self.fmt == 'mcap' and messages and self._block_writer() is not None:
+        elif messages and (
+            (self.fmt == 'mcap' and self._block_writer() is not None)
+            or (self._ros1 and ros1write.supports(self._writer))
+        ):
             ids = np.array([self._connections[t].id for t, _, _ in messages], dtype=np.int64)
             times = np.array([ns for _, ns, _ in messages], dtype=np.int64)
             self.write_spans(ids, times, Spans.join([d for _, _, d in messages]))
@@ -248,6 +252,9 @@ class BagWriter:
         blocks = self._block_writer() if self.fmt == 'mcap' else None
         if blocks is not None:
             blocks.write(connection_ids, log_times_ns, spans)
+            return
+        if self._ros1 and ros1write.supports(self._writer):
+            ros1write.write_block(self._writer, connection_ids, log_times_ns, spans)
             return
         by_id = {c.id: topic for topic, c in self._connections.items()}
         topics = [by_id[int(i)] for i in np.asarray(connection_ids).tolist()]

@@ -294,14 +294,14 @@ def calibrate_detailed(
     """
     import dataclasses
 
-    from scipy import ndimage
-
-    from fog_temp_comp.core.coil import search_time_constant
-
     if not records:
         raise CalibrationError('no records to calibrate on')
     lag_fit: dict[str, object] | None = None
     if fit_coil_lag:
+        from scipy import ndimage  # here: only the coil-lag search needs it (start-up)
+
+        from fog_temp_comp.core.coil import search_time_constant
+
         bases = [
             offline_estimates(
                 settings, r.temp_stamps_s, r.temperature_degC, coil_lag=False, online=online_tdot

@@ -28,12 +28,13 @@ import math
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
-import pywt
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal
+
+if TYPE_CHECKING:
+    import pywt
 
 from fog_temp_comp.core.names import GRID_METHODS, METHODS
 
@@ -61,7 +62,19 @@ __all__ = [
 THRESHOLD_RULES: tuple[str, ...] = ('heursure', 'rigrsure', 'sqtwolog', 'minimaxi')
 THRESHOLD_MODES: tuple[str, ...] = ('soft', 'hard')
 NOISE_SCALINGS: tuple[str, ...] = ('sln', 'mln', 'one')
-BOUNDARY_MODES: tuple[str, ...] = tuple(pywt.Modes.modes)
+# ``pywt.Modes.modes`` (checked in the tests); spelt out so that importing this module imports
+# neither PyWavelets nor scipy.signal: each is imported by the code that needs it (start-up)
+BOUNDARY_MODES: tuple[str, ...] = (
+    'zero',
+    'constant',
+    'symmetric',
+    'periodic',
+    'smooth',
+    'periodization',
+    'reflect',
+    'antisymmetric',
+    'antireflect',
+)
 
 # MATLAB wnoisest: median absolute deviation of N(0, 1) is 0.6745.
 _MAD_TO_SIGMA = 0.6745
@@ -80,6 +93,8 @@ def _check_choice(name: str, value: object, allowed: tuple[str, ...]) -> str:
 
 
 def _check_wavelet(name: str, value: object) -> str:
+    import pywt
+
     allowed = pywt.wavelist(kind='discrete')
     if not isinstance(value, str) or value not in allowed:
         raise ValueError(
@@ -159,6 +174,8 @@ def min_window_samples(wavelet: str, level: int) -> int:
         ``'sym8'`` at level 5.
 
     """
+    import pywt
+
     name = _check_wavelet('wavelet', wavelet)
     lev = _check_int('wavelet_level', level, 1)
     dec_len = pywt.Wavelet(name).dec_len
@@ -456,6 +473,8 @@ def _wden(
 ) -> NDArray[np.float64]:
     """Core of :func:`wavelet_denoise`; inputs already validated, ``level`` admissible."""
     n = x.size
+    import pywt
+
     coeffs = pywt.wavedec(x, wavelet, mode=boundary_mode, level=level)
     details = coeffs[1:]  # coarsest ... finest
     if noise_scaling == 'one':
@@ -537,6 +556,8 @@ def wavelet_denoise(
     _check_choice('noise_scaling', noise_scaling, NOISE_SCALINGS)
     _check_choice('boundary_mode', boundary_mode, BOUNDARY_MODES)
     arr = _as_finite_1d(x)
+    import pywt
+
     wav = pywt.Wavelet(wavelet)
     max_level = pywt.dwt_max_level(arr.size, wav.dec_len)
     if lev > max_level:
@@ -621,6 +642,8 @@ class PassThroughDenoiser:
 
 
 def _butter_sos(order: int, cutoff_hz: float, sample_period_s: float) -> NDArray[np.float64]:
+    from scipy import signal
+
     sos = signal.butter(order, cutoff_hz, btype='low', output='sos', fs=1.0 / sample_period_s)
     return np.asarray(sos, dtype=np.float64)
 
@@ -656,6 +679,8 @@ def butterworth_filter(
     if arr.size == 0:
         return arr
     sos = _butter_sos(order_i, cutoff, period)
+    from scipy import signal
+
     y, _ = signal.sosfilt(sos, arr, zi=signal.sosfilt_zi(sos) * arr[0])
     return np.asarray(y, dtype=np.float64)
 
@@ -689,6 +714,8 @@ class ButterworthDenoiser:
         # per section (b0, b1, b2, a1, a2) and steady-state state per unit input, as floats:
         # one sample at a time, a Python loop beats a sosfilt call (and allocates nothing)
         self._sections = [(b0, b1, b2, a1, a2) for b0, b1, b2, _, a1, a2 in self.sos.tolist()]
+        from scipy import signal
+
         self._zi_unit = np.asarray(signal.sosfilt_zi(self.sos), dtype=np.float64).tolist()
         self._zi: list[list[float]] | None = None
         self._count = 0
@@ -755,7 +782,10 @@ class SlidingWaveletDenoiser:
         if not isinstance(settings, DenoiseSettings):
             raise ValueError(f'settings must be a DenoiseSettings, got {type(settings)!r}')
         self.settings = settings
+        import pywt
+
         self._wavelet = pywt.Wavelet(settings.wavelet)
+        self._dwt_max_level = pywt.dwt_max_level
         self._buf = np.zeros(settings.window_samples, dtype=np.float64)
         self._count = 0
 
@@ -775,7 +805,7 @@ class SlidingWaveletDenoiser:
         n = min(self._count, buf.size)
         window = buf[buf.size - n :]
         s = self.settings
-        level = min(s.wavelet_level, pywt.dwt_max_level(n, self._wavelet.dec_len))
+        level = min(s.wavelet_level, self._dwt_max_level(n, self._wavelet.dec_len))
         if level < 1:
             return float(np.mean(window))
         rec = _wden(

@@ -33,7 +33,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal
 
 from fog_temp_comp.core.fitstats import AxisFitStats, fit_ols
 
@@ -154,6 +153,8 @@ def prewhiten(values: ArrayLike, theta: float, starts: ArrayLike) -> FloatArray:
     x = np.asarray(values, dtype=np.float64)
     if theta >= THETA_OLS:
         return x.copy()
+    from scipy import signal  # here: scipy.signal costs ~1 s of start-up
+
     bounds = [*np.asarray(starts, dtype=np.intp).tolist(), x.shape[0]]
     out = np.empty_like(x)
     for lo, hi in itertools.pairwise(bounds):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -152,6 +153,15 @@ def bin_means(
     return idx[starts], stamp, mean
 
 
+def _unique_inverse(idx: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """``np.unique(idx, return_inverse=True)``, without its sort when ``idx`` is sorted."""
+    if bool(np.all(idx[1:] >= idx[:-1])):  # a chunk of a bag
+        step = idx[1:] != idx[:-1]
+        return idx[np.flatnonzero(np.r_[True, step])], np.r_[0, np.cumsum(step)]
+    unique, inverse = np.unique(idx, return_inverse=True)
+    return unique, inverse
+
+
 class GridAccumulator:
     """Bin means of a stream fed in chunks (any order), in memory bounded by the bin count.
 
@@ -184,7 +194,7 @@ class GridAccumulator:
         if not t.size:
             return
         idx = np.floor(t / self.period_s).astype(np.int64)
-        unique, inverse = np.unique(idx, return_inverse=True)
+        unique, inverse = _unique_inverse(idx)
         count = np.bincount(inverse, minlength=unique.size)
         offset = np.bincount(inverse, weights=t - idx * self.period_s, minlength=unique.size)
         x2 = x.reshape(t.size, -1)
@@ -200,6 +210,9 @@ class GridAccumulator:
             self._shape = x.shape[1:]
         elif value.shape[1] != self._sum_value.shape[1]:
             raise ValueError('values changed shape between chunks')
+        if self._append(unique, count, offset, value):
+            self.samples += t.size
+            return
         merged = np.union1d(self._index, unique)
         new_count = np.zeros(merged.size, dtype=np.int64)
         new_offset = np.zeros(merged.size)
@@ -220,6 +233,40 @@ class GridAccumulator:
             new_value,
         )
         self.samples += t.size
+
+    def _append(
+        self,
+        unique: NDArray[np.int64],
+        count: NDArray[np.int64],
+        offset: NDArray[Any],  # float64 (bincount with weights)
+        value: NDArray[Any],
+    ) -> bool:
+        """The merge when the new bins follow the old ones (the last one may be shared).
+
+        The same sums as the general merge, bit for bit: there a bin's sum is ``0.0 + old``
+        then ``+ new``, and neither partial sum is ever -0.0 (each is a ``bincount``, which
+        starts from 0.0), so ``0.0 + old`` is ``old``.
+        """
+        index = self._index
+        assert self._sum_value is not None
+        if index.size == 0 or unique[0] > index[-1]:
+            shared = 0
+        elif unique[0] == index[-1]:
+            shared = 1
+        else:
+            return False
+        if shared:
+            self._count = self._count.copy()
+            self._sum_offset = self._sum_offset.copy()
+            self._sum_value = self._sum_value.copy()
+            self._count[-1] += count[0]
+            self._sum_offset[-1] += offset[0]
+            self._sum_value[-1] += value[0]
+        self._index = np.concatenate([index, unique[shared:]])
+        self._count = np.concatenate([self._count, count[shared:]])
+        self._sum_offset = np.concatenate([self._sum_offset, offset[shared:]])
+        self._sum_value = np.concatenate([self._sum_value, value[shared:]])
+        return True
 
     def result(self) -> tuple[NDArray[np.int64], FloatArray, FloatArray]:
         """Occupied bins (K,), mean stamps (K,) and mean values (K,) or (K, M)."""

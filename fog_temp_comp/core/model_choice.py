@@ -26,6 +26,7 @@ block is judged on what the node would output there.
 
 from __future__ import annotations
 
+import contextvars
 import dataclasses
 import itertools
 import math
@@ -35,7 +36,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize
 
 from fog_temp_comp.core.calibration import (
     CalibrationError,
@@ -234,7 +234,27 @@ class StructureScore:
     parts: list[float] = field(default_factory=list)
 
 
+#: the Kalman series of :func:`_series` while :func:`choose_and_calibrate` runs (it asks for
+#: the same records and walk several times); keyed by the records' ids, which it keeps alive
+_SERIES_CACHE: contextvars.ContextVar[dict[Any, Any] | None] = contextvars.ContextVar(
+    '_SERIES_CACHE', default=None
+)
+
+
 def _series(
+    records: Sequence[ChamberRecord], base: DenoiseSettings, walk: float
+) -> list[EstimateSeries]:
+    cache = _SERIES_CACHE.get()
+    key = (tuple(id(r) for r in records), base, walk)
+    if cache is not None and key in cache:
+        return list(cache[key][1])
+    series = _compute_series(records, base, walk)
+    if cache is not None:
+        cache[key] = (list(records), series)
+    return list(series)
+
+
+def _compute_series(
     records: Sequence[ChamberRecord], base: DenoiseSettings, walk: float
 ) -> list[EstimateSeries]:
     settings = dataclasses.replace(
@@ -416,8 +436,9 @@ def cross_validate(
     """
     period = base.tdot_period_s
     cache: dict[float, tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
-    # grid tables depend on the estimator settings, not on the terms: structures that differ
-    # only in their terms (T2, T_Tdot) share them
+    # the series through each coil lag, and the grid tables and folds of each estimator
+    # setting, are shared by the structures that differ only in their terms or fit
+    lagged: dict[tuple[float, float], tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
     folds_cache: dict[tuple[float, float, float, float], list[Any]] = {}
     thresholds: dict[tuple[float, float], tuple[float, float]] = {}
     scores = []
@@ -446,13 +467,19 @@ def cross_validate(
             coil, shrink = structure.coil_lag_s, structure.shrink_sigmas
             key = (structure.walk, shrink, lag, coil)
             if key not in folds_cache:
+                if (structure.walk, coil) not in lagged:
+                    lagged[structure.walk, coil] = (
+                        [s.lagged(coil) for s in train_series],
+                        [s.lagged(coil) for s in test_series],
+                    )
+                train_lagged, test_lagged = lagged[structure.walk, coil]
                 tables = [
-                    table_of(r, s.lagged(coil).shaped(shrink, lag), period)
-                    for r, s in zip(records, train_series, strict=True)
+                    table_of(r, s.shaped(shrink, lag), period)
+                    for r, s in zip(records, train_lagged, strict=True)
                 ]
                 tests = [
-                    table_of(r, s.lagged(coil).shaped(shrink, lag), period)
-                    for r, s in zip(heldout, test_series, strict=True)
+                    table_of(r, s.shaped(shrink, lag), period)
+                    for r, s in zip(heldout, test_lagged, strict=True)
                 ]
                 folds_cache[key] = [GridTable.concatenate(tables), _parts(tables, tests)]
             whole, folds = folds_cache[key]
@@ -524,6 +551,8 @@ def refine_time_constant(
         if score.criterion < best.criterion:
             best = score
         return score.criterion
+
+    from scipy import optimize  # here: not every calibration needs it (start-up)
 
     optimize.minimize_scalar(
         objective,
@@ -598,6 +627,25 @@ def choose_and_calibrate(
     """
     if not records:
         raise CalibrationError('no records to calibrate on')
+    token = _SERIES_CACHE.set({})
+    try:
+        return _choose_and_calibrate(
+            records, base, heldout, structures, tolerance, hac_lag, provenance
+        )
+    finally:
+        _SERIES_CACHE.reset(token)
+
+
+def _choose_and_calibrate(
+    records: Sequence[ChamberRecord],
+    base: DenoiseSettings,
+    heldout: Sequence[ChamberRecord],
+    structures: Sequence[Structure] | None,
+    tolerance: float,
+    hac_lag: int | None,
+    provenance: dict[str, Any] | None,
+) -> tuple[CalibrationResult, list[StructureScore], StructureScore]:
+    """:func:`choose_and_calibrate` with the series cache set."""
     noise = sensor_noise(records)
     base = noise.apply(dataclasses.replace(base, method='kalman', coil_lag_s=0.0))
     candidates = list(structures) if structures is not None else default_structures()

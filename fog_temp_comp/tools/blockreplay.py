@@ -188,35 +188,19 @@ def _compensate(
     """Feed the messages in order; corrected rates (N_imu, 3) and which Imu were not dropped.
 
     ``kind`` is the chunk's merged order; Imu and temperatures each come in their batch's
-    order in it, so the Imu between two temperatures are a slice, corrected with one ``map``.
+    order in it, so the chunk goes in as one :meth:`Compensator.correct_interleaved`.
     """
     n_imu = len(spans[imu_topic]) if imu_topic in spans else 0
-    corrected: list[tuple[float, float, float] | None] = []
-    correct_xyz = compensator.correct_xyz
     if n_imu:
         imu = cdr.decode_imu_rates_cdr(spans[imu_topic])
-        stamps = imu.stamps_s.tolist()
-        xs, ys, zs = imu.angular_velocity_rad_s.T.tolist()
+        stamps, rates = imu.stamps_s, imu.angular_velocity_rad_s
+    else:
+        stamps, rates = np.empty(0), np.empty((0, 3))
     # Imu before each temperature, in the merged order
     fed = kind[kind != _OTHER]
-    before = np.cumsum(fed == _IMU)[fed == _TEMP].tolist()
-    done = 0
-    if before:
+    before = np.cumsum(fed == _IMU)[fed == _TEMP]
+    temp_stamps, temps = np.empty(0), np.empty(0)
+    if before.size:
         temp = cdr.decode_temperature_cdr(spans[temp_topic])
-        for stop, stamp, value in zip(
-            before, temp.stamps_s.tolist(), temp.temperature_degC.tolist(), strict=True
-        ):
-            if stop > done:
-                part = slice(done, stop)
-                corrected += map(correct_xyz, stamps[part], xs[part], ys[part], zs[part])
-                done = stop
-            compensator.add_temperature(stamp, value)
-    if n_imu > done:
-        part = slice(done, n_imu)
-        corrected += map(correct_xyz, stamps[part], xs[part], ys[part], zs[part])
-    if corrected.count(None) == 0:
-        return np.array(corrected, dtype=np.float64).reshape(n_imu, 3), np.ones(n_imu, bool)
-    keep = np.array([c is not None for c in corrected], dtype=np.bool_)
-    zero = (0.0, 0.0, 0.0)
-    rates = np.array([c or zero for c in corrected], dtype=np.float64).reshape(n_imu, 3)
-    return rates, keep
+        temp_stamps, temps = temp.stamps_s, temp.temperature_degC
+    return compensator.correct_interleaved(stamps, rates, temp_stamps, temps, before)

@@ -9,7 +9,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 import yaml
@@ -42,7 +42,9 @@ from fog_temp_comp.core.units import AXES
 from fog_temp_comp.tools import blockreplay
 from fog_temp_comp.tools.atomic import AtomicOutputs
 from fog_temp_comp.tools.excitation import identifiable_terms
-from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
+
+if TYPE_CHECKING:
+    from fog_temp_comp.tools.simulate import SimulationConfig
 
 #: errors that end a command with one ``ERROR:`` line and exit code 1
 USER_ERRORS = (BagError, CalibrationError, CoefficientsError, FileExistsError, ValueError)
@@ -120,6 +122,9 @@ def simulate_command(
     deg/h, rest/motion phases); the truth files then hold ``turn_on_shift_deg_h`` and
     ``true_rotation_rad_s`` too (the oracle: rate minus drift, shift and rotation is noise).
     """
+    # here, not at the top: the simulator needs scipy.signal (~1 s), no other command does
+    from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
+
     stdout = stdout or sys.stdout
     base = REALISTIC if realistic else SimulationConfig()
     cfg = config or dataclasses.replace(base, imu_hz=imu_hz, temp_hz=temp_hz, **(vehicle or {}))
@@ -835,31 +840,18 @@ class ChunkReplayer:
         temp = [k for k, (c, _, _) in enumerate(chunk) if c.topic == self.temp_topic]
         imu_batch = self._decode([chunk[k] for k in imu], imu=True)
         temp_batch = self._decode([chunk[k] for k in temp], imu=False)
-        rates = imu_batch.angular_velocity_rad_s.tolist() if imu else []
-        accel = imu_batch.linear_acceleration.tolist() if imu and self.with_accel else None
-        imu_stamps = imu_batch.stamps_s.tolist() if imu else []
-        temp_stamps = temp_batch.stamps_s.tolist() if temp else []
-        temps = temp_batch.temperature_degC.tolist() if temp else []
-        kind = {k: ('imu', j) for j, k in enumerate(imu)}
-        kind.update({k: ('temp', j) for j, k in enumerate(temp)})
-        corrected: list[tuple[float, float, float] | None] = []
-        compensator = self.compensator
-        for k in range(len(chunk)):
-            what = kind.get(k)
-            if what is None:
-                continue
-            j = what[1]
-            if what[0] == 'temp':
-                compensator.add_temperature(temp_stamps[j], temps[j])
-            else:
-                x, y, z = rates[j]
-                if accel is None:
-                    corrected.append(compensator.correct_xyz(imu_stamps[j], x, y, z))
-                else:
-                    ax, ay, az = accel[j]
-                    corrected.append(compensator.correct_xyz(imu_stamps[j], x, y, z, (ax, ay, az)))
-        keep = [j for j, c in enumerate(corrected) if c is not None]
-        patched = self._patch([chunk[imu[j]] for j in keep], [corrected[j] for j in keep])
+        rates = imu_batch.angular_velocity_rad_s if imu else np.empty((0, 3))
+        accel = imu_batch.linear_acceleration if imu and self.with_accel else None
+        imu_stamps = imu_batch.stamps_s if imu else np.empty(0)
+        temp_stamps = temp_batch.stamps_s if temp else np.empty(0)
+        temps = temp_batch.temperature_degC if temp else np.empty(0)
+        # how many Imu (in chunk order) come before each temperature
+        before = np.searchsorted(imu, temp) if imu else np.zeros(len(temp), dtype=np.int64)
+        corrected, kept = self.compensator.correct_interleaved(
+            imu_stamps, rates, temp_stamps, temps, before, accel
+        )
+        keep = np.flatnonzero(kept).tolist()
+        patched = self._patch([chunk[imu[j]] for j in keep], corrected[kept].tolist())
         out_of = dict(zip((imu[j] for j in keep), patched, strict=True))
         out: list[tuple[str | None, int, bytes]] = []
         for k, (conn, log_ns, raw) in enumerate(chunk):
