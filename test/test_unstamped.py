@@ -81,3 +81,25 @@ def test_calibrate_on_an_unstamped_temperature_equals_the_stamped_one(
         coeffs[label] = yaml.safe_load(out.read_text())['axes']
     assert 'have no header stamp' in capsys.readouterr().err
     assert coeffs['bad'] == coeffs['good']
+
+
+@pytest.mark.parametrize('fmt', ['mcap', 'sqlite3', 'ros1'])
+def test_compensate_on_an_unstamped_temperature_equals_the_stamped_one(
+    fmt: str, run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Both compensate paths (MCAP blocks; AnyReader chunks) time unset stamps by receipt."""
+    good = write(tmp_path / name(fmt, 'good'), fmt, run)
+    bad = write(tmp_path / name(fmt, 'bad'), fmt, run, unstamped=TEMP)
+    coeffs = tmp_path / 'c.yaml'
+    args = ['calibrate', str(good), '-o', str(coeffs), '--terms', 'const,T,Tdot', '--quiet']
+    assert cli.main(args) == 0
+    out = {}
+    for label, bag in (('good', good), ('bad', bad)):
+        target = tmp_path / name(fmt, f'{label}_out')
+        assert cli.main(['compensate', str(bag), '--coeffs', str(coeffs), '-o', str(target)]) == 0
+        out[label] = read_record(target, gyro_topic='/imu/data', temp_topic=TEMP)
+    err = capsys.readouterr().err
+    assert f'{run.temp_stamps_s.size} messages on {TEMP} have no header stamp' in err
+    np.testing.assert_array_equal(out['bad'].rates_rad_s, out['good'].rates_rad_s)
+    # and the correction did something (a Tdot and T model on a 2 degC/min cycle)
+    assert not np.allclose(out['good'].rates_rad_s, run.rates_rad_s, atol=1e-9)

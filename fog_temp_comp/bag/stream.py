@@ -56,6 +56,7 @@ from fog_temp_comp.bag.sqlitescan import (
     scan_sqlite,
     topic_types,
 )
+from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.units import NS_PER_S
 
@@ -192,8 +193,8 @@ class BagStream:
         self.salvage = Salvage(self.path, strict=strict)
         self._salvage_mcap: list[Path] = []  # MCAP files rosbags cannot open
         self._dropped_rows = 0  # sqlite3 rows found but unreadable
-        #: topic -> messages whose header stamp was unset (0) and took their receive time
-        self.unstamped: dict[str, int] = {}
+        #: messages whose header stamp was unset (0) and took their receive time, per topic
+        self.unstamped = UnsetStamps()
 
     def __enter__(self) -> BagStream:
         if not self.path.exists():
@@ -604,7 +605,8 @@ class BagStream:
         decoders: dict[Any, Any],  # owner (connection id or topic) -> batch decoder
     ) -> Chunk:
         raws, logs, owners = batch
-        receive = np.asarray([] if logs is None else logs, dtype=np.int64) / NS_PER_S
+        log_ns = np.asarray([] if logs is None else logs, dtype=np.int64)
+        receive = log_ns / NS_PER_S
         if kind == 'temperature' and self.temp_field is not None:
             field = self.temp_field
             values = np.array([get_field(msg, field) for msg in raws])
@@ -628,29 +630,21 @@ class BagStream:
                 values = batch_out.temperature_degC
         if self.time_source == 'receive':
             return Chunk(kind, receive, values)
-        return Chunk(kind, self._stamped(kind, stamps, receive), values)
+        return Chunk(kind, self._stamped(kind, stamps, log_ns), values)
 
-    def _stamped(self, kind: str, stamps: Any, receive: Any) -> Any:
+    def _stamped(self, kind: str, stamps: Any, log_ns: Any) -> Any:
         """Header stamps, s; an unset one (0: a driver that never stamps) takes its receive time.
 
         Counted per topic in :attr:`unstamped`.
         """
-        stamps = np.asarray(stamps, dtype=float)
-        unset = stamps == 0.0
-        if not unset.any() or receive.size != stamps.size:
+        if log_ns.size != np.size(stamps):
             return stamps
         topic = self.imu_topic if kind == 'imu' else self.temp_topic
-        self.unstamped[topic] = self.unstamped.get(topic, 0) + int(unset.sum())
-        return np.where(unset, receive, stamps)
+        return self.unstamped.fill(topic, stamps, log_ns)
 
     def warn_unstamped(self, stderr: TextIO | None = None) -> None:
         """One ``WARNING:`` line per topic whose unset header stamps took the receive time."""
-        for topic, count in self.unstamped.items():
-            print(
-                f'WARNING: {self.path}: {count} messages on {topic} have no header stamp (0); '
-                'their receive time is used (the driver does not stamp them)',
-                file=stderr or sys.stderr,
-            )
+        self.unstamped.warn(self.path, stderr)
 
 
 def _decoder(conn: Any, is_ros2: bool) -> Any:

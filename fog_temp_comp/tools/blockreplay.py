@@ -27,6 +27,7 @@ from fog_temp_comp.bag import cdr
 from fog_temp_comp.bag.bagio import BagWriter
 from fog_temp_comp.bag.cdr import Spans
 from fog_temp_comp.bag.mcapscan import scan_mcap
+from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.compensator import Compensator
 
 __all__ = ['UnsupportedError', 'per_message_compressed', 'replay_mcap', 'single_mcap_file']
@@ -101,8 +102,11 @@ def replay_mcap(
     imu_topic: str,
     temp_topic: str,
     output_topic: str,
+    unstamped: UnsetStamps | None = None,
 ) -> int:
     """Compensate ``mcap`` into ``writer`` (topics registered already); corrected Imu written.
+
+    Unset header stamps (0) take the receive time, counted in ``unstamped``.
 
     Raises
     ------
@@ -116,6 +120,7 @@ def replay_mcap(
     connection = {topic: writer.connection_id(topic) for topic in topics}
     output_id = writer.connection_id(output_topic)
     boundary = _Boundary()
+    unstamped = unstamped if unstamped is not None else UnsetStamps()
     n_out = 0
     for buffer, batches in _chunks(mcap, topics):
         n_out += _replay_chunk(
@@ -128,6 +133,7 @@ def replay_mcap(
             output_id=output_id,
             imu_topic=imu_topic,
             temp_topic=temp_topic,
+            unstamped=unstamped,
         )
     return n_out
 
@@ -143,6 +149,7 @@ def _replay_chunk(
     output_id: int,
     imu_topic: str,
     temp_topic: str,
+    unstamped: UnsetStamps,
 ) -> int:
     """One chunk: order, compensate, patch, write; return the corrected Imu written."""
     kind_of = {imu_topic: _IMU, temp_topic: _TEMP}
@@ -155,7 +162,10 @@ def _replay_chunk(
     order = np.lexsort((starts, kind != _TEMP, times))
     boundary.check(times[order], kind[order] == _TEMP)
     spans = {n: s for n, _, s in batches}
-    rates, keep = _compensate(compensator, kind[order], spans, imu_topic, temp_topic)
+    logs = {n: t for n, t, _ in batches}
+    rates, keep = _compensate(
+        compensator, kind[order], spans, logs, (imu_topic, temp_topic), unstamped
+    )
     patched: bytes | bytearray = b''
     if imu_topic in spans and keep.any():
         imu = spans[imu_topic]
@@ -182,18 +192,22 @@ def _compensate(
     compensator: Compensator,
     kind: NDArray[np.int64],
     spans: dict[str, Spans],
-    imu_topic: str,
-    temp_topic: str,
+    logs: dict[str, IntArray],
+    topics: tuple[str, str],
+    unstamped: UnsetStamps,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Feed the messages in order; corrected rates (N_imu, 3) and which Imu were not dropped.
 
     ``kind`` is the chunk's merged order; Imu and temperatures each come in their batch's
     order in it, so the chunk goes in as one :meth:`Compensator.correct_interleaved`.
+    ``topics``: (gyro, temperature); ``logs``: each topic's log times, ns.
     """
+    imu_topic, temp_topic = topics
     n_imu = len(spans[imu_topic]) if imu_topic in spans else 0
     if n_imu:
         imu = cdr.decode_imu_rates_cdr(spans[imu_topic])
-        stamps, rates = imu.stamps_s, imu.angular_velocity_rad_s
+        stamps = unstamped.fill(imu_topic, imu.stamps_s, logs[imu_topic])
+        rates = imu.angular_velocity_rad_s
     else:
         stamps, rates = np.empty(0), np.empty((0, 3))
     # Imu before each temperature, in the merged order
@@ -202,5 +216,6 @@ def _compensate(
     temp_stamps, temps = np.empty(0), np.empty(0)
     if before.size:
         temp = cdr.decode_temperature_cdr(spans[temp_topic])
-        temp_stamps, temps = temp.stamps_s, temp.temperature_degC
+        temp_stamps = unstamped.fill(temp_topic, temp.stamps_s, logs[temp_topic])
+        temps = temp.temperature_degC
     return compensator.correct_interleaved(stamps, rates, temp_stamps, temps, before)

@@ -20,6 +20,7 @@ from fog_temp_comp.bag.reduce import reduce_record
 from fog_temp_comp.bag.repair import repaired_bag
 from fog_temp_comp.bag.salvage import Salvage, finite_only, split_at_gaps
 from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.calibration import CalibrationError, CalibrationResult, calibrate_detailed
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load, save
 from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
@@ -681,12 +682,17 @@ class _Compensate:
                 mcap = blockreplay.single_mcap_file(source)
             if mcap is not None:
                 try:
-                    return job.run(compensator, mcap=mcap), compensator
+                    result = job.run(compensator, mcap=mcap)
+                    job.unstamped.warn(self.in_bag)
+                    return result, compensator
                 except (blockreplay.UnsupportedError, ValueError):
                     remove_bag(target)  # the per-message path decides (and words any error)
                     compensator = self.new_compensator()
                     compensator.mark_holes(holes)
-            return job.run(compensator, batched=self.fast), compensator
+                    job.unstamped = UnsetStamps()
+            result = job.run(compensator, batched=self.fast)
+            job.unstamped.warn(self.in_bag)
+            return result, compensator
 
 
 def _start_rest_from(
@@ -727,6 +733,8 @@ class _CompensateJob:
     temp_name: str
     output_topic: str
     compress: bool = False
+    #: unset header stamps (0) that took the receive time, per topic
+    unstamped: UnsetStamps = dataclasses.field(default_factory=UnsetStamps)
 
     def run(
         self, compensator: Compensator, *, mcap: Path | None = None, batched: bool = True
@@ -749,6 +757,7 @@ class _CompensateJob:
                         imu_topic=self.imu_name,
                         temp_topic=self.temp_name,
                         output_topic=self.output_topic,
+                        unstamped=self.unstamped,
                     )
                 else:
                     n_out = self._replay_messages(writer, compensator, batched)
@@ -777,7 +786,9 @@ class _CompensateJob:
     def _replay_messages(self, writer: BagWriter, compensator: Compensator, batched: bool) -> int:
         """Through ``AnyReader``, a chunk at a time, written as a block or one by one."""
         messages = bagio.temperature_first(self.reader.messages(), self.temp_name)
-        replayer = ChunkReplayer(compensator, self.reader, self.imu_name, self.temp_name)
+        replayer = ChunkReplayer(
+            compensator, self.reader, self.imu_name, self.temp_name, self.unstamped
+        )
         n_out = 0
         for chunk in chunked(messages, 20_000):
             out = [(topic or self.output_topic, ns, raw) for topic, ns, raw in replayer.run(chunk)]
@@ -818,8 +829,17 @@ class ChunkReplayer:
     field stays bit-identical.
     """
 
-    def __init__(self, compensator: Compensator, reader: Any, imu_topic: str, temp_topic: str):
+    def __init__(
+        self,
+        compensator: Compensator,
+        reader: Any,
+        imu_topic: str,
+        temp_topic: str,
+        unstamped: UnsetStamps | None = None,
+    ):
         self.compensator = compensator
+        #: unset header stamps (0) take the receive time; counted here
+        self.unstamped = unstamped if unstamped is not None else UnsetStamps()
         self.ros2 = bool(reader.is2)
         self.imu_topic = imu_topic
         self.temp_topic = temp_topic
@@ -842,8 +862,13 @@ class ChunkReplayer:
         temp_batch = self._decode([chunk[k] for k in temp], imu=False)
         rates = imu_batch.angular_velocity_rad_s if imu else np.empty((0, 3))
         accel = imu_batch.linear_acceleration if imu and self.with_accel else None
-        imu_stamps = imu_batch.stamps_s if imu else np.empty(0)
-        temp_stamps = temp_batch.stamps_s if temp else np.empty(0)
+        fill = self.unstamped.fill
+        imu_logs = [chunk[k][1] for k in imu]
+        temp_logs = [chunk[k][1] for k in temp]
+        imu_stamps = fill(self.imu_topic, imu_batch.stamps_s, imu_logs) if imu else np.empty(0)
+        temp_stamps = (
+            fill(self.temp_topic, temp_batch.stamps_s, temp_logs) if temp else np.empty(0)
+        )
         temps = temp_batch.temperature_degC if temp else np.empty(0)
         # how many Imu (in chunk order) come before each temperature
         before = np.searchsorted(imu, temp) if imu else np.zeros(len(temp), dtype=np.int64)
