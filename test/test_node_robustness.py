@@ -379,9 +379,9 @@ def test_unset_header_stamps_are_timed_by_the_node_clock(
         assert out is not None
         assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0))
         status = h.diagnose()
-        assert 'without a header stamp' in status.message
+        assert 'temperature without a header stamp' in status.message
         assert status.level == WARN
-        assert dict((v.key, v.value) for v in status.values)['unstamped_messages'] == '3'
+        assert dict((v.key, v.value) for v in status.values)['temperature_unstamped'] == '3'
     finally:
         h.close()
 

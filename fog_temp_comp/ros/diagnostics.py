@@ -85,7 +85,7 @@ def build_report(
         action = 'passed through uncorrected' if require_frame_match else 'corrected anyway'
         reasons.append((level, f'gyro frame_id differs from calibrated one ({action})'))
     if unstamped:
-        reasons.append((WARN, 'messages without a header stamp: timed by the node clock'))
+        reasons.append((WARN, 'temperature without a header stamp: timed by the node clock'))
     if rest is not None and rest.residual_over_limit:
         reasons.append(
             (WARN, 'rest residual above rest_residual_limit_deg_h: not applied (moving?)')
@@ -122,7 +122,7 @@ def build_report(
         ('coefficients_created_utc', str(coefficients.provenance.get('created_utc', ''))),
         ('coefficients_bags', ', '.join(map(str, coefficients.provenance.get('bags', [])))),
         ('frame_id_mismatches', str(frame_mismatches)),
-        ('unstamped_messages', str(unstamped)),
+        ('temperature_unstamped', str(unstamped)),
     ]
     values += [(name, str(value)) for name, value in dataclasses.asdict(counters).items()]
     if rest is not None:

@@ -722,7 +722,11 @@ class CompensatorShell(_NodeBase):
 
     # ------------------------------------------------------------------ data
     def _unset_stamp_s(self) -> float:
-        """The node clock's time, s, for a message whose driver left the stamp unset (0)."""
+        """The node clock's time, s, for a temperature whose driver left the stamp unset (0).
+
+        (An unset gyro stamp goes to the core, which corrects it with the current correction
+        and counts it.)
+        """
         self.unstamped += 1
         return self.get_clock().now().nanoseconds * 1e-9
 
@@ -764,7 +768,7 @@ class CompensatorShell(_NodeBase):
                 self._publisher.publish(msg)
                 return
         compensator = self.compensator
-        stamp_s = stamp.sec + stamp.nanosec * 1e-9 or self._unset_stamp_s()
+        stamp_s = stamp.sec + stamp.nanosec * 1e-9  # 0: the core's current correction
         if compensator.rest is None:
             rate = compensator.correct_xyz(stamp_s, w.x, w.y, w.z)
         else:

@@ -862,12 +862,14 @@ class ChunkReplayer:
         temp_batch = self._decode([chunk[k] for k in temp], imu=False)
         rates = imu_batch.angular_velocity_rad_s if imu else np.empty((0, 3))
         accel = imu_batch.linear_acceleration if imu and self.with_accel else None
-        fill = self.unstamped.fill
-        imu_logs = [chunk[k][1] for k in imu]
+        # an unset temperature stamp takes the receive time (as the node takes its clock); an
+        # unset gyro stamp goes to the compensator as it is (as on the node)
+        imu_stamps = imu_batch.stamps_s if imu else np.empty(0)
         temp_logs = [chunk[k][1] for k in temp]
-        imu_stamps = fill(self.imu_topic, imu_batch.stamps_s, imu_logs) if imu else np.empty(0)
         temp_stamps = (
-            fill(self.temp_topic, temp_batch.stamps_s, temp_logs) if temp else np.empty(0)
+            self.unstamped.fill(self.temp_topic, temp_batch.stamps_s, temp_logs)
+            if temp
+            else np.empty(0)
         )
         temps = temp_batch.temperature_degC if temp else np.empty(0)
         # how many Imu (in chunk order) come before each temperature
