@@ -6,7 +6,6 @@ fleets of short 1 Hz cycles.
 
 from __future__ import annotations
 
-import _thread
 import csv
 import json
 import os
@@ -235,7 +234,14 @@ def test_csv_manifest_with_options(tmp_path: Path) -> None:
 
 
 def interrupt_when(condition: Callable[[], bool], timeout_s: float) -> threading.Thread:
-    """A thread that sends the main thread a SIGINT (as Ctrl-C does) once ``condition()``."""
+    """A thread that sends the main thread a SIGINT (as Ctrl-C does) once ``condition()``.
+
+    A real signal to the main thread (it wakes a blocking wait there), handled by Python's
+    default handler whatever an earlier test in the process left installed.
+    """
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    main = threading.main_thread().ident
+    assert main is not None
 
     def watch() -> None:
         deadline = time.monotonic() + timeout_s
@@ -243,7 +249,7 @@ def interrupt_when(condition: Callable[[], bool], timeout_s: float) -> threading
             if time.monotonic() > deadline:
                 return
             time.sleep(0.02)
-        _thread.interrupt_main(signal.SIGINT)
+        signal.pthread_kill(main, signal.SIGINT)
 
     thread = threading.Thread(target=watch, daemon=True)
     thread.start()
