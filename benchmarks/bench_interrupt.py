@@ -14,7 +14,10 @@ report has its index: the command finished, the signal came after the rename or 
 or none is and the exit code is non-zero with ``interrupted: nothing written`` on stderr (or
 the signal's default action killed Python before the handlers were installed). A SIGINT caught
 during an import may still end the process by SIGINT (exit -2, the shell's 130) after the
-message. Exit code 1 if any trial failed.
+message. A SIGINT in the first few tens of milliseconds, while the interpreter itself starts
+(``runpy``, the package's ``__init__``) and before any code of the command runs, ends with
+Python's own ``KeyboardInterrupt`` traceback; it passes only when nothing is left. Exit code 1
+if any trial failed.
 """
 
 from __future__ import annotations
@@ -89,6 +92,12 @@ def _complete(kind: str, outputs: list[Path]) -> bool:
 def _verdict(kind: str, trial: Trial, outputs: list[Path]) -> str:
     """What a trial left; the passing verdicts are :data:`PASS`."""
     if 'Traceback' in trial.stderr:
+        lines = trial.stderr.strip().splitlines()
+        ours = [ln for ln in lines if 'fog_temp_comp/' in ln and '__init__.py' not in ln]
+        if lines[-1] == 'KeyboardInterrupt' and not ours and not trial.leftovers:
+            # Python's own start-up (runpy, the package's __init__): no code of the command
+            # has run yet, so none can catch it; nothing is left
+            return 'nothing left, interrupted in the interpreter start-up'
         return 'TRACEBACK'
     partial = [p for p in trial.leftovers if p.name.startswith('.')]
     if partial:
@@ -113,6 +122,7 @@ PASS = (
     'complete, signal after the rename',
     'nothing left',
     'nothing left, killed during start-up',
+    'nothing left, interrupted in the interpreter start-up',
 )
 
 

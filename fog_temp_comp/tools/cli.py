@@ -582,8 +582,12 @@ def run(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fog-temp-comp`` console script."""
-    args = build_parser().parse_args(argv)
-    from fog_temp_comp.tools.atomic import Terminated, terminating_on_signals
+    try:  # Ctrl-C while the parser's imports run: nothing started, nothing written
+        args = build_parser().parse_args(argv)
+        from fog_temp_comp.tools.atomic import Terminated, terminating_on_signals
+    except KeyboardInterrupt:
+        print('interrupted: nothing written (during start-up)', file=sys.stderr)
+        return 130
 
     try:  # SIGTERM, SIGHUP: unwind (partial outputs removed) and exit 128 + n, as SIGINT
         with terminating_on_signals():
