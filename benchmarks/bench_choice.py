@@ -81,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
             read, cal = [], []
             for _ in range(args.rounds):
                 read.append(timed([sys.executable, '-c', READ, str(bag)]))
+                out.unlink(missing_ok=True)  # calibrate does not overwrite
                 cal.append(timed([tool, 'calibrate', str(bag), '-o', str(out), '--quiet']))
             r, c = min(read), min(cal)
             print(f'| {hz:g} Hz | {hours:.1f} h, gyro 2 Hz | {r:.1f} | {c:.1f} | {c / r:.2f} |')
