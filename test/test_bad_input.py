@@ -62,7 +62,11 @@ def _write(path: Path, fmt: str, run: SimulatedRun, **kwargs: object) -> Path:
 @pytest.fixture(scope='module')
 def bases(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """Whole bags (several chunks each) and a coefficients file, written once."""
-    root = tmp_path_factory.mktemp('bases')
+    return write_bases(tmp_path_factory.mktemp('bases'))
+
+
+def write_bases(root: Path) -> dict[str, Path]:
+    """Whole bags in every format (several chunks each) and a coefficients file, in ``root``."""
     run = simulate_run('cycle', 2.0, CHAMBER, seed=3)
     out = {
         'mcap': _write(root / 'mcap', 'mcap', run),

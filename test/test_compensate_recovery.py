@@ -15,10 +15,8 @@ import pytest
 from numpy.testing import assert_array_equal
 from rosbags.highlevel import AnyReader
 from test_bad_input import (
-    CHAMBER,
     IMU,
     TEMP,
-    _write,
     copy,
     cut_fraction,
     edit,
@@ -27,6 +25,7 @@ from test_bad_input import (
     never_indexed,
     ros1_chunk,
     sqlite_page,
+    write_bases,
 )
 
 from fog_temp_comp.bag import bagio
@@ -34,7 +33,6 @@ from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.tools import cli
 from fog_temp_comp.tools.atomic import partial_dir
-from fog_temp_comp.tools.simulate import simulate_run
 
 #: (base, damage, what the warning says)
 DAMAGES = {
@@ -60,20 +58,8 @@ CASES = [
 
 @pytest.fixture(scope='module')
 def bases(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """Whole bags of several chunks each, and a coefficients file."""
-    root = tmp_path_factory.mktemp('bases')
-    run = simulate_run('cycle', 2.0, CHAMBER, seed=3)
-    out = {
-        'mcap': _write(root / 'mcap', 'mcap', run),
-        'mcap_z': _write(root / 'mcap_z', 'mcap', run, compress=True),
-        'sqlite3': _write(root / 'sqlite3', 'sqlite3', run),
-        'ros1': _write(root / 'ros1.bag', 'ros1', run),
-        'ros1_lz4': _write(root / 'ros1_lz4.bag', 'ros1', run, compress=True),
-    }
-    coeffs = root / 'coeffs.yaml'
-    assert cli.main(['calibrate', str(out['mcap']), '-o', str(coeffs), '--terms', 'const,T']) == 0
-    out['coeffs'] = coeffs
-    return out
+    """The bad-input matrix's whole bags and coefficients file, written once."""
+    return write_bases(tmp_path_factory.mktemp('bases'))
 
 
 def messages(bag: Path) -> dict[str, list[int]]:

@@ -7,22 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from test_bad_input import IMU, SMALL, TEMP
 
 from fog_temp_comp.bag.bagio import BagWriter, make_imu, make_temperature, s_to_stamp_ns
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.tools import cli
-from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig, simulate_run
-
-SMALL = SimulationConfig(
-    imu_hz=0.5,
-    temp_hz=0.5,
-    low_degC=10.0,
-    high_degC=30.0,
-    start_degC=20.0,
-    cycle_soak_s=300.0,
-    soak_duration_s=300.0,
-)
-IMU, TEMP = '/imu/data_raw', '/imu/temperature'
+from fog_temp_comp.tools.simulate import SimulatedRun, simulate_run
 
 
 @pytest.fixture(scope='module')

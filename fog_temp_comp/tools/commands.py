@@ -559,8 +559,7 @@ def compensate_command(
     if out_bag.exists():
         raise FileExistsError(f'{out_bag}: exists already, not overwriting')
     settings = effective_settings(coeffs, denoise_method)
-    learning = Compensator(coeffs.model, settings, guard, rest).rest is not None
-    if (rest_bias_in or rest_bias_out) and not learning:
+    if (rest_bias_in or rest_bias_out) and not (rest is not None and rest.enabled):
         raise ValueError('--rest-bias-in/--rest-bias-out need --rest-learning')
 
     def new_compensator(out: TextIO | None = None) -> Compensator:
