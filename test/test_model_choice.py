@@ -214,3 +214,29 @@ def test_a_soak_is_refused_with_the_reason() -> None:
     soak = simulate_run('soak', 20.0, CHAMBER, seed=5).as_record()
     with pytest.raises(CalibrationError, match='swing'):
         choose_and_calibrate([soak], RECOMMENDED_SETTINGS)
+
+
+def test_ols_coefficients_equal_lstsq_and_refuse_a_rank_deficient_design() -> None:
+    from fog_temp_comp.core.model_choice import ols_coefficients
+
+    rng = np.random.default_rng(7)
+    t = rng.uniform(-40.0, 60.0, 3000)
+    tdot = rng.normal(0.0, 0.3, t.size)
+    y = rng.normal(size=(t.size, 3))
+    designs = {
+        'paper': np.column_stack([np.ones_like(t), t, tdot]),
+        'with T2': np.column_stack([np.ones_like(t), t, tdot, t * t]),
+        # T^2 of a temperature that barely moves: nearly collinear with const and T, lstsq path
+        'collinear': np.column_stack([np.ones_like(t), 25 + t * 1e-4, (25 + t * 1e-4) ** 2]),
+    }
+    for name, a in designs.items():
+        expected = np.linalg.lstsq(a, y, rcond=None)[0]
+        got = ols_coefficients(a, y)
+        np.testing.assert_allclose(a @ got, a @ expected, rtol=0, atol=1e-9, err_msg=name)
+    for bad in (
+        np.column_stack([np.ones_like(t), t, 2.0 * t]),
+        np.column_stack([np.ones_like(t), np.zeros_like(t)]),
+        np.ones((2, 3)),
+    ):
+        with pytest.raises(CalibrationError, match='rank-deficient'):
+            ols_coefficients(bad, y[: bad.shape[0]])

@@ -437,24 +437,35 @@ class KalmanTdotEstimator:
         q, r = self.q, self.r
         stamp, t, v = self._stamp, self._t, self._v
         p00, p01, p11, ready = self._p00, self._p01, self._p11, self._ready
+        # The covariance is a function of itself and dt only: once a step with some dt leaves
+        # it unchanged (the filter's steady state, to the last bit), further steps with that dt
+        # leave it unchanged too, and their gains are the last ones; they are not recomputed.
+        steady_dt = math.nan
+        k0 = k1 = 0.0
         for ts, z in zip(t_in[k:], z_in[k:], strict=True):
             dt = ts - stamp
             if not dt > 0.0:
                 continue
             tp = t + dt * v
-            a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
-            a01 = p01 + dt * p11 + q * dt * dt / 2.0
-            a11 = p11 + q * dt
-            sv = a00 + r
-            k0, k1 = a00 / sv, a01 / sv
             innovation = z - tp
+            if dt != steady_dt:
+                a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
+                a01 = p01 + dt * p11 + q * dt * dt / 2.0
+                a11 = p11 + q * dt
+                sv = a00 + r
+                k0, k1 = a00 / sv, a01 / sv
+                previous = (p00, p01, p11)
+                p00, p01, p11 = a00 - k0 * a00, a01 - k0 * a01, a11 - k1 * a01
+                if previous == (p00, p01, p11):
+                    steady_dt = dt
+                else:
+                    steady_dt = math.nan
+                    if not ready and abs(p11 - previous[2]) <= 1e-3 * p11:
+                        ready = True
             t = tp + k0 * innovation
             v += k1 * innovation
-            previous = p11
-            p00, p01, p11 = a00 - k0 * a00, a01 - k0 * a01, a11 - k1 * a01
             stamp = ts
-            if not ready and abs(p11 - previous) <= 1e-3 * p11:
-                ready = True
+            ready = ready or steady_dt == dt
             out_t.append(ts)
             out_x.append(t)
             out_v.append(v)

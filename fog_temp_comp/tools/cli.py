@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -580,8 +581,16 @@ def run(args: argparse.Namespace) -> int:
     return demo_command(bags_dir=args.bags, out_dir=args.out)
 
 
+#: the command's matrices are thousands of rows by a few columns, where OpenBLAS's threads only
+#: cost: with another process on the second core, calibrate ran 2x slower with 2 threads
+#: (``benchmarks/bench_compensate.py``); a value set by the user is kept
+BLAS_THREADS = {'OPENBLAS_NUM_THREADS': '1'}
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fog-temp-comp`` console script."""
+    for name, value in BLAS_THREADS.items():  # before numpy's first import
+        os.environ.setdefault(name, value)
     try:  # Ctrl-C while the parser's imports run: nothing started, nothing written
         args = build_parser().parse_args(argv)
         from fog_temp_comp.tools.atomic import Terminated, terminating_on_signals
