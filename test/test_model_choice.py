@@ -240,3 +240,34 @@ def test_ols_coefficients_equal_lstsq_and_refuse_a_rank_deficient_design() -> No
     ):
         with pytest.raises(CalibrationError, match='rank-deficient'):
             ols_coefficients(bad, y[: bad.shape[0]])
+
+
+def test_fold_score_equals_scoring_the_corrected_rows() -> None:
+    """The shared means (mean of the correction = correction of the means) change nothing."""
+    from fog_temp_comp.core.model_choice import SCORE_TAUS_S, _Fold, _score
+
+    rng = np.random.default_rng(11)
+    n, period = 700, 10.0
+    t = 20.0 + 10.0 * np.sin(np.arange(n) / 60.0)
+    tdot = np.gradient(t) * 6.0 + rng.normal(0, 0.01, n)
+    rate = np.stack([0.3 * t + 2.0 * tdot + rng.normal(0, 0.05, n)] * 3, axis=1)
+    table = GridTable(t, tdot, rate, None, np.arange(n))
+    terms = ('const', 'T', 'Tdot', 'T2')
+    parts = _parts([table], None)
+    folds = [_Fold(train, tests, period) for train, tests in parts]
+    got, got_logs = _score(folds, terms, period, 'ols')
+    expected = []
+    for train, tests in parts:
+        coef = np.linalg.lstsq(train.design(terms), train.rate_deg_h, rcond=None)[0]
+        for test in tests:
+            after = test.rate_deg_h - test.design(terms) @ coef
+            for tau in SCORE_TAUS_S:
+                k = round(tau / period)
+                m = after.shape[0] // k
+                blocks = [
+                    x[: m * k].reshape(m, k, 3).mean(axis=1) for x in (test.rate_deg_h, after)
+                ]
+                expected += np.log(np.std(blocks[1], axis=0) / np.std(blocks[0], axis=0)).tolist()
+    np.testing.assert_allclose(got_logs, expected, rtol=0, atol=1e-9)
+    assert got == pytest.approx(np.exp(np.mean(expected)), rel=1e-9)
+    assert got < 0.5  # the model explains most of the rate: a score that could fail
