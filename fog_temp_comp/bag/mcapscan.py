@@ -25,7 +25,7 @@ import struct
 import sys
 import zlib
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
@@ -45,7 +45,15 @@ try:
 except ImportError:  # pragma: no cover
     _lz4_decompress = None
 
-__all__ = ['MAGIC', 'ScanStats', 'Spans', 'mcap_topics', 'scan_mcap']
+__all__ = [
+    'MAGIC',
+    'ScanStats',
+    'Spans',
+    'check_counts',
+    'chunk_offsets',
+    'mcap_topics',
+    'scan_mcap',
+]
 
 MAGIC = b'\x89MCAP0\r\n'
 
@@ -55,6 +63,7 @@ _OP_CHANNEL = 0x04
 _OP_MESSAGE = 0x05
 _OP_CHUNK = 0x06
 _OP_MESSAGE_INDEX = 0x07
+_OP_CHUNK_INDEX = 0x08
 _OP_STATISTICS = 0x0B
 
 _HEADER = struct.Struct('<BQ')  # opcode, record length
@@ -75,10 +84,18 @@ Batch = tuple[str, NDArray[np.int64], Spans]
 
 @dataclass
 class ScanStats:
-    """How :func:`scan_mcap` read the chunks of a file."""
+    """How :func:`scan_mcap` read the chunks of a file (and, for a span, what it found)."""
 
     indexed_chunks: int = 0  # through their Message Index records
     walked_chunks: int = 0  # record by record
+    #: messages yielded per topic
+    yielded: dict[str, int] = field(default_factory=dict)
+    #: messages per wanted topic in the file's Statistics record (None: no such record)
+    expected: dict[str, int] | None = None
+    #: messages lost in skipped chunks, counted from their indexes
+    counted: int = 0
+    #: newest log time yielded, ns
+    last_log_ns: int = 0
 
 
 def _decompress(name: str, data: memoryview, size: int) -> bytes:
@@ -174,24 +191,28 @@ class _Scanner:
         ``salvage`` (a damaged file), the shortfall is the count of messages lost, replacing
         the ``counted`` ones the skipped chunks' indexes gave.
         """
+        expected = self.expected()
+        if expected is not None:
+            check_counts(self.path, expected, self.yielded, salvage, counted)
+
+    def expected(self) -> dict[str, int] | None:
+        """Messages per wanted topic in the Statistics record, or None without one."""
         if self.channel_counts is None:
-            return
+            return None
         expected: dict[str, int] = {}
         for cid, count in self.channel_counts.items():
             topic = self.channel_topic.get(cid)
             if topic in self.topics:
                 expected[topic] = expected.get(topic, 0) + count
-        shortfall = 0
-        for topic, count in expected.items():
-            got = self.yielded.get(topic, 0)
-            if got != count and not (salvage is not None and salvage.recovered):
-                raise self._error(
-                    f'{got} messages found on {topic}, but the file statistics count {count} '
-                    '(damaged message index?)'
-                )
-            shortfall += max(count - got, 0)
-        if salvage is not None and salvage.recovered:
-            salvage.lost_total((salvage.lost_messages or 0) - counted + shortfall)
+        return expected
+
+    def record(self, stats: ScanStats | None, counted: int) -> None:
+        """Copy what the scan found into ``stats``."""
+        if stats is not None:
+            stats.yielded = dict(self.yielded)
+            stats.expected = self.expected()
+            stats.counted = counted
+            stats.last_log_ns = self.last_log_ns
 
     def records(self, buf: memoryview, pos: int, end: int) -> None:
         """Walk the records of ``buf[pos:end]``; wanted messages go to ``collect``."""
@@ -323,6 +344,32 @@ class _Scanner:
             yield topic, t, Spans(buffer, start, length)
 
 
+def check_counts(
+    path: Path,
+    expected: dict[str, int],
+    yielded: dict[str, int],
+    salvage: Salvage | None = None,
+    counted: int = 0,
+) -> None:
+    """The messages yielded per topic match the file's Statistics record.
+
+    A Message Index that leaves out messages would otherwise lose them silently. With
+    ``salvage`` (a damaged file), the shortfall is the count of messages lost, replacing
+    the ``counted`` ones the skipped chunks' indexes gave.
+    """
+    shortfall = 0
+    for topic, count in expected.items():
+        got = yielded.get(topic, 0)
+        if got != count and not (salvage is not None and salvage.recovered):
+            raise ValueError(
+                f'{path}: {got} messages found on {topic}, but the file statistics count '
+                f'{count} (damaged message index?)'
+            )
+        shortfall += max(count - got, 0)
+    if salvage is not None and salvage.recovered:
+        salvage.lost_total((salvage.lost_messages or 0) - counted + shortfall)
+
+
 def scan_mcap(
     path: str | Path,
     topics: set[str],
@@ -331,6 +378,8 @@ def scan_mcap(
     use_index: bool = True,
     stats: ScanStats | None = None,
     salvage: Salvage | None = None,
+    span: tuple[int, int | None] | None = None,
+    after_log_ns: int = 0,
 ) -> Iterator[Batch]:
     """Scan an MCAP file for the raw messages of some topics.
 
@@ -351,6 +400,14 @@ def scan_mcap(
         Read a damaged file as far as it is intact (a file cut anywhere, without footer or
         summary; a damaged chunk is skipped) and record in ``salvage`` what was skipped.
         Without it, damage raises ``ValueError``.
+    span : (int, int or None), optional
+        Scan only the records from file offset ``span[0]`` (a record's start, e.g. a chunk's
+        from :func:`chunk_offsets`) up to ``span[1]`` (another's; None: to the end). The
+        channels come from the summary (which must have them), and the message counts are not
+        checked against the Statistics record (``stats`` gets them: :func:`check_counts` over
+        all the spans).
+    after_log_ns : int, optional
+        Newest log time of the spans before this one, ns (the start of a gap in ``salvage``).
 
     Yields
     ------
@@ -377,15 +434,22 @@ def scan_mcap(
     """
     path = Path(path)
     scanner = _Scanner(path, set(topics), sort_by_time)
+    scanner.last_log_ns = after_log_ns
     with path.open('rb') as file:
         reader = _RecordReader(file, path, salvage)
-        if use_index:
+        if use_index or span is not None:
             summary = reader.summary()
             if summary:
                 scanner.summary_channels(summary)
+            if span is not None and not scanner.channel_topic:
+                raise ValueError(f'{path}: a span needs the channels of a summary section')
         loose = bytearray()  # unchunked Channel and Message records, walked in batches
-        pos = len(MAGIC)
+        pos, stop = (len(MAGIC), None) if span is None else span
         while True:
+            if stop is not None and pos >= stop:
+                yield from _walk_loose(scanner, loose)
+                scanner.record(stats, reader.counted)
+                return
             try:
                 op, length = reader.header(pos)
             except _DamagedError:
@@ -397,7 +461,9 @@ def scan_mcap(
                     yield from scanner.flush(cut)
                 pos = reader.skip_to_next_chunk(pos, scanner.last_log_ns)
                 if pos < 0:  # the file ends here (cut)
-                    scanner.check_counts(salvage, reader.counted)
+                    scanner.record(stats, reader.counted)
+                    if span is None:
+                        scanner.check_counts(salvage, reader.counted)
                     return
                 continue
             body_pos = pos + 9
@@ -405,7 +471,9 @@ def scan_mcap(
             if op in (_OP_CHUNK, _OP_FOOTER) or len(loose) > _LOOSE_BATCH:
                 yield from _walk_loose(scanner, loose)
             if op == _OP_FOOTER:
-                scanner.check_counts(salvage, reader.counted)
+                scanner.record(stats, reader.counted)
+                if span is None:
+                    scanner.check_counts(salvage, reader.counted)
                 return
             if op == _OP_CHUNK:
                 body = reader.read(body_pos, length)
@@ -430,6 +498,34 @@ def scan_mcap(
             elif op in (_OP_MESSAGE, _OP_CHANNEL):
                 loose += reader.read(body_pos - 9, length + 9)
             # other records (header, schemas, attachments, metadata, indexes) are skipped
+
+
+def chunk_offsets(path: str | Path) -> list[int]:
+    """File offsets of the Chunk records an intact MCAP file's summary lists, in file order.
+
+    Empty when the file is cut (no trailing magic), has no summary, or its summary has no
+    Chunk Index records or no Channel records: then only a whole scan is safe.
+    """
+    path = Path(path)
+    with path.open('rb') as file:
+        try:
+            reader = _RecordReader(file, path)
+        except ValueError:
+            return []
+        summary = memoryview(reader.summary())
+    offsets: list[int] = []
+    channels = False
+    pos = 0
+    while pos + 9 <= len(summary):
+        op, length = _HEADER.unpack_from(summary, pos)
+        nxt = pos + 9 + length
+        if nxt > len(summary):
+            return []
+        if op == _OP_CHUNK_INDEX and length >= 24:
+            offsets.append(_U64.unpack_from(summary, pos + 9 + 16)[0])
+        channels = channels or op == _OP_CHANNEL
+        pos = nxt
+    return sorted(offsets) if channels else []
 
 
 _Channels = tuple[set[int], set[int]]  # wanted and known channel ids

@@ -10,8 +10,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fog_temp_comp.bag.bagio import BagError
+from fog_temp_comp.bag.forked import ForkedCall, fork_available
+from fog_temp_comp.bag.mcapscan import ScanStats
 from fog_temp_comp.bag.salvage import Salvage
-from fog_temp_comp.bag.stream import BagStream, Progress
+from fog_temp_comp.bag.stream import BagStream, Chunk, Progress, StampOrder
+from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.grid import GridAccumulator, bin_means
 from fog_temp_comp.core.record import ChamberRecord
 
@@ -54,6 +57,101 @@ def bin_record(record: ChamberRecord, period_s: float) -> BinnedRecord:
     )  # fmt: skip
 
 
+#: a bag that is one intact MCAP file of at least this size is read in two processes
+PARALLEL_MIN_BYTES = 16 << 20
+
+
+class _Reduction:
+    """What reducing a stream keeps: grid sums per stream and, if asked, temperature samples."""
+
+    def __init__(self, period_s: float, keep_temperature: bool) -> None:
+        self.gyro = GridAccumulator(period_s)
+        self.temperature = GridAccumulator(period_s)
+        self.keep_temperature = keep_temperature
+        self.kept: list[tuple[FloatArray, FloatArray]] = []
+
+    def add(self, chunk: Chunk) -> None:
+        """Add a chunk read after the others."""
+        (self.gyro if chunk.kind == 'imu' else self.temperature).add(chunk.stamps_s, chunk.values)
+        if self.keep_temperature and chunk.kind == 'temperature':
+            self.kept.append((chunk.stamps_s, chunk.values))
+
+    def extend(self, later: _Reduction) -> None:
+        """Add what another reduction kept of the chunks read after ours."""
+        self.gyro.merge(later.gyro)
+        self.temperature.merge(later.temperature)
+        self.kept += later.kept
+
+
+@dataclass
+class _SpanResult:
+    """What a child process brings back from reducing the second span of a bag."""
+
+    reduction: _Reduction
+    order: StampOrder
+    unstamped: dict[str, int]
+    frame_id: str
+    stats: list[ScanStats]
+    messages: int
+
+
+def _reduce_span(
+    stream: BagStream, span: tuple[int, int | None], period_s: float, keep_temperature: bool
+) -> _SpanResult | None:
+    """In the child: reduce one span of the open stream (None if it is damaged)."""
+    stream.progress = None
+    stream.salvage = Salvage(stream.path)
+    stream.order = StampOrder()
+    stream.unstamped = UnsetStamps()
+    stream.span_stats = []
+    stream.frame_id = ''
+    reduction = _Reduction(period_s, keep_temperature)
+    messages = 0
+    for chunk in stream.chunks(span):
+        reduction.add(chunk)
+        messages += chunk.stamps_s.size
+    if stream.salvage.recovered:  # the parent reads it again and records the damage
+        return None
+    return _SpanResult(
+        reduction, stream.order, stream.unstamped.counts, stream.frame_id, stream.span_stats,
+        messages,
+    )  # fmt: skip
+
+
+def _read_in_two(stream: BagStream, reduction: _Reduction, period_s: float) -> bool:
+    """Reduce the bag's two spans, the second in a child process; False if not splittable.
+
+    The child's result is used when its stamps follow the parent's (so the order counts are
+    exact) and it found no damage; else the parent reads the second span too: the result is
+    what one process reads, up to the summation order of the one grid bin at the seam.
+    """
+    if not fork_available():
+        return False
+    spans = stream.mcap_spans(min_bytes=PARALLEL_MIN_BYTES)
+    if spans is None:
+        return False
+    first, second = spans
+    with ForkedCall(_reduce_span, stream, second, period_s, reduction.keep_temperature) as child:
+        for chunk in stream.chunks(first):
+            reduction.add(chunk)
+        part = child.result()
+    if part is not None and stream.order.follows(part.order):
+        reduction.extend(part.reduction)
+        stream.order.extend(part.order)
+        stream.salvage.disorder = stream.order.disorder()
+        for topic, count in part.unstamped.items():
+            stream.unstamped.counts[topic] = stream.unstamped.counts.get(topic, 0) + count
+        stream.frame_id = stream.frame_id or part.frame_id
+        stream.span_stats += part.stats
+        if stream.progress is not None and part.stats:
+            stream.progress.update(part.messages, part.stats[-1].last_log_ns)
+    else:
+        for chunk in stream.chunks(second):
+            reduction.add(chunk)
+    stream.check_spans()
+    return True
+
+
 def reduce_bag(
     path: str | Path,
     period_s: float,
@@ -71,10 +169,11 @@ def reduce_bag(
 
     With ``keep_temperature`` the temperature samples are kept too (sorted by stamp).
     ``strict`` refuses a damaged bag; else ``on_salvage`` is called with what was skipped.
+    A bag that is one intact MCAP file of :data:`PARALLEL_MIN_BYTES` or more is read in two
+    processes (its second half in a fork; :mod:`fog_temp_comp.bag.forked`).
     """
     path = Path(path)
-    gyro = GridAccumulator(period_s)
-    temperature = GridAccumulator(period_s)
+    reduction = _Reduction(period_s, keep_temperature)
     progress = Progress(path.name, quiet=quiet)
     with BagStream(
         path,
@@ -85,24 +184,24 @@ def reduce_bag(
         progress=progress,
         strict=strict,
     ) as stream:
-        kept: list[tuple[FloatArray, FloatArray]] = []
-        for chunk in stream.chunks():
-            (gyro if chunk.kind == 'imu' else temperature).add(chunk.stamps_s, chunk.values)
-            if keep_temperature and chunk.kind == 'temperature':
-                kept.append((chunk.stamps_s, chunk.values))
+        if not _read_in_two(stream, reduction, period_s):
+            for chunk in stream.chunks():
+                reduction.add(chunk)
         progress.close()
         stream.warn_unstamped()
         if on_salvage is not None and (stream.salvage.recovered or stream.salvage.order_summary()):
             on_salvage(stream.salvage)
+        gyro, temperature = reduction.gyro, reduction.temperature
         for acc, topic in ((gyro, stream.imu_topic), (temperature, stream.temp_topic)):
             if not acc.samples:
                 raise BagError(f'{path}: topic {topic} has no messages')
         t_idx, t_stamp, temp = temperature.result()
         g_idx, g_stamp, rate = gyro.result()
+        kept = _sorted_samples(reduction.kept) if keep_temperature else None
         return BinnedRecord(
             path, stream.imu_topic, stream.temp_topic, stream.frame_id, period_s,
             t_idx, t_stamp, temp, g_idx, g_stamp, rate.reshape(-1, 3),
-            gyro.samples, temperature.samples, _sorted_samples(kept) if keep_temperature else None,
+            gyro.samples, temperature.samples, kept,
         )  # fmt: skip
 
 

@@ -38,7 +38,14 @@ from fog_temp_comp.bag.bagio import (
     resolve_topic_in,
     stamp_to_s,
 )
-from fog_temp_comp.bag.mcapscan import mcap_topics, scan_mcap
+from fog_temp_comp.bag.mcapscan import (
+    MAGIC,
+    ScanStats,
+    check_counts,
+    chunk_offsets,
+    mcap_topics,
+    scan_mcap,
+)
 from fog_temp_comp.bag.names import TIME_SOURCES
 from fog_temp_comp.bag.ros1scan import Ros1Bag, Ros1FormatError
 from fog_temp_comp.bag.salvage import RecoveryError, Salvage
@@ -74,6 +81,60 @@ class Chunk:
     kind: str
     stamps_s: FloatArray
     values: FloatArray
+
+
+class StampOrder:
+    """Stamps out of order and duplicate per stream, counted chunk by chunk in reading order."""
+
+    def __init__(self) -> None:
+        self.newest = {'imu': -np.inf, 'temperature': -np.inf}
+        self.last = {'imu': np.nan, 'temperature': np.nan}
+        self.first = {'imu': np.nan, 'temperature': np.nan}
+        self.late = {'imu': 0, 'temperature': 0}
+        self.same = {'imu': 0, 'temperature': 0}
+
+    def count(self, chunk: Chunk) -> None:
+        """Count a chunk read after all those counted so far."""
+        stamps = chunk.stamps_s
+        if not stamps.size:
+            return
+        kind = chunk.kind
+        before = np.maximum.accumulate(np.r_[self.newest[kind], stamps[:-1]])
+        self.late[kind] += int((stamps < before).sum())
+        self.same[kind] += int((stamps == np.r_[self.last[kind], stamps[:-1]]).sum())
+        self.newest[kind] = max(self.newest[kind], float(stamps.max()))
+        if np.isnan(self.first[kind]):
+            self.first[kind] = float(stamps[0])
+        self.last[kind] = float(stamps[-1])
+
+    def follows(self, later: StampOrder) -> bool:
+        """Whether ``later``'s counts stay exact after these (no stamp of it is before ours).
+
+        A stamp of ``later`` is out of order against ours only if its first one is (the
+        first is below every later stamp that is not itself out of order within ``later``).
+        """
+        return all(
+            not (later.first[kind] < self.newest[kind]) for kind in self.newest
+        )  # NaN (no stamps) compares False
+
+    def extend(self, later: StampOrder) -> None:
+        """Add the counts of the chunks read after ours (``follows(later)`` must hold)."""
+        for kind in self.newest:
+            if np.isnan(later.first[kind]):
+                continue
+            self.late[kind] += later.late[kind]
+            self.same[kind] += later.same[kind] + int(later.first[kind] == self.last[kind])
+            self.newest[kind] = max(self.newest[kind], later.newest[kind])
+            if np.isnan(self.first[kind]):
+                self.first[kind] = later.first[kind]
+            self.last[kind] = later.last[kind]
+
+    def disorder(self) -> dict[str, tuple[int, int]]:
+        """What :attr:`Salvage.disorder` holds: stream -> (out of order, duplicate)."""
+        return {
+            'gyro': (self.late['imu'], self.same['imu']),
+            'temperature': (self.late['temperature'], self.same['temperature']),
+        }
 
 
 class Progress:
@@ -195,6 +256,10 @@ class BagStream:
         self._dropped_rows = 0  # sqlite3 rows found but unreadable
         #: messages whose header stamp was unset (0) and took their receive time, per topic
         self.unstamped = UnsetStamps()
+        #: stamps out of order and duplicate so far (in :attr:`salvage` after :meth:`chunks`)
+        self.order = StampOrder()
+        #: what the scans of :meth:`mcap_spans` spans found, in order
+        self.span_stats: list[ScanStats] = []
 
     def __enter__(self) -> BagStream:
         if not self.path.exists():
@@ -316,29 +381,84 @@ class BagStream:
         self.reader = None
         self._open = False
 
-    def chunks(self) -> Iterator[Chunk]:
+    def chunks(self, span: tuple[int, int | None] | None = None) -> Iterator[Chunk]:
         """Chunks of each stream in bag order; every message appears exactly once.
 
         Stamps out of order and duplicate are counted in :attr:`salvage` (``disorder``).
+        ``span``: only the records of this part of the bag's one MCAP file (one of
+        :meth:`mcap_spans`, in order; :meth:`check_spans` after the last).
         """
-        newest = {'imu': -np.inf, 'temperature': -np.inf}
-        last = {'imu': np.nan, 'temperature': np.nan}
-        late = {'imu': 0, 'temperature': 0}
-        same = {'imu': 0, 'temperature': 0}
-        for chunk in self._chunks():
-            stamps = chunk.stamps_s
-            if stamps.size:
-                kind = chunk.kind
-                before = np.maximum.accumulate(np.r_[newest[kind], stamps[:-1]])
-                late[kind] += int((stamps < before).sum())
-                same[kind] += int((stamps == np.r_[last[kind], stamps[:-1]]).sum())
-                newest[kind] = max(newest[kind], float(stamps.max()))
-                last[kind] = float(stamps[-1])
+        for chunk in self._chunks() if span is None else self._scan_span(span):
+            self.order.count(chunk)
             yield chunk
-        self.salvage.disorder = {
-            'gyro': (late['imu'], same['imu']),
-            'temperature': (late['temperature'], same['temperature']),
+        self.salvage.disorder = self.order.disorder()
+
+    def mcap_spans(self, min_bytes: int = 0) -> tuple[tuple[int, int], tuple[int, None]] | None:
+        """Two spans of about half the bytes each of a bag that is one intact MCAP file.
+
+        None for any other bag (several files, damaged, without a summary listing its
+        chunks, read through ``--temp-field``, or smaller than ``min_bytes``).
+        """
+        files = self._mcap_files() if self.reader is not None else []
+        if len(files) != 1 or self.temp_field is not None:
+            return None
+        if files[0].stat().st_size < min_bytes:
+            return None
+        offsets = chunk_offsets(files[0])
+        if len(offsets) < 2:
+            return None
+        middle = (offsets[0] + files[0].stat().st_size) / 2
+        split = min(offsets[1:], key=lambda offset: abs(offset - middle))
+        return (len(MAGIC), split), (split, None)
+
+    def _scan_span(self, span: tuple[int, int | None]) -> Iterator[Chunk]:
+        """The chunks of a span of the bag's one MCAP file (see :meth:`mcap_spans`)."""
+        reader = self.reader
+        if reader is None or not self._open:
+            raise RuntimeError('BagStream is not open on an MCAP bag')
+        (file,) = self._mcap_files()
+        by_topic = {
+            c.topic: _decoder(c, reader.is2)
+            for c in reader.connections
+            if c.topic in (self.imu_topic, self.temp_topic)
         }
+        stats = ScanStats()
+        after = self.span_stats[-1].last_log_ns if self.span_stats else 0
+        batches = scan_mcap(
+            file, set(by_topic), salvage=self.salvage, stats=stats, span=span, after_log_ns=after
+        )
+        try:
+            yield from self._from_spans(batches, by_topic)
+        except RecoveryError:
+            raise
+        except (ValueError, struct.error, RuntimeError) as err:
+            raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
+        self.span_stats.append(stats)
+
+    def check_spans(self) -> None:
+        """After the last span: the counts of all spans against the file's statistics."""
+        expected = next((s.expected for s in self.span_stats if s.expected is not None), None)
+        yielded: dict[str, int] = {}
+        for stats in self.span_stats:
+            for topic, count in stats.yielded.items():
+                yielded[topic] = yielded.get(topic, 0) + count
+        if expected is not None:
+            try:
+                check_counts(
+                    self.path,
+                    expected,
+                    yielded,
+                    self.salvage,
+                    sum(s.counted for s in self.span_stats),
+                )
+            except ValueError as err:
+                raise BagError(f'{self.path}: cannot read messages: {err}') from err
+        self._lost_from_metadata(
+            {
+                self.imu_topic: yielded.get(self.imu_topic, 0),
+                self.temp_topic: yielded.get(self.temp_topic, 0),
+            }
+        )
 
     def _chunks(self) -> Iterator[Chunk]:
         """Chunks of each stream in bag order; every message appears exactly once.
@@ -429,12 +549,17 @@ class BagStream:
             raise
         except (ValueError, struct.error, RuntimeError) as err:
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
+        self._lost_from_metadata(
+            {self.imu_topic: read['imu'], self.temp_topic: read['temperature']}
+        )
+
+    def _lost_from_metadata(self, read: dict[str, int]) -> None:
+        """Messages lost, where nothing else counted them: ``metadata.yaml`` minus ``read``."""
         salvage = self.salvage
         if salvage.recovered and (salvage.lost_messages is None or salvage.uncounted):
             expected = metadata_counts(self.path) if self.path.is_dir() else {}
-            wanted = {self.imu_topic: read['imu'], self.temp_topic: read['temperature']}
-            if expected and all(t in expected for t in wanted):
-                salvage.lost_total(sum(max(expected[t] - n, 0) for t, n in wanted.items()))
+            if expected and all(t in expected for t in read):
+                salvage.lost_total(sum(max(expected[t] - n, 0) for t, n in read.items()))
 
     def _kinds(self) -> dict[str, str]:
         """Topic -> chunk kind."""

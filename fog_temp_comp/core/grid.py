@@ -210,8 +210,38 @@ class GridAccumulator:
             self._shape = x.shape[1:]
         elif value.shape[1] != self._sum_value.shape[1]:
             raise ValueError('values changed shape between chunks')
+        self._add_sums(unique, count, offset, value, t.size)
+
+    def merge(self, other: GridAccumulator) -> None:
+        """Add the samples another accumulator of the same period has seen.
+
+        The same bins as feeding its samples here, with each bin's sum taken in another order
+        where both have samples in it (a bin at the seam of two halves of a bag).
+        """
+        if other.period_s != self.period_s:
+            raise ValueError(f'periods differ: {self.period_s} s and {other.period_s} s')
+        if other._sum_value is None:
+            return
+        if self._sum_value is None:
+            self._sum_value = np.empty((0, other._sum_value.shape[1]))
+            self._shape = other._shape
+        elif other._shape != self._shape:
+            raise ValueError('values of another shape')
+        self._add_sums(
+            other._index, other._count, other._sum_offset, other._sum_value, other.samples
+        )
+
+    def _add_sums(
+        self,
+        unique: NDArray[np.int64],
+        count: NDArray[np.int64],
+        offset: NDArray[Any],
+        value: NDArray[Any],
+        samples: int,
+    ) -> None:
+        """Add per-bin sums of ``samples`` samples (``unique`` increasing)."""
         if self._append(unique, count, offset, value):
-            self.samples += t.size
+            self.samples += samples
             return
         merged = np.union1d(self._index, unique)
         new_count = np.zeros(merged.size, dtype=np.int64)
@@ -232,7 +262,7 @@ class GridAccumulator:
             new_offset,
             new_value,
         )
-        self.samples += t.size
+        self.samples += samples
 
     def _append(
         self,
