@@ -11,7 +11,8 @@ once into ``--cache`` with ``benchutil.write_chamber_bag_fast`` (the bytes
 ``bagio.write_chamber_bag`` writes), in zstd-compressed chunks as ``fog-temp-comp simulate``
 writes them, and reused by later runs.
 
-Every case is a fresh process, timed from outside, so start-up is included:
+Every case is a fresh process, timed from outside, so start-up is included; the package is
+byte-compiled first, as pip or colcon install it (:func:`benchutil.byte_compile_package`):
 
 - ``rosbags``: ``AnyReader.messages()`` + ``deserialize`` of every message, nothing kept (the
   reference: what reading the bag with rosbags costs at least);
@@ -39,7 +40,7 @@ import sys
 import time
 from pathlib import Path
 
-from benchutil import machine, table, write_chamber_bag_fast
+from benchutil import byte_compile_package, machine, table, write_chamber_bag_fast
 
 from fog_temp_comp.bag import bagio
 from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
@@ -163,6 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--no-per-message', action='store_true', help='skip the slow fallback')
     args = parser.parse_args(argv)
     bag, count = ensure_bag(args.cache, args.quick)
+    compiled = byte_compile_package()
     tool = str(Path(sys.executable).with_name('fog-temp-comp'))
     out = args.cache / 'out'
     coeffs = args.cache / 'coeffs.yaml'
@@ -204,7 +206,10 @@ def main(argv: list[str] | None = None) -> int:
                 '-' if goal is None else f'<= {goal}',
             ]
         )
-    print(f'\n{machine()}; {count} messages ({bag.name}, MCAP, zstd), {args.rounds} rounds')
+    print(
+        f'\n{machine()}; {count} messages ({bag.name}, MCAP, zstd), {args.rounds} rounds; '
+        f'{compiled}'
+    )
     headers = ['case', 'best s', 'best / best read', 'median ratio', 'ratio per round', 'goal']
     print(table(headers, rows))
     return 0

@@ -66,6 +66,7 @@ def read_both(
         monkeypatch.setattr(reduce, 'PARALLEL_MIN_BYTES', min_bytes)
         reports: list[Salvage] = []
         binned = reduce_bag(bag, 10.0, keep_temperature=True, on_salvage=reports.append)
+        assert binned.processes == (2 if min_bytes == 0 else 1)
         results += [binned, reports]
         assert not multiprocessing.active_children()  # the child never outlives the read
     return results[0], results[1], results[2], results[3], []
@@ -171,3 +172,24 @@ def test_a_small_or_split_bag_is_read_in_one_process(tmp_path: Path) -> None:
         assert spans is not None
         (start, split), (second, end) = spans
         assert start < split == second and end is None
+
+
+def test_no_fork_while_another_thread_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A fork copies only the calling thread: with another one running, read in one process."""
+    import threading
+
+    bag, _ = write_bag(tmp_path / 'bag')
+    monkeypatch.setattr(reduce, 'PARALLEL_MIN_BYTES', 0)
+    release = threading.Event()
+    worker = threading.Thread(target=release.wait)
+    worker.start()
+    try:
+        assert not fork_available()
+        alone = reduce_bag(bag, 10.0)
+    finally:
+        release.set()
+        worker.join()
+    assert alone.processes == 1
+    assert reduce_bag(bag, 10.0).processes == 2

@@ -3,7 +3,8 @@
 Reading a long bag is CPU work in Python and numpy that holds the GIL (chunk decompression
 too), so a second core helps only from a second process. A fork starts at once (no imports,
 the open bag's state is copied) and sends back a small pickled result. Linux only; elsewhere,
-or with one core, :func:`fork_available` is false and the caller reads serially.
+with one core or with other threads running, :func:`fork_available` is false and the caller
+reads serially.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -18,9 +20,13 @@ __all__ = ['ForkedCall', 'fork_available']
 
 
 def fork_available() -> bool:
-    """Whether :class:`ForkedCall` may be used here (Linux, more than one CPU)."""
+    """Whether :class:`ForkedCall` may be used here.
+
+    Linux, more than one CPU, and no other Python thread (a fork copies only the calling
+    thread; a lock another one held would stay locked in the child, e.g. in a Dask worker).
+    """
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()
-    return sys.platform.startswith('linux') and (cpus or 1) > 1
+    return sys.platform.startswith('linux') and (cpus or 1) > 1 and threading.active_count() == 1
 
 
 class ForkedCall:

@@ -44,6 +44,8 @@ class BinnedRecord:
     temperature_messages: int
     #: (stamps_s (M,), temperature_degC (M,)) sorted by stamp, when asked to keep them
     temperature_samples: tuple[FloatArray, FloatArray] | None = None
+    #: processes that read the bag (2: its second half in a fork, see :func:`reduce_bag`)
+    processes: int = 1
 
 
 def bin_record(record: ChamberRecord, period_s: float) -> BinnedRecord:
@@ -184,7 +186,8 @@ def reduce_bag(
         progress=progress,
         strict=strict,
     ) as stream:
-        if not _read_in_two(stream, reduction, period_s):
+        processes = 2 if _read_in_two(stream, reduction, period_s) else 1
+        if processes == 1:
             for chunk in stream.chunks():
                 reduction.add(chunk)
         progress.close()
@@ -201,7 +204,7 @@ def reduce_bag(
         return BinnedRecord(
             path, stream.imu_topic, stream.temp_topic, stream.frame_id, period_s,
             t_idx, t_stamp, temp, g_idx, g_stamp, rate.reshape(-1, 3),
-            gyro.samples, temperature.samples, kept,
+            gyro.samples, temperature.samples, kept, processes,
         )  # fmt: skip
 
 
