@@ -8,20 +8,26 @@ caller sees: bins, temperature samples, counts, frame_id, order counts, unset st
 
 from __future__ import annotations
 
-import multiprocessing
+import os
+import pickle
 import struct
+import subprocess
+import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from fog_temp_comp.bag import bagio, reduce
-from fog_temp_comp.bag.forked import fork_available
+from fog_temp_comp.bag import bagio
 from fog_temp_comp.bag.mcapscan import chunk_offsets
-from fog_temp_comp.bag.reduce import BinnedRecord, reduce_bag
+from fog_temp_comp.bag.reduce import BinnedRecord
 from fog_temp_comp.bag.salvage import Salvage
 
-pytestmark = pytest.mark.skipif(not fork_available(), reason='needs fork and two CPUs')
+pytestmark = pytest.mark.skipif(
+    not sys.platform.startswith('linux') or len(os.sched_getaffinity(0)) < 2,
+    reason='needs fork and two CPUs',
+)
 
 IMU_TOPIC, TEMP_TOPIC = '/imu/data_raw', '/imu/temperature'
 FIELDS = (
@@ -57,19 +63,55 @@ def write_bag(
     return path, file
 
 
-def read_both(
-    monkeypatch: pytest.MonkeyPatch, bag: Path
-) -> tuple[BinnedRecord, list[Salvage], BinnedRecord, list[Salvage], list[str]]:
-    """(two processes, their salvage reports, one process, its reports, topics warned)."""
-    results = []
+# Each read runs in a fresh interpreter: a fork needs a process with no other thread, and the
+# test process may hold some from earlier tests (e.g. Dask's offload and IO-loop threads).
+READS = """
+import multiprocessing, pickle, sys, threading
+from fog_temp_comp.bag import reduce
+from fog_temp_comp.bag.forked import fork_available
+bag, out, mode = sys.argv[1:]
+results = []
+if mode == 'both':
     for min_bytes in (0, 1 << 62):
-        monkeypatch.setattr(reduce, 'PARALLEL_MIN_BYTES', min_bytes)
-        reports: list[Salvage] = []
-        binned = reduce_bag(bag, 10.0, keep_temperature=True, on_salvage=reports.append)
-        assert binned.processes == (2 if min_bytes == 0 else 1)
-        results += [binned, reports]
-        assert not multiprocessing.active_children()  # the child never outlives the read
-    return results[0], results[1], results[2], results[3], []
+        reduce.PARALLEL_MIN_BYTES = min_bytes
+        reports = []
+        binned = reduce.reduce_bag(bag, 10.0, keep_temperature=True, on_salvage=reports.append)
+        results.append((binned, reports, multiprocessing.active_children()))
+else:  # 'thread': the same bag with another thread running, then alone
+    reduce.PARALLEL_MIN_BYTES = 0
+    release = threading.Event()
+    worker = threading.Thread(target=release.wait)
+    worker.start()
+    results.append((fork_available(), reduce.reduce_bag(bag, 10.0).processes))
+    release.set()
+    worker.join()
+    results.append((fork_available(), reduce.reduce_bag(bag, 10.0).processes))
+with open(out, 'wb') as file:
+    pickle.dump(results, file)
+"""
+
+
+def run_reads(bag: Path, mode: str) -> tuple[list[Any], str]:
+    """Run :data:`READS` on ``bag`` in a fresh interpreter: (its results, its stderr)."""
+    out = bag.parent / f'reads_{mode}.pickle'
+    done = subprocess.run(
+        [sys.executable, '-c', READS, str(bag), str(out), mode],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    with out.open('rb') as file:
+        return pickle.load(file), done.stderr
+
+
+def read_both(bag: Path) -> tuple[BinnedRecord, list[Salvage], BinnedRecord, list[Salvage], str]:
+    """(two processes, their salvage reports, one process, its reports, the stderr)."""
+    ((two, two_reports, left_two), (one, one_reports, left_one)), err = run_reads(bag, 'both')
+    assert (two.processes, one.processes) == (2, 1)
+    assert left_two == left_one == []  # the child never outlives the read
+    return two, two_reports, one, one_reports, err
 
 
 def assert_same(two: BinnedRecord, one: BinnedRecord) -> None:
@@ -86,18 +128,16 @@ def assert_same(two: BinnedRecord, one: BinnedRecord) -> None:
         np.testing.assert_array_equal(a, b)
 
 
-def test_two_processes_read_what_one_reads(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_two_processes_read_what_one_reads(tmp_path: Path) -> None:
     bag, _ = write_bag(tmp_path / 'bag')
-    two, two_reports, one, one_reports, _ = read_both(monkeypatch, bag)
+    two, two_reports, one, one_reports, _ = read_both(bag)
     assert_same(two, one)
     assert two.imu_messages == 20_000 and two.temperature_messages == 1000
     assert two_reports == one_reports == []
 
 
 def test_stamps_out_of_order_across_the_seam_are_counted_as_one_process_does(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path,
 ) -> None:
     """Late and repeated stamps everywhere, so the second half starts before the first ends."""
     stamps = 1.7e9 + np.arange(20_000) * 0.05
@@ -106,7 +146,7 @@ def test_stamps_out_of_order_across_the_seam_are_counted_as_one_process_does(
     stamps[late] -= 30.0  # 30 s late: some straddle the seam
     stamps[late[:50] + 1] = stamps[late[:50]]  # and some repeated
     bag, _ = write_bag(tmp_path / 'bag', imu_stamps=stamps)
-    two, two_reports, one, one_reports, _ = read_both(monkeypatch, bag)
+    two, two_reports, one, one_reports, _ = read_both(bag)
     assert_same(two, one)
     (a,), (b,) = two_reports, one_reports
     assert a.disorder == b.disorder
@@ -114,32 +154,27 @@ def test_stamps_out_of_order_across_the_seam_are_counted_as_one_process_does(
     assert late_count > 0 and same_count > 0
 
 
-def test_in_order_second_half_counts_its_own_repeats(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_in_order_second_half_counts_its_own_repeats(tmp_path: Path) -> None:
     """Repeated stamps in each half only (the child's counts are merged, not recounted)."""
     stamps = 1.7e9 + np.arange(20_000) * 0.05
     stamps[[1000, 15000]] = stamps[[999, 14999]]
     bag, _ = write_bag(tmp_path / 'bag', imu_stamps=stamps)
-    two, (a,), one, (b,), _ = read_both(monkeypatch, bag)
+    two, (a,), one, (b,), _ = read_both(bag)
     assert_same(two, one)
     assert a.disorder == b.disorder == {'gyro': (0, 2), 'temperature': (0, 0)}
 
 
-def test_unset_stamps_in_the_second_half_are_counted(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_unset_stamps_in_the_second_half_are_counted(tmp_path: Path) -> None:
     stamps = 1.7e9 + np.arange(20_000) * 0.05
     stamps[-100:] = 0.0  # a driver that stopped stamping
     bag, _ = write_bag(tmp_path / 'bag', imu_stamps=stamps)
-    two, _, one, _, _ = read_both(monkeypatch, bag)
+    two, _, one, _, err = read_both(bag)
     assert_same(two, one)
-    err = capsys.readouterr().err
     assert err.count('100 messages on /imu/data_raw have no header stamp') == 2
 
 
 def test_a_damaged_chunk_in_the_second_half_is_reported_as_one_process_does(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path,
 ) -> None:
     """The child finds damage and gives up; the parent reads that half itself."""
     bag, file = write_bag(tmp_path / 'bag')
@@ -150,7 +185,7 @@ def test_a_damaged_chunk_in_the_second_half_is_reported_as_one_process_does(
     assert data[index] == 0x07
     data[index : index + 20] = bytes(b ^ 0xFF for b in data[index : index + 20])
     file.write_bytes(bytes(data))
-    two, (a,), one, (b,), _ = read_both(monkeypatch, bag)
+    two, (a,), one, (b,), _ = read_both(bag)
     assert_same(two, one)
     assert a.recovered and a.notes == b.notes
     assert (a.lost_messages, a.gaps_ns, a.skipped_chunks, a.skipped_bytes) == (
@@ -174,22 +209,9 @@ def test_a_small_or_split_bag_is_read_in_one_process(tmp_path: Path) -> None:
         assert start < split == second and end is None
 
 
-def test_no_fork_while_another_thread_runs(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_no_fork_while_another_thread_runs(tmp_path: Path) -> None:
     """A fork copies only the calling thread: with another one running, read in one process."""
-    import threading
-
     bag, _ = write_bag(tmp_path / 'bag')
-    monkeypatch.setattr(reduce, 'PARALLEL_MIN_BYTES', 0)
-    release = threading.Event()
-    worker = threading.Thread(target=release.wait)
-    worker.start()
-    try:
-        assert not fork_available()
-        alone = reduce_bag(bag, 10.0)
-    finally:
-        release.set()
-        worker.join()
-    assert alone.processes == 1
-    assert reduce_bag(bag, 10.0).processes == 2
+    (with_thread, alone), _ = run_reads(bag, 'thread')
+    assert with_thread == (False, 1)
+    assert alone == (True, 2)

@@ -249,6 +249,7 @@ class GridAccumulator:
         new_value = np.zeros((merged.size, value.shape[1]))
         old_pos = np.searchsorted(merged, self._index)
         pos = np.searchsorted(merged, unique)
+        assert self._sum_value is not None  # set by _append or merge before any sums
         for src_pos, c, o, v in (
             (old_pos, self._count, self._sum_offset, self._sum_value),
             (pos, count, offset, value),

@@ -565,8 +565,9 @@ def cross_validate(
                     identifiable[checked] = None
                 except CalibrationError as err:
                     identifiable[checked] = err
-            if identifiable[checked] is not None:
-                raise identifiable[checked]
+            refused = identifiable[checked]
+            if refused is not None:
+                raise refused
             result.criterion, result.parts = _score(folds, structure.terms, period, structure.fit)
         except CalibrationError as err:
             result.error = str(err)
