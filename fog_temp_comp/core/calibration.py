@@ -292,68 +292,107 @@ def calibrate_detailed(
     CalibrationResult
 
     """
-    import dataclasses
-
     if not records:
         raise CalibrationError('no records to calibrate on')
+    if fit not in ('ols', 'gls'):
+        raise ValueError(f"fit must be 'ols' or 'gls', got {fit!r}")
     lag_fit: dict[str, object] | None = None
     if fit_coil_lag:
-        from scipy import ndimage  # here: only the coil-lag search needs it (start-up)
-
-        from fog_temp_comp.core.coil import search_time_constant
-
-        bases = [
-            offline_estimates(
-                settings, r.temp_stamps_s, r.temperature_degC, coil_lag=False, online=online_tdot
-            )
-            for r in records
-        ]
-
-        width = round(coil_lag_highpass_s / settings.tdot_period_s)
-
-        def tables(tau: float) -> list[GridTable]:
-            lagged = dataclasses.replace(settings, coil_lag_s=tau)
-            return [
-                table_of(
-                    r,
-                    b.lagged(tau).shaped(lagged.tdot_shrink_sigmas, lagged.tdot_lag_s),
-                    lagged.tdot_period_s,
-                )
-                for r, b in zip(records, bases, strict=True)
-            ]
-
-        def objective(tau: float) -> float:
-            parts = tables(tau)
-            t = GridTable.concatenate(parts)
-            a = t.design(terms)
-            resid = t.rate_deg_h - a @ np.linalg.lstsq(a, t.rate_deg_h, rcond=None)[0]
-            total, start = 0.0, 0
-            for part in parts:
-                r = resid[start : start + part.rate_deg_h.shape[0]]
-                start += r.shape[0]
-                if width > 1:
-                    r = r - ndimage.uniform_filter1d(r, min(width, r.shape[0]), 0, mode='nearest')
-                total += float(np.sum(r * r))
-            return total
-
-        tau, evaluations = search_time_constant(objective, coil_lag_bounds_s)
-        settings = dataclasses.replace(settings, coil_lag_s=tau)
-        table = GridTable.concatenate(tables(tau))
-        lag_fit = {
-            'coil_lag_s': tau,
-            'bounds_s': [float(b) for b in coil_lag_bounds_s],
-            'highpass_s': float(coil_lag_highpass_s),
-            'objective': 'sum of squared high-passed residuals over axes, deg^2/h^2',
-            'evaluations': [[t, v] for t, v in sorted(evaluations)],
-        }
+        settings, table, lag_fit = _fit_coil_lag(
+            records, settings, terms, coil_lag_bounds_s, coil_lag_highpass_s, online_tdot
+        )
     else:
         table = GridTable.concatenate(
             [grid_table(r, settings, online_tdot=online_tdot) for r in records]
         )
     warnings = check_identifiable(table, terms)
-    if fit not in ('ols', 'gls'):
-        raise ValueError(f"fit must be 'ols' or 'gls', got {fit!r}")
     fits = fit_table(table, terms, lag=hac_lag, gls=fit == 'gls')
+    extra = {**({'coil_lag_fit': lag_fit} if lag_fit is not None else {}), **(provenance or {})}
+    coefficients = _coefficients(records, settings, terms, table, fits, warnings, extra)
+    return CalibrationResult(coefficients, table, fits, warnings)
+
+
+def _fit_coil_lag(
+    records: Sequence[ChamberRecord],
+    settings: DenoiseSettings,
+    terms: Sequence[str],
+    bounds_s: tuple[float, float],
+    highpass_s: float,
+    online_tdot: bool,
+) -> tuple[DenoiseSettings, GridTable, dict[str, object]]:
+    """The coil lag search of :func:`calibrate_detailed`.
+
+    Returns the settings with the fitted ``coil_lag_s`` (s), their grid rows and the search's
+    provenance entry.
+    """
+    import dataclasses
+
+    from scipy import ndimage  # here: only the coil-lag search needs it (start-up)
+
+    from fog_temp_comp.core.coil import search_time_constant
+
+    bases = [
+        offline_estimates(
+            settings, r.temp_stamps_s, r.temperature_degC, coil_lag=False, online=online_tdot
+        )
+        for r in records
+    ]
+    width = round(highpass_s / settings.tdot_period_s)
+
+    def tables(tau: float) -> list[GridTable]:
+        lagged = dataclasses.replace(settings, coil_lag_s=tau)
+        return [
+            table_of(
+                r,
+                b.lagged(tau).shaped(lagged.tdot_shrink_sigmas, lagged.tdot_lag_s),
+                lagged.tdot_period_s,
+            )
+            for r, b in zip(records, bases, strict=True)
+        ]
+
+    def objective(tau: float) -> float:
+        parts = tables(tau)
+        t = GridTable.concatenate(parts)
+        a = t.design(terms)
+        resid = t.rate_deg_h - a @ np.linalg.lstsq(a, t.rate_deg_h, rcond=None)[0]
+        total, start = 0.0, 0
+        for part in parts:
+            r = resid[start : start + part.rate_deg_h.shape[0]]
+            start += r.shape[0]
+            if width > 1:
+                r = r - ndimage.uniform_filter1d(r, min(width, r.shape[0]), 0, mode='nearest')
+            total += float(np.sum(r * r))
+        return total
+
+    tau, evaluations = search_time_constant(objective, bounds_s)
+    lag_fit: dict[str, object] = {
+        'coil_lag_s': tau,
+        'bounds_s': [float(b) for b in bounds_s],
+        'highpass_s': float(highpass_s),
+        'objective': 'sum of squared high-passed residuals over axes, deg^2/h^2',
+        'evaluations': [[t, v] for t, v in sorted(evaluations)],
+    }
+    return (
+        dataclasses.replace(settings, coil_lag_s=tau),
+        GridTable.concatenate(tables(tau)),
+        lag_fit,
+    )
+
+
+def _coefficients(
+    records: Sequence[ChamberRecord],
+    settings: DenoiseSettings,
+    terms: Sequence[str],
+    table: GridTable,
+    fits: list[AxisFitStats],
+    warnings: list[str],
+    provenance: dict[str, Any],
+) -> Coefficients:
+    """The YAML's content of a fit.
+
+    The model with its calibrated T and Tdot ranges (degC, degC/min), the Tdot settings, the
+    fit summary and where the data came from.
+    """
     model = DriftModel(
         tuple(terms),
         np.stack([f.coefficients for f in fits], axis=1),
@@ -361,7 +400,7 @@ def calibrate_detailed(
         Range(float(table.tdot_degC_per_min.min()), float(table.tdot_degC_per_min.max())),
     )
     frame_ids = sorted({r.frame_id for r in records})
-    coefficients = Coefficients(
+    return Coefficients(
         model=model,
         denoise=settings,
         frame_id=frame_ids[0] if len(frame_ids) == 1 else '',
@@ -372,8 +411,6 @@ def calibrate_detailed(
             'temperature_topics': sorted({r.temp_topic for r in records}),
             'created_utc': dt.datetime.now(dt.UTC).strftime('%Y-%m-%dT%H:%M:%SZ'),
             'package_version': __version__,
-            **({'coil_lag_fit': lag_fit} if lag_fit is not None else {}),
-            **(provenance or {}),
+            **provenance,
         },
     )
-    return CalibrationResult(coefficients, table, fits, warnings)
