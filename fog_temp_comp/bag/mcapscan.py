@@ -24,7 +24,7 @@ from __future__ import annotations
 import struct
 import sys
 import zlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
@@ -455,15 +455,9 @@ def scan_mcap(
             except _DamagedError:
                 yield from _walk_loose(scanner, loose)
                 assert salvage is not None
-                cut = reader.cut_chunk(pos)  # the intact records of a chunk the file ends in
-                if cut is not None:
-                    scanner.records(cut, 0, len(cut))
-                    yield from scanner.flush(cut)
-                pos = reader.skip_to_next_chunk(pos, scanner.last_log_ns)
+                pos = yield from _past_damage(scanner, reader, pos)
                 if pos < 0:  # the file ends here (cut)
-                    scanner.record(stats, reader.counted)
-                    if span is None:
-                        scanner.check_counts(salvage, reader.counted)
+                    _finish(scanner, reader, stats, salvage, whole=span is None)
                     return
                 continue
             body_pos = pos + 9
@@ -471,33 +465,83 @@ def scan_mcap(
             if op in (_OP_CHUNK, _OP_FOOTER) or len(loose) > _LOOSE_BATCH:
                 yield from _walk_loose(scanner, loose)
             if op == _OP_FOOTER:
-                scanner.record(stats, reader.counted)
-                if span is None:
-                    scanner.check_counts(salvage, reader.counted)
+                _finish(scanner, reader, stats, salvage, whole=span is None)
                 return
             if op == _OP_CHUNK:
-                body = reader.read(body_pos, length)
-                try:
-                    records = scanner.chunk(body, body_pos - 9)
-                    indexes, pos = reader.message_indexes(pos)
-                    if use_index and indexes and scanner.indexed(records, indexes):
-                        if stats is not None:
-                            stats.indexed_chunks += 1
-                    else:
-                        scanner.records(records, 0, len(records))
-                        if stats is not None:
-                            stats.walked_chunks += 1
-                except (ValueError, UnicodeDecodeError, zstd.ZstdError, RuntimeError) as err:
-                    if salvage is None:
-                        raise
-                    scanner.discard()
-                    channels = (set(scanner.wanted), set(scanner.channel_topic))
-                    pos = reader.skip_chunk(body_pos - 9, body, pos, err, channels)
-                    continue
-                yield from scanner.flush(records)
+                pos = yield from _scan_chunk(
+                    scanner, reader, body_pos, length, use_index, stats, salvage
+                )
             elif op in (_OP_MESSAGE, _OP_CHANNEL):
                 loose += reader.read(body_pos - 9, length + 9)
             # other records (header, schemas, attachments, metadata, indexes) are skipped
+
+
+def _scan_chunk(
+    scanner: _Scanner,
+    reader: _RecordReader,
+    body_pos: int,
+    length: int,
+    use_index: bool,
+    stats: ScanStats | None,
+    salvage: Salvage | None,
+) -> Generator[Batch, None, int]:
+    """The batches of the chunk whose body starts at ``body_pos``.
+
+    Returns the next record's offset: past the chunk's Message Index records, or past a
+    damaged chunk (with ``salvage``; without, the damage raises).
+    """
+    pos = body_pos + length
+    body = reader.read(body_pos, length)
+    try:
+        records = scanner.chunk(body, body_pos - 9)
+        indexes, pos = reader.message_indexes(pos)
+        if use_index and indexes and scanner.indexed(records, indexes):
+            if stats is not None:
+                stats.indexed_chunks += 1
+        else:
+            scanner.records(records, 0, len(records))
+            if stats is not None:
+                stats.walked_chunks += 1
+    except (ValueError, UnicodeDecodeError, zstd.ZstdError, RuntimeError) as err:
+        if salvage is None:
+            raise
+        scanner.discard()
+        channels = (set(scanner.wanted), set(scanner.channel_topic))
+        return reader.skip_chunk(body_pos - 9, body, pos, err, channels)
+    yield from scanner.flush(records)
+    return pos
+
+
+def _past_damage(
+    scanner: _Scanner, reader: _RecordReader, pos: int
+) -> Generator[Batch, None, int]:
+    """The intact records of a chunk the file ends in, if any.
+
+    Returns where the next intact chunk starts (-1: nothing follows).
+    """
+    cut = reader.cut_chunk(pos)
+    if cut is not None:
+        scanner.records(cut, 0, len(cut))
+        yield from scanner.flush(cut)
+    return reader.skip_to_next_chunk(pos, scanner.last_log_ns)
+
+
+def _finish(
+    scanner: _Scanner,
+    reader: _RecordReader,
+    stats: ScanStats | None,
+    salvage: Salvage | None,
+    *,
+    whole: bool,
+) -> None:
+    """At the end of the scan: the counts into ``stats``.
+
+    They are checked against the Statistics record when the whole file was scanned (a span's
+    are checked over all the spans, by :func:`check_counts`).
+    """
+    scanner.record(stats, reader.counted)
+    if whole:
+        scanner.check_counts(salvage, reader.counted)
 
 
 def chunk_offsets(path: str | Path) -> list[int]:
