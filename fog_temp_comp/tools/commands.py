@@ -30,7 +30,7 @@ from fog_temp_comp.core.evaluate import format_scores, replay_record, score_reco
 from fog_temp_comp.core.fitstats import format_fits
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, coefficient_key
 from fog_temp_comp.core.record import ChamberRecord
-from fog_temp_comp.core.rest import RestSettings
+from fog_temp_comp.core.rest import RestLearner, RestSettings
 from fog_temp_comp.core.restfile import (
     check_learned_bias,
     file_sha256,
@@ -578,49 +578,66 @@ def compensate_command(
         new_compensator=new_compensator,
         fast=fast,
     )
-    with AtomicOutputs(out_bag) as out:  # complete, or nothing at out_bag
-        target = out.path(out_bag)
-        try:
-            with repaired_bag(in_bag, out_bag.parent, strict=strict) as (source, salvage):
-                result, compensator = run.into(target, source, salvage)
-        except ReplayError as err:  # damage that shows only when read: copy what is intact
-            remove_bag(target)
-            with repaired_bag(in_bag, out_bag.parent, strict=strict, failure=err) as (
-                source,
-                salvage,
-            ):
-                result, compensator = run.into(target, source, salvage)
-    n_out, counters = result
+    (n_out, counters), compensator = _replay_atomically(run, in_bag, out_bag, strict)
     print(
         f'wrote {out_bag}: {n_out} corrected Imu on {output_topic} '
         f'({counters.imu_uncorrected} before the first temperature passed through)',
         file=stdout,
     )
     if compensator.rest is not None:
-        st = compensator.rest.finish()
-        print(
-            f'rest learning: {st.windows_rest} rest windows learned from, '
-            f'{st.windows_motion} moving, {st.windows_tilting} tilting, '
-            f'{st.windows_over_limit} over the limit; learned '
-            + ', '.join(f'{v:.3f}' for v in st.learned_deg_h)
-            + ' deg/h (x, y, z), applied '
-            + ', '.join(f'{v:.3f}' for v in st.applied_deg_h)
-            + ' deg/h',
-            file=stdout,
-        )
-        if rest_bias_out is not None:
-            bias = learned_bias_from_status(
-                st,
-                compensator.rest.settings,
-                coefficients_file=str(coeffs_path),
-                coefficients_sha256=file_sha256(coeffs_path),
-            )
-            if bias is None:
-                print(f'rest learning: nothing learned, {rest_bias_out} not written', file=stdout)
-            else:
-                write_learned_bias(rest_bias_out, bias)
-                print(f'wrote {rest_bias_out} (learned bias)', file=stdout)
+        _report_rest(compensator.rest, coeffs_path, rest_bias_out, stdout)
     return 0
+
+
+def _replay_atomically(
+    run: _Compensate, in_bag: Path, out_bag: Path, strict: bool
+) -> tuple[tuple[int, CompensatorCounters], Compensator]:
+    """``run`` into ``out_bag``, complete or not at all: (written, counters), the compensator.
+
+    A bag whose damage shows only when read is repaired (what is intact copied) and replayed.
+    """
+    with AtomicOutputs(out_bag) as out:  # complete, or nothing at out_bag
+        target = out.path(out_bag)
+        try:
+            with repaired_bag(in_bag, out_bag.parent, strict=strict) as (source, salvage):
+                return run.into(target, source, salvage)
+        except ReplayError as err:  # damage that shows only when read: copy what is intact
+            remove_bag(target)
+            with repaired_bag(in_bag, out_bag.parent, strict=strict, failure=err) as (
+                source,
+                salvage,
+            ):
+                return run.into(target, source, salvage)
+
+
+def _report_rest(
+    learner: RestLearner, coeffs_path: Path, rest_bias_out: Path | None, stdout: TextIO
+) -> None:
+    """Print what the bias learner at rest learned (deg/h); write it to ``rest_bias_out``."""
+    st = learner.finish()
+    print(
+        f'rest learning: {st.windows_rest} rest windows learned from, '
+        f'{st.windows_motion} moving, {st.windows_tilting} tilting, '
+        f'{st.windows_over_limit} over the limit; learned '
+        + ', '.join(f'{v:.3f}' for v in st.learned_deg_h)
+        + ' deg/h (x, y, z), applied '
+        + ', '.join(f'{v:.3f}' for v in st.applied_deg_h)
+        + ' deg/h',
+        file=stdout,
+    )
+    if rest_bias_out is None:
+        return
+    bias = learned_bias_from_status(
+        st,
+        learner.settings,
+        coefficients_file=str(coeffs_path),
+        coefficients_sha256=file_sha256(coeffs_path),
+    )
+    if bias is None:
+        print(f'rest learning: nothing learned, {rest_bias_out} not written', file=stdout)
+    else:
+        write_learned_bias(rest_bias_out, bias)
+        print(f'wrote {rest_bias_out} (learned bias)', file=stdout)
 
 
 class ReplayError(BagError):
