@@ -57,25 +57,7 @@ def build_report(
     ``rest_bias_file`` is (path, what happened to it: loaded, refused and why, written, ...).
     """
     counters = status.counters
-    reasons: list[tuple[int, str]] = []
-    if not status.has_temperature:
-        if counters.imu_total:
-            reasons.append((ERROR, 'no temperature received: gyro passed through uncorrected'))
-        else:
-            reasons.append((WARN, 'waiting for gyro and temperature messages'))
-    else:
-        if status.temperature_stale:
-            reasons.append((WARN, 'temperature stale: ' + _stale_action(counters, previous)))
-        if not status.estimator_ready:
-            reasons.append((WARN, 'Tdot filter warming up'))
-        if status.temperature_clamped:
-            reasons.append((WARN, 'temperature outside calibrated range, clamped'))
-        elif status.temperature_out_of_range:
-            reasons.append((WARN, 'temperature outside calibrated range, extrapolating'))
-        if status.tdot_clamped:
-            reasons.append((WARN, 'Tdot outside calibrated range, clamped'))
-        elif status.tdot_out_of_range:
-            reasons.append((WARN, 'Tdot outside calibrated range, extrapolating the linear terms'))
+    reasons = _temperature_reasons(status, previous)
     for name, text in _WARN_COUNTERS.items():
         delta = getattr(counters, name) - getattr(previous, name)
         if delta > 0:
@@ -92,35 +74,15 @@ def build_report(
         )
     level = max((lvl for lvl, _ in reasons), default=OK)
     message = '; '.join(text for _, text in reasons) or 'compensating'
-    values = [
-        ('temperature_degC', _num(status.temperature_degC)),
-        ('tdot_degC_per_min', _num(status.tdot_degC_per_min)),
-        ('tdot_raw_degC_per_min', _num(status.tdot_raw_degC_per_min)),
-        ('temperature_used_degC', _num(status.temperature_used_degC)),
-        ('tdot_used_degC_per_min', _num(status.tdot_used_degC_per_min)),
-    ]
-    values += [
-        (f'correction_{axis}_deg_h', _num(float(status.correction_deg_h[j])))
-        for j, axis in enumerate(AXES)
-    ]
-    model = coefficients.model
+    values = _estimate_values(status)
     values += [
         ('imu_rate_hz', _num(imu_rate_hz)),
         ('temperature_rate_hz', _num(temperature_rate_hz)),
         ('denoise', method),
         ('filter_ready', str(status.estimator_ready)),
-        (
-            'calibrated_temperature_degC',
-            f'[{model.temperature_range_degC.low:.3f}, {model.temperature_range_degC.high:.3f}]',
-        ),
-        (
-            'calibrated_tdot_degC_per_min',
-            f'[{model.tdot_range_degC_per_min.low:.4f}, {model.tdot_range_degC_per_min.high:.4f}]',
-        ),
-        ('coefficients_file', coefficients_file),
-        ('coefficients_frame_id', coefficients.frame_id),
-        ('coefficients_created_utc', str(coefficients.provenance.get('created_utc', ''))),
-        ('coefficients_bags', ', '.join(map(str, coefficients.provenance.get('bags', [])))),
+    ]
+    values += _coefficients_values(coefficients, coefficients_file)
+    values += [
         ('frame_id_mismatches', str(frame_mismatches)),
         ('temperature_unstamped', str(unstamped)),
     ]
@@ -133,6 +95,62 @@ def build_report(
             ('rest_bias_file_state', rest_bias_file[1]),
         ]
     return Report(level, message, values)
+
+
+def _temperature_reasons(
+    status: CompensatorStatus, previous: CompensatorCounters
+) -> list[tuple[int, str]]:
+    """(level, text) of the temperature input: missing, stale, warming up, out of range."""
+    counters = status.counters
+    reasons: list[tuple[int, str]] = []
+    if not status.has_temperature:
+        if counters.imu_total:
+            reasons.append((ERROR, 'no temperature received: gyro passed through uncorrected'))
+        else:
+            reasons.append((WARN, 'waiting for gyro and temperature messages'))
+        return reasons
+    if status.temperature_stale:
+        reasons.append((WARN, 'temperature stale: ' + _stale_action(counters, previous)))
+    if not status.estimator_ready:
+        reasons.append((WARN, 'Tdot filter warming up'))
+    if status.temperature_clamped:
+        reasons.append((WARN, 'temperature outside calibrated range, clamped'))
+    elif status.temperature_out_of_range:
+        reasons.append((WARN, 'temperature outside calibrated range, extrapolating'))
+    if status.tdot_clamped:
+        reasons.append((WARN, 'Tdot outside calibrated range, clamped'))
+    elif status.tdot_out_of_range:
+        reasons.append((WARN, 'Tdot outside calibrated range, extrapolating the linear terms'))
+    return reasons
+
+
+def _estimate_values(status: CompensatorStatus) -> list[tuple[str, str]]:
+    """Temperature (degC), Tdot (degC/min) as estimated and as used, correction (deg/h)."""
+    values = [
+        ('temperature_degC', _num(status.temperature_degC)),
+        ('tdot_degC_per_min', _num(status.tdot_degC_per_min)),
+        ('tdot_raw_degC_per_min', _num(status.tdot_raw_degC_per_min)),
+        ('temperature_used_degC', _num(status.temperature_used_degC)),
+        ('tdot_used_degC_per_min', _num(status.tdot_used_degC_per_min)),
+    ]
+    return values + [
+        (f'correction_{axis}_deg_h', _num(float(status.correction_deg_h[j])))
+        for j, axis in enumerate(AXES)
+    ]
+
+
+def _coefficients_values(coefficients: Coefficients, path: str) -> list[tuple[str, str]]:
+    """The loaded coefficients: calibrated ranges (degC, degC/min), file, frame, provenance."""
+    model = coefficients.model
+    t_range, tdot_range = model.temperature_range_degC, model.tdot_range_degC_per_min
+    return [
+        ('calibrated_temperature_degC', f'[{t_range.low:.3f}, {t_range.high:.3f}]'),
+        ('calibrated_tdot_degC_per_min', f'[{tdot_range.low:.4f}, {tdot_range.high:.4f}]'),
+        ('coefficients_file', path),
+        ('coefficients_frame_id', coefficients.frame_id),
+        ('coefficients_created_utc', str(coefficients.provenance.get('created_utc', ''))),
+        ('coefficients_bags', ', '.join(map(str, coefficients.provenance.get('bags', [])))),
+    ]
 
 
 def _rest_values(rest: RestStatus) -> list[tuple[str, str]]:
