@@ -539,39 +539,7 @@ class CompensatorShell(_NodeBase):
                 'path, or package://<pkg>/<path in its share directory>; setting it reloads'
             ),
         )
-        for name, (_, ptype, text) in FILTER_PARAMETERS.items():
-            descriptor = ParameterDescriptor(
-                description=text + '; unset = as in the coefficients file; changing it '
-                'restarts the Tdot filter'
-            )
-            if ptype == _T.DOUBLE:
-                descriptor.floating_point_range = [
-                    FloatingPointRange(from_value=0.0, to_value=3600.0, step=0.0)
-                ]
-            if ptype == _T.INTEGER:
-                descriptor.integer_range = [IntegerRange(from_value=0, to_value=1 << 20, step=1)]
-            self._declare(name, ptype, descriptor)
-        for name, (default, text) in GUARD_PARAMETERS.items():
-            descriptor = ParameterDescriptor(description=text)
-            if isinstance(default, float):
-                descriptor.floating_point_range = [
-                    FloatingPointRange(from_value=0.001, to_value=1e6, step=0.0)
-                ]
-            self._declare(name, default, descriptor)
-        for name, (_, default, text) in REST_PARAMETERS.items():
-            descriptor = ParameterDescriptor(description=text, read_only=True)
-            if isinstance(default, float):
-                descriptor.floating_point_range = [
-                    FloatingPointRange(from_value=1e-6, to_value=1e6, step=0.0)
-                ]
-            self._declare(name, default, descriptor)
-        for name, (default, text) in REST_EARTH_PARAMETERS.items():
-            descriptor = ParameterDescriptor(description=text, read_only=True)
-            if name == 'rest_latitude_deg':
-                descriptor.floating_point_range = [
-                    FloatingPointRange(from_value=-90.0, to_value=90.0, step=0.0)
-                ]
-            self._declare(name, default, descriptor)
+        self._declare_table_parameters()
         self._declare(
             'require_frame_id_match',
             False,
@@ -619,6 +587,42 @@ class CompensatorShell(_NodeBase):
                 floating_point_range=[FloatingPointRange(from_value=0.01, to_value=3600.0)],
             ),
         )
+
+    def _declare_table_parameters(self) -> None:
+        """The Tdot filter, guard and rest-learning parameters, from their tables."""
+        for name, (_, ptype, text) in FILTER_PARAMETERS.items():
+            descriptor = ParameterDescriptor(
+                description=text + '; unset = as in the coefficients file; changing it '
+                'restarts the Tdot filter'
+            )
+            if ptype == _T.DOUBLE:
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=0.0, to_value=3600.0, step=0.0)
+                ]
+            if ptype == _T.INTEGER:
+                descriptor.integer_range = [IntegerRange(from_value=0, to_value=1 << 20, step=1)]
+            self._declare(name, ptype, descriptor)
+        for name, (default, text) in GUARD_PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=text)
+            if isinstance(default, float):
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=0.001, to_value=1e6, step=0.0)
+                ]
+            self._declare(name, default, descriptor)
+        for name, (_, default, text) in REST_PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=text, read_only=True)
+            if isinstance(default, float):
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=1e-6, to_value=1e6, step=0.0)
+                ]
+            self._declare(name, default, descriptor)
+        for name, (default, text) in REST_EARTH_PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=text, read_only=True)
+            if name == 'rest_latitude_deg':
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=-90.0, to_value=90.0, step=0.0)
+                ]
+            self._declare(name, default, descriptor)
 
     def _declare(self, name: str, value: Any, descriptor: ParameterDescriptor) -> None:
         """Declare one parameter; a bad override raises a one-line :class:`ParameterError`."""

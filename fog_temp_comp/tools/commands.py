@@ -45,7 +45,7 @@ from fog_temp_comp.tools.atomic import AtomicOutputs
 from fog_temp_comp.tools.excitation import identifiable_terms
 
 if TYPE_CHECKING:
-    from fog_temp_comp.tools.simulate import SimulationConfig
+    from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig
 
 #: errors that end a command with one ``ERROR:`` line and exit code 1
 USER_ERRORS = (BagError, CalibrationError, CoefficientsError, FileExistsError, ValueError)
@@ -130,26 +130,7 @@ def simulate_command(
     base = REALISTIC if realistic else SimulationConfig()
     cfg = config or dataclasses.replace(base, imu_hz=imu_hz, temp_hz=temp_hz, **(vehicle or {}))
     out_dir.mkdir(parents=True, exist_ok=True)
-    manifest: dict[str, Any] = {
-        'description': 'synthetic thermal-chamber runs (fog_temp_comp simulate)',
-        'format': fmt,
-        'imu_hz': cfg.imu_hz,
-        'temp_hz': cfg.temp_hz,
-        'seed': seed,
-        'true_coefficients': {
-            axis: {
-                coefficient_key(term): float(cfg.true_coefficients[i, j])
-                for i, term in enumerate(cfg.terms)
-            }
-            for j, axis in enumerate(AXES)
-        },
-        'coil_lag_s': float(cfg.coil_lag_s),
-        'turn_on_shift_deg_h': dict(zip(AXES, map(float, cfg.turn_on_shift_deg_h), strict=True)),
-        'motion_period_s': float(cfg.motion_period_s),
-        'motion_fraction': float(cfg.motion_fraction),
-        'motion_rate_deg_s': float(cfg.motion_rate_deg_s),
-        'runs': [],
-    }
+    manifest = _simulation_manifest(cfg, fmt, seed)
     with AtomicOutputs() as outputs:  # all files appear at the end, or none
         for k, (kind, setpoint) in enumerate(runs or paper_plan()):
             run = simulate_run(kind, setpoint, cfg, seed=seed * 1000 + k)
@@ -164,19 +145,7 @@ def simulate_command(
                 compress=compress,
             )
             truth = out_dir / f'{run.name}.truth.npz'
-            np.savez_compressed(
-                outputs.path(truth),
-                imu_stamps_s=run.imu_stamps_s,
-                true_drift_deg_h=run.true_drift_deg_h,
-                true_temperature_degC=run.true_temperature_degC,
-                true_tdot_degC_per_min=run.true_tdot_degC_per_min,
-                turn_on_shift_deg_h=run.turn_on_shift_deg_h,
-                true_rotation_rad_s=(
-                    np.zeros_like(run.rates_rad_s)
-                    if run.true_rotation_rad_s is None
-                    else run.true_rotation_rad_s
-                ),
-            )
+            _save_truth(outputs.path(truth), run)
             unit = 'degC_per_min' if kind == 'cycle' else 'degC'
             manifest['runs'].append(
                 {
@@ -196,6 +165,47 @@ def simulate_command(
         manifest_path = outputs.path(out_dir / 'manifest.yaml', replace=True)
         manifest_path.write_text(yaml.safe_dump(manifest, sort_keys=False))
     return 0
+
+
+def _simulation_manifest(cfg: SimulationConfig, fmt: str, seed: int) -> dict[str, Any]:
+    """The manifest of a simulation: rates (Hz), the true coefficients and vehicle; no runs yet."""
+    return {
+        'description': 'synthetic thermal-chamber runs (fog_temp_comp simulate)',
+        'format': fmt,
+        'imu_hz': cfg.imu_hz,
+        'temp_hz': cfg.temp_hz,
+        'seed': seed,
+        'true_coefficients': {
+            axis: {
+                coefficient_key(term): float(cfg.true_coefficients[i, j])
+                for i, term in enumerate(cfg.terms)
+            }
+            for j, axis in enumerate(AXES)
+        },
+        'coil_lag_s': float(cfg.coil_lag_s),
+        'turn_on_shift_deg_h': dict(zip(AXES, map(float, cfg.turn_on_shift_deg_h), strict=True)),
+        'motion_period_s': float(cfg.motion_period_s),
+        'motion_fraction': float(cfg.motion_fraction),
+        'motion_rate_deg_s': float(cfg.motion_rate_deg_s),
+        'runs': [],
+    }
+
+
+def _save_truth(path: Path, run: SimulatedRun) -> None:
+    """A run's truth (the oracle's inputs) as ``.npz``: drift deg/h, T degC, Tdot degC/min."""
+    np.savez_compressed(
+        path,
+        imu_stamps_s=run.imu_stamps_s,
+        true_drift_deg_h=run.true_drift_deg_h,
+        true_temperature_degC=run.true_temperature_degC,
+        true_tdot_degC_per_min=run.true_tdot_degC_per_min,
+        turn_on_shift_deg_h=run.turn_on_shift_deg_h,
+        true_rotation_rad_s=(
+            np.zeros_like(run.rates_rad_s)
+            if run.true_rotation_rad_s is None
+            else run.true_rotation_rad_s
+        ),
+    )
 
 
 @dataclass(frozen=True)
