@@ -353,6 +353,65 @@ def simulate_run(
     cfg = cfg or SimulationConfig()
     rng = np.random.default_rng(seed)
     extra_rng = np.random.default_rng((seed, 1))
+    duration, t_grid, coil_t, coil_tdot, sensor_t = _thermal_path(
+        kind, setpoint, cfg, rng, extra_rng
+    )
+    n_imu = int(np.floor(duration * cfg.imu_hz))
+    t_imu = np.arange(n_imu) / cfg.imu_hz
+    true_t = np.interp(t_imu, t_grid, coil_t)
+    true_tdot = np.interp(t_imu, t_grid, coil_tdot)
+    drift = true_model(cfg).drift_deg_h(true_t, true_tdot)  # (N, 3) deg/h
+
+    sigma_white = cfg.arw_10s_deg_h * np.sqrt(10.0 * cfg.imu_hz)  # per-sample std, deg/h
+    white = rng.normal(0.0, sigma_white, size=(n_imu, 3))
+    bias = _gauss_markov(
+        rng, n_imu, 1.0 / cfg.imu_hz, cfg.bias_instability_deg_h, cfg.bias_correlation_s
+    )
+    rates = drift + white + bias
+    if cfg.bias_random_walk_deg_h_per_sqrt_h > 0 and n_imu:
+        step = cfg.bias_random_walk_deg_h_per_sqrt_h * np.sqrt(1.0 / cfg.imu_hz / S_PER_H)
+        rates = rates + np.cumsum(extra_rng.normal(0.0, step, size=(n_imu, 3)), axis=0)
+    shift = np.array(cfg.turn_on_shift_deg_h)
+    if np.any(shift):
+        rates = rates + shift
+    rates = rates * RAD_S_PER_DEG_H
+    rotation = _vehicle_rotation(cfg, t_imu)
+    if rotation is not None:
+        rates = rates + rotation
+
+    n_temp = int(np.floor(duration * cfg.temp_hz))
+    t_temp = np.arange(n_temp) / cfg.temp_hz
+    temp = np.interp(t_temp, t_grid, sensor_t) + rng.normal(0.0, cfg.temp_noise_degC, n_temp)
+    if cfg.temp_quantum_degC > 0:
+        temp = np.round(temp / cfg.temp_quantum_degC) * cfg.temp_quantum_degC
+    return SimulatedRun(
+        name=run_name(kind, setpoint),
+        kind=kind,
+        setpoint=float(setpoint),
+        imu_stamps_s=cfg.start_stamp_s + t_imu,
+        rates_rad_s=rates,
+        temp_stamps_s=cfg.start_stamp_s + t_temp,
+        temperature_degC=temp,
+        true_temperature_degC=true_t,
+        true_tdot_degC_per_min=true_tdot,
+        true_drift_deg_h=drift,
+        turn_on_shift_deg_h=shift,
+        true_rotation_rad_s=rotation,
+    )
+
+
+def _thermal_path(
+    kind: str,
+    setpoint: float,
+    cfg: SimulationConfig,
+    rng: np.random.Generator,
+    extra_rng: np.random.Generator,
+) -> tuple[float, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Chamber air to housing to coil to sensor, on a 1 s grid.
+
+    Returns the run's duration (s), the grid (s), the coil's temperature (degC) and Tdot (as
+    :func:`first_order_lag` gives it, degC/min) and what the sensor reads (degC), noise-free.
+    """
     bp_t, bp_x = chamber_profile(kind, setpoint, cfg)
     duration = float(bp_t[-1])
     # 1 s simulation grid for the thermal lags (exact first-order discretisation)
@@ -379,54 +438,20 @@ def simulate_run(
         first_order_lag(coil_t, dt, cfg.sensor_lag_s)[0] if cfg.sensor_lag_s > 0 else (housing_t)
     )
 
-    n_imu = int(np.floor(duration * cfg.imu_hz))
-    t_imu = np.arange(n_imu) / cfg.imu_hz
-    true_t = np.interp(t_imu, t_grid, coil_t)
-    true_tdot = np.interp(t_imu, t_grid, coil_tdot)
-    drift = true_model(cfg).drift_deg_h(true_t, true_tdot)  # (N, 3) deg/h
+    return duration, t_grid, coil_t, coil_tdot, sensor_t
 
-    sigma_white = cfg.arw_10s_deg_h * np.sqrt(10.0 * cfg.imu_hz)  # per-sample std, deg/h
-    white = rng.normal(0.0, sigma_white, size=(n_imu, 3))
-    bias = _gauss_markov(
-        rng, n_imu, 1.0 / cfg.imu_hz, cfg.bias_instability_deg_h, cfg.bias_correlation_s
-    )
-    rates = drift + white + bias
-    if cfg.bias_random_walk_deg_h_per_sqrt_h > 0 and n_imu:
-        step = cfg.bias_random_walk_deg_h_per_sqrt_h * np.sqrt(1.0 / cfg.imu_hz / S_PER_H)
-        rates = rates + np.cumsum(extra_rng.normal(0.0, step, size=(n_imu, 3)), axis=0)
-    shift = np.array(cfg.turn_on_shift_deg_h)
-    if np.any(shift):
-        rates = rates + shift
-    rates = rates * RAD_S_PER_DEG_H
-    rotation = None
-    if cfg.motion_period_s > 0 and cfg.motion_fraction > 0:
-        phase_s = np.mod(t_imu, cfg.motion_period_s)
-        moving = phase_s >= (1.0 - cfg.motion_fraction) * cfg.motion_period_s
-        amplitude = np.radians(cfg.motion_rate_deg_s)
-        rotation = np.zeros((n_imu, 3))
-        for j in range(3):  # 0.5 Hz shaking, a different phase per axis
-            rotation[moving, j] = amplitude * np.sin(2 * np.pi * 0.5 * t_imu[moving] + j)
-        rates = rates + rotation
 
-    n_temp = int(np.floor(duration * cfg.temp_hz))
-    t_temp = np.arange(n_temp) / cfg.temp_hz
-    temp = np.interp(t_temp, t_grid, sensor_t) + rng.normal(0.0, cfg.temp_noise_degC, n_temp)
-    if cfg.temp_quantum_degC > 0:
-        temp = np.round(temp / cfg.temp_quantum_degC) * cfg.temp_quantum_degC
-    return SimulatedRun(
-        name=run_name(kind, setpoint),
-        kind=kind,
-        setpoint=float(setpoint),
-        imu_stamps_s=cfg.start_stamp_s + t_imu,
-        rates_rad_s=rates,
-        temp_stamps_s=cfg.start_stamp_s + t_temp,
-        temperature_degC=temp,
-        true_temperature_degC=true_t,
-        true_tdot_degC_per_min=true_tdot,
-        true_drift_deg_h=drift,
-        turn_on_shift_deg_h=shift,
-        true_rotation_rad_s=rotation,
-    )
+def _vehicle_rotation(cfg: SimulationConfig, t_imu: FloatArray) -> FloatArray | None:
+    """The vehicle's true rotation, rad/s (N, 3): 0.5 Hz shaking in the moving phases."""
+    if not (cfg.motion_period_s > 0 and cfg.motion_fraction > 0):
+        return None
+    phase_s = np.mod(t_imu, cfg.motion_period_s)
+    moving = phase_s >= (1.0 - cfg.motion_fraction) * cfg.motion_period_s
+    amplitude = np.radians(cfg.motion_rate_deg_s)
+    rotation = np.zeros((t_imu.size, 3))
+    for j in range(3):  # a different phase per axis
+        rotation[moving, j] = amplitude * np.sin(2 * np.pi * 0.5 * t_imu[moving] + j)
+    return rotation
 
 
 def simulate_plan(
