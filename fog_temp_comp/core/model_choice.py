@@ -763,12 +763,32 @@ def _choose_and_calibrate(
             for r, s in zip(heldout, _series(heldout, base, walk), strict=True)
         ],
     )
+    selection = _selection(scores, chosen, mode, tolerance, noise)
+    result = calibrate_detailed(
+        records,
+        chosen.structure.settings(base),
+        terms=chosen.structure.terms,
+        fit=chosen.structure.fit,
+        hac_lag=hac_lag,
+        provenance={**(provenance or {}), 'selection': selection},
+    )
+    return result, scores, chosen
+
+
+def _selection(
+    scores: Sequence[StructureScore],
+    chosen: StructureScore,
+    mode: str,
+    tolerance: float,
+    noise: SensorNoise,
+) -> dict[str, Any]:
+    """The YAML's ``selection`` record: the choice, how it was scored, the best per model."""
     best_per_model: dict[str, StructureScore] = {}
     for s in scores:
         key = s.structure.model
         if key not in best_per_model or s.criterion < best_per_model[key].criterion:
             best_per_model[key] = s
-    selection = {
+    return {
         'chosen': chosen.structure.name,
         'mode': mode,
         'tolerance': tolerance,
@@ -790,15 +810,6 @@ def _choose_and_calibrate(
         'candidates': len(scores),
         'fit': chosen.structure.fit,
     }
-    result = calibrate_detailed(
-        records,
-        chosen.structure.settings(base),
-        terms=chosen.structure.terms,
-        fit=chosen.structure.fit,
-        hac_lag=hac_lag,
-        provenance={**(provenance or {}), 'selection': selection},
-    )
-    return result, scores, chosen
 
 
 def format_scores(scores: Sequence[StructureScore], chosen: StructureScore) -> str:
