@@ -430,29 +430,7 @@ def calibrate_with_prior(
         )
     weight, scores = choose_weight(table, prior, weights)
     covered, warnings = coverage(table, prior)
-    a = table.design(prior.terms)
-    fits = []
-    for j, axis in enumerate(AXES):
-        y = table.rate_deg_h[:, j]
-        b, cov, _, factor = _fit_axis(a, y, prior.mean[:, j], prior.covariance[j], weight)
-        resid = y - a @ b
-        sst = float(np.sum((y - y.mean()) ** 2))
-        sd = np.sqrt(np.diag(cov))
-        fits.append(
-            AxisFitStats(
-                axis=axis,
-                names=prior.terms,
-                coefficients=b,
-                se_classical=sd / math.sqrt(factor),
-                se_hac=sd,
-                hac_lag=0,
-                r_squared=1 - float(resid @ resid) / sst if sst > 0 else math.nan,
-                residual_std=float(np.std(resid, ddof=1)),
-                condition_number=condition_number(a),
-                n_samples=int(y.size),
-                residuals=resid,
-            )
-        )
+    fits = _posterior_fits(table, prior, weight)
     summary = fit_summary(fits)
     for f in fits:
         summary[f.axis]['standard_error_method'] = (
@@ -485,6 +463,34 @@ def calibrate_with_prior(
         },
     )
     return CalibrationResult(coefficients, table, fits, warnings)
+
+
+def _posterior_fits(table: GridTable, prior: FleetPrior, weight: float) -> list[AxisFitStats]:
+    """Per axis: the Bayesian fit toward the prior (``weight``), posterior std as the errors."""
+    a = table.design(prior.terms)
+    fits = []
+    for j, axis in enumerate(AXES):
+        y = table.rate_deg_h[:, j]
+        b, cov, _, factor = _fit_axis(a, y, prior.mean[:, j], prior.covariance[j], weight)
+        resid = y - a @ b
+        sst = float(np.sum((y - y.mean()) ** 2))
+        sd = np.sqrt(np.diag(cov))
+        fits.append(
+            AxisFitStats(
+                axis=axis,
+                names=prior.terms,
+                coefficients=b,
+                se_classical=sd / math.sqrt(factor),
+                se_hac=sd,
+                hac_lag=0,
+                r_squared=1 - float(resid @ resid) / sst if sst > 0 else math.nan,
+                residual_std=float(np.std(resid, ddof=1)),
+                condition_number=condition_number(a),
+                n_samples=int(y.size),
+                residuals=resid,
+            )
+        )
+    return fits
 
 
 def coverage(table: GridTable, prior: FleetPrior) -> tuple[dict[str, Any], list[str]]:
