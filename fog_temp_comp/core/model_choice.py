@@ -509,7 +509,7 @@ def cross_validate(
     # the series through each coil lag, and the grid tables and folds of each estimator
     # setting, are shared by the structures that differ only in their terms or fit
     lagged: dict[tuple[float, float], tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
-    folds_cache: dict[tuple[float, float, float, float], list[Any]] = {}
+    folds_cache: dict[tuple[float, float, float, float], tuple[GridTable, list[_Fold]]] = {}
     thresholds: dict[tuple[float, float], tuple[float, float]] = {}
     identifiable: dict[tuple[Any, ...], CalibrationError | None] = {}
     scores = []
@@ -544,27 +544,16 @@ def cross_validate(
                         [s.lagged(coil) for s in test_series],
                     )
                 train_lagged, test_lagged = lagged[structure.walk, coil]
-                tables = [
-                    table_of(r, s.shaped(shrink, lag), period)
-                    for r, s in zip(records, train_lagged, strict=True)
-                ]
-                tests = [
-                    table_of(r, s.shaped(shrink, lag), period)
-                    for r, s in zip(heldout, test_lagged, strict=True)
-                ]
-                folds = [_Fold(train, parts, period) for train, parts in _parts(tables, tests)]
-                folds_cache[key] = [GridTable.concatenate(tables), folds]
+                folds_cache[key] = _folds(
+                    records, heldout, train_lagged, test_lagged, shrink, lag, period
+                )
             whole, folds = folds_cache[key]
             # a structure the final fit would refuse (e.g. a coil lag so long that the lagged
             # temperature no longer swings) is not a candidate; the check reads T and Tdot
             # only, which the Tdot lag does not change
             checked = (structure.walk, shrink, coil, tuple(structure.terms))
             if checked not in identifiable:
-                try:
-                    check_identifiable(whole, structure.terms)
-                    identifiable[checked] = None
-                except CalibrationError as err:
-                    identifiable[checked] = err
+                identifiable[checked] = _refusal(whole, structure.terms)
             refused = identifiable[checked]
             if refused is not None:
                 raise refused
@@ -572,6 +561,37 @@ def cross_validate(
         except CalibrationError as err:
             result.error = str(err)
     return scores
+
+
+def _folds(
+    records: Sequence[ChamberRecord],
+    heldout: Sequence[ChamberRecord],
+    train_series: Sequence[EstimateSeries],
+    test_series: Sequence[EstimateSeries],
+    shrink_sigmas: float,
+    tdot_lag_s: float,
+    period_s: float,
+) -> tuple[GridTable, list[_Fold]]:
+    """The training rows of one estimator setting (shrinkage, Tdot lag in s), and its folds."""
+    tables = [
+        table_of(r, s.shaped(shrink_sigmas, tdot_lag_s), period_s)
+        for r, s in zip(records, train_series, strict=True)
+    ]
+    tests = [
+        table_of(r, s.shaped(shrink_sigmas, tdot_lag_s), period_s)
+        for r, s in zip(heldout, test_series, strict=True)
+    ]
+    folds = [_Fold(train, parts, period_s) for train, parts in _parts(tables, tests)]
+    return GridTable.concatenate(tables), folds
+
+
+def _refusal(table: GridTable, terms: Sequence[str]) -> CalibrationError | None:
+    """Why the final fit would refuse ``terms`` on these rows (None: it would not)."""
+    try:
+        check_identifiable(table, terms)
+    except CalibrationError as err:
+        return err
+    return None
 
 
 def choose(scores: Sequence[StructureScore], tolerance: float = TOLERANCE) -> StructureScore:
