@@ -399,18 +399,27 @@ def _coefficients(
         Range(float(table.temperature_degC.min()), float(table.temperature_degC.max())),
         Range(float(table.tdot_degC_per_min.min()), float(table.tdot_degC_per_min.max())),
     )
-    frame_ids = sorted({r.frame_id for r in records})
     return Coefficients(
         model=model,
         denoise=settings,
-        frame_id=frame_ids[0] if len(frame_ids) == 1 else '',
+        frame_id=common_frame_id(records),
         fit={**fit_summary(fits), **({'warnings': warnings} if warnings else {})},
-        provenance={
-            'bags': [str(r.path) for r in records],
-            'gyro_topics': sorted({r.imu_topic for r in records}),
-            'temperature_topics': sorted({r.temp_topic for r in records}),
-            'created_utc': dt.datetime.now(dt.UTC).strftime('%Y-%m-%dT%H:%M:%SZ'),
-            'package_version': __version__,
-            **provenance,
-        },
+        provenance={**records_provenance(records), **provenance},
     )
+
+
+def common_frame_id(records: Sequence[ChamberRecord]) -> str:
+    """The gyro frame_id of all the records ('' when they differ)."""
+    frame_ids = sorted({r.frame_id for r in records})
+    return frame_ids[0] if len(frame_ids) == 1 else ''
+
+
+def records_provenance(records: Sequence[ChamberRecord]) -> dict[str, Any]:
+    """Where a calibration's data came from: bags, topics, creation time (UTC), version."""
+    return {
+        'bags': [str(r.path) for r in records],
+        'gyro_topics': sorted({r.imu_topic for r in records}),
+        'temperature_topics': sorted({r.temp_topic for r in records}),
+        'created_utc': dt.datetime.now(dt.UTC).strftime('%Y-%m-%dT%H:%M:%SZ'),
+        'package_version': __version__,
+    }

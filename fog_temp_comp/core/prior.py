@@ -28,7 +28,13 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from fog_temp_comp.core.calibration import CalibrationError, CalibrationResult, GridTable
+from fog_temp_comp.core.calibration import (
+    CalibrationError,
+    CalibrationResult,
+    GridTable,
+    common_frame_id,
+    records_provenance,
+)
 from fog_temp_comp.core.calibration import grid_table as _grid_table
 from fog_temp_comp.core.coefficients import Coefficients
 from fog_temp_comp.core.denoise import DenoiseSettings
@@ -442,12 +448,11 @@ def calibrate_with_prior(
         _union(table.temperature_degC, prior.temperature_range_degC),
         _union(table.tdot_degC_per_min, prior.tdot_range_degC_per_min),
     )
-    frame_ids = sorted({r.frame_id for r in records})
-    base = _base_provenance(records)
+    base = records_provenance(records)
     coefficients = Coefficients(
         model=model,
         denoise=prior.settings,
-        frame_id=frame_ids[0] if len(frame_ids) == 1 else '',
+        frame_id=common_frame_id(records),
         fit=summary,
         provenance={
             **base,
@@ -529,20 +534,6 @@ def _union(values: FloatArray, fleet: Range | None) -> Range:
     if fleet is None:
         return Range(low, high)
     return Range(min(low, fleet.low), max(high, fleet.high))
-
-
-def _base_provenance(records: Sequence[ChamberRecord]) -> dict[str, Any]:
-    import datetime as dt
-
-    from fog_temp_comp import __version__
-
-    return {
-        'bags': [str(r.path) for r in records],
-        'gyro_topics': sorted({r.imu_topic for r in records}),
-        'temperature_topics': sorted({r.temp_topic for r in records}),
-        'created_utc': dt.datetime.now(dt.UTC).strftime('%Y-%m-%dT%H:%M:%SZ'),
-        'package_version': __version__,
-    }
 
 
 def format_prior_fit(result: CalibrationResult) -> str:
