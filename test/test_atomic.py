@@ -105,7 +105,13 @@ def test_compensate_interrupted_while_writing_leaves_no_bag(
     out = tmp_path / 'out'
     argv = ['compensate', str(inputs['long']), '--coeffs', str(inputs['coeffs']), '-o', str(out)]
     trial = interrupt(argv, [out], signum=signum, wait_for='.out.partial-*/out/*')
-    assert trial.returncode == code, trial.stderr
+    # 130/143, or, for SIGINT, ended by the signal itself after the message: CPython re-raises
+    # SIGINT at exit once a KeyboardInterrupt has left an exec()/eval() of a string (a dataclass
+    # or message class being built when Ctrl-C lands), even if the CLI caught it later; the
+    # shell shows both as 130 (about 1 run in 10 here)
+    assert trial.returncode in (code, -signal.SIGINT if signum == signal.SIGINT else code), (
+        trial.stderr
+    )
     assert trial.leftovers == ()
     assert f'interrupted: nothing written to {out}' in trial.stderr
     assert 'Traceback' not in trial.stderr
