@@ -28,7 +28,8 @@ from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, State, Transition
 from rclpy.publisher import Publisher
 
 from fog_temp_comp.core.coefficients import CoefficientsError
-from fog_temp_comp.ros.node import CompensatorShell, run
+from fog_temp_comp.ros.compensator_shell import CompensatorShell
+from fog_temp_comp.ros.spin import run
 
 
 class CompensatorLifecycleNode(CompensatorShell, LifecycleNode):

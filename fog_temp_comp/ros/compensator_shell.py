@@ -1,0 +1,282 @@
+"""The ROS glue shared by the ``compensator`` node and its lifecycle twin (CompensatorShell).
+
+Subscriptions and publishers around one :class:`~fog_temp_comp.core.compensator.Compensator`:
+messages become floats (stamps in s, rates in rad/s, temperature in degC) and the corrected rates
+go back into the Imu; parameter changes rebuild the compensator; ``/diagnostics`` is published on
+a timer. Parameters, the learned-bias file and the console lines are its mixins'
+(:mod:`~fog_temp_comp.ros.node_parameters`, :mod:`~fog_temp_comp.ros.bias_learning`,
+:mod:`~fog_temp_comp.ros.console_log`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from sensor_msgs.msg import Imu, Temperature
+from std_msgs.msg import Bool
+from std_srvs.srv import Trigger
+
+from fog_temp_comp.core.coefficients import CoefficientsError
+from fog_temp_comp.core.compensator import Compensator
+from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
+from fog_temp_comp.ros.bias_learning import BiasLearningMixin
+from fog_temp_comp.ros.console_log import ConsoleLogMixin
+from fog_temp_comp.ros.diagnostics import build_report
+from fog_temp_comp.ros.node_parameters import FILTER_PARAMETERS, GUARD_PARAMETERS
+from fog_temp_comp.ros.params import ParameterError, params_files, unknown_warnings
+from fog_temp_comp.ros.spin import EXECUTORS
+
+__all__ = ['IMU_INPUT_DEPTH', 'IMU_INPUT_QOS', 'CompensatorShell']
+
+#: history depth of the gyro subscription: 50 ms at 2 kHz. A dropped gyro sample is lost to the
+#: attitude integration downstream, so the queue rides out scheduling hiccups (a GC pause, a
+#: busy core) that a depth of 5 (2.5 ms at 2 kHz) cannot; ``benchmarks/bench_node.py``
+IMU_INPUT_DEPTH = 100
+IMU_INPUT_QOS = QoSProfile(
+    history=qos_profile_sensor_data.history,
+    depth=IMU_INPUT_DEPTH,
+    reliability=qos_profile_sensor_data.reliability,
+    durability=qos_profile_sensor_data.durability,
+)
+
+
+class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
+    """The ROS glue shared by :class:`CompensatorNode` and the lifecycle node.
+
+    A mixin for an rclpy ``Node`` (or ``LifecycleNode``): parameters, the subscriptions and
+    publishers around one :class:`Compensator`, console lines and diagnostics. The two nodes
+    differ only in when they call :meth:`_setup_parameters`, :meth:`_configure`,
+    :meth:`_create_io` and :meth:`_destroy_io`.
+    """
+
+    def _setup_parameters(self, params_file_paths: Sequence[str], cli_args: Any) -> None:
+        """Declare and check the parameters (raises :class:`ParameterError` on a bad one)."""
+        self._check_params_files([*params_file_paths, *params_files(cli_args)])
+        self._declare_parameters()
+        executor = self.get_parameter('executor').value
+        if executor not in EXECUTORS:
+            raise ParameterError(
+                f'parameter executor: expected one of {EXECUTORS}, got {executor!r}'
+            )
+        for line in unknown_warnings(self._given_parameters(), self._parameters):
+            self.get_logger().warning(line)
+        self._forget_compensator()
+        self.reconfigurations = 0
+        self.frame_mismatches = 0
+        #: messages with an unset (0) header stamp, timed by the node clock instead
+        self.unstamped = 0
+        self._require_frame_match = bool(self.get_parameter('require_frame_id_match').value)
+        self._inflate_covariance = bool(self.get_parameter('inflate_covariance').value)
+        self._throttle_s = float(self.get_parameter('log_throttle_s').value)
+        self._warm_up_start_s: float | None = None
+        self._last_frame_mismatches = 0
+        #: gyro messages are corrected and published only while this is set (lifecycle: active)
+        self.output_enabled = True
+        #: gyro messages ignored while output_enabled was off
+        self.imu_while_inactive = 0
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    def _configure(self) -> None:
+        """Load and validate the coefficients, build the compensator (raises on bad ones)."""
+        self.config = self._build_config({})
+        self.compensator = Compensator(
+            self.config.coefficients.model,
+            self.config.settings,
+            self.config.guard,
+            self.config.rest,
+        )
+        self._warm_up_start_s = None
+        self._load_learned_bias()
+
+    def _create_output(self, *args: Any, **kwargs: Any) -> Publisher:
+        """The publisher of ``imu/data`` (the lifecycle node makes it a lifecycle publisher)."""
+        return self.create_publisher(*args, **kwargs)
+
+    def _destroy_output(self, publisher: Publisher) -> None:
+        self.destroy_publisher(publisher)
+
+    def _create_io(self) -> None:
+        """Subscriptions, publishers and the diagnostics timer.
+
+        ``/diagnostics`` is always a plain publisher, so the health stays visible while a
+        lifecycle node is inactive.
+        """
+        qos_options = QoSOverridingOptions.with_default_policies()
+        self._publisher = self._create_output(
+            Imu, 'imu/data', qos_profile_sensor_data, qos_overriding_options=qos_options
+        )
+        self._imu_sub = self.create_subscription(
+            Imu,
+            'imu/data_raw',
+            self._on_imu,
+            IMU_INPUT_QOS,
+            qos_overriding_options=qos_options,
+        )
+        self._temp_sub = self.create_subscription(
+            Temperature,
+            'imu/temperature',
+            self._on_temperature,
+            qos_profile_sensor_data,
+            qos_overriding_options=qos_options,
+        )
+        self._rest_sub = None
+        self._learn_srv = None
+        if self.config.rest.enabled:
+            self._rest_sub = self.create_subscription(Bool, 'imu/at_rest', self._on_at_rest, 10)
+            self._learn_srv = self.create_service(Trigger, '~/learn_bias_now', self._on_learn_now)
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._last_counters = dataclasses.replace(self.compensator.status.counters)
+        self._last_report_time = time.monotonic()
+        period = self.get_parameter('diagnostics_period_s').value
+        self._diag_timer = self.create_timer(period, self.publish_diagnostics)
+
+    def _destroy_io(self) -> None:
+        """Undo :meth:`_create_io`."""
+        self.destroy_timer(self._diag_timer)
+        self.destroy_subscription(self._imu_sub)
+        self.destroy_subscription(self._temp_sub)
+        self.destroy_publisher(self._diag_pub)
+        if self._rest_sub is not None:
+            self.destroy_subscription(self._rest_sub)
+        if self._learn_srv is not None:
+            self.destroy_service(self._learn_srv)
+        self._destroy_output(self._publisher)
+
+    # ------------------------------------------------------------------ parameter changes
+    def _on_set_parameters(self, params: Sequence[Parameter]) -> SetParametersResult:
+        changes = {p.name: p for p in params}
+        if 'require_frame_id_match' in changes:
+            self._require_frame_match = bool(changes['require_frame_id_match'].value)
+        if 'inflate_covariance' in changes:
+            self._inflate_covariance = bool(changes['inflate_covariance'].value)
+        rebuild = set(changes) & ({'coefficients_file'} | set(FILTER_PARAMETERS))
+        guard_change = set(changes) & set(GUARD_PARAMETERS)
+        if not self.configured:  # lifecycle node not configured: configure checks them
+            return SetParametersResult(successful=True)
+        if not (rebuild or guard_change):
+            return SetParametersResult(successful=True)
+        try:
+            config = self._build_config(changes)
+        except (CoefficientsError, ValueError, TypeError) as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        if rebuild:  # the learned bias belongs to the old coefficients: keep it in the file
+            self.save_learned_bias('reconfigure')
+        self.config = config
+        if rebuild:
+            counters = self.compensator.status.counters
+            self.compensator = Compensator(
+                config.coefficients.model, config.settings, config.guard, config.rest
+            )
+            self.compensator.status.counters = counters
+            self._load_learned_bias()
+            self.reconfigurations += 1
+            self._log_config(f'reconfigured ({", ".join(sorted(rebuild))})')
+        else:
+            self.compensator.guard = config.guard
+        return SetParametersResult(successful=True)
+
+    # ------------------------------------------------------------------ data
+    def _unset_stamp_s(self) -> float:
+        """The node clock's time, s, for a temperature whose driver left the stamp unset (0).
+
+        (An unset gyro stamp goes to the core, which corrects it with the current correction
+        and counts it.)
+        """
+        self.unstamped += 1
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_temperature(self, msg: Temperature) -> None:
+        stamp = msg.header.stamp
+        stamp_s = stamp.sec + stamp.nanosec * 1e-9 or self._unset_stamp_s()
+        was_ready = self.compensator.status.estimator_ready
+        if self.compensator.add_temperature(stamp_s, msg.temperature):
+            self._track_warm_up(stamp_s, was_ready)
+
+    def _on_at_rest(self, msg: Bool) -> None:
+        if self.configured and self.compensator.rest is not None:
+            self.compensator.rest.set_external_rest(msg.data)
+
+    def _on_imu(self, msg: Imu) -> None:
+        if not self.output_enabled:  # inactive lifecycle node: no output, no gyro state
+            self.imu_while_inactive += 1
+            return
+        stamp = msg.header.stamp
+        w = msg.angular_velocity
+        expected_frame = self.config.coefficients.frame_id
+        if expected_frame and msg.header.frame_id != expected_frame:
+            self.frame_mismatches += 1
+            if self._require_frame_match:
+                self._publisher.publish(msg)
+                return
+        compensator = self.compensator
+        stamp_s = stamp.sec + stamp.nanosec * 1e-9  # 0: the core's current correction
+        if compensator.rest is None:
+            rate = compensator.correct_xyz(stamp_s, w.x, w.y, w.z)
+        else:
+            a = msg.linear_acceleration
+            rate = compensator.correct_xyz(stamp_s, w.x, w.y, w.z, (a.x, a.y, a.z))
+        if rate is None:  # duplicate stamp: dropped and counted
+            return
+        w.x, w.y, w.z = rate
+        if self._inflate_covariance:
+            self._inflate(msg)
+        self._publisher.publish(msg)
+
+    def _inflate(self, msg: Imu) -> None:
+        cov = msg.angular_velocity_covariance
+        if cov[0] < 0:  # -1: covariance unknown, leave the convention alone
+            return
+        fit = self.config.coefficients.fit
+        for j, axis in enumerate(AXES):
+            std_deg_h = float(fit.get(axis, {}).get('residual_std_deg_h', 0.0))
+            cov[4 * j] += (std_deg_h * RAD_S_PER_DEG_H) ** 2
+
+    # ------------------------------------------------------------------ diagnostics
+    def publish_diagnostics(self) -> None:
+        """Publish one DiagnosticArray with the compensator's health."""
+        now = time.monotonic()
+        elapsed = max(now - self._last_report_time, 1e-9)
+        counters = self.compensator.status.counters
+        previous = self._last_counters
+        self._check_forced_window()  # first: the report shows the file it may write
+        report = build_report(
+            self.compensator.status,
+            previous,
+            coefficients=self.config.coefficients,
+            coefficients_file=self.config.coefficients_file,
+            method=self.config.settings.method,
+            imu_rate_hz=(counters.imu_total - previous.imu_total) / elapsed,
+            temperature_rate_hz=(counters.temperature_total - previous.temperature_total)
+            / elapsed,
+            frame_mismatches=self.frame_mismatches,
+            unstamped=self.unstamped,
+            require_frame_match=self._require_frame_match,
+            rest=None if self.compensator.rest is None else self.compensator.rest.finish(),
+            rest_bias_file=(
+                (self.config.rest_bias_file, self._rest_bias_state)
+                if self.compensator.rest is not None and self.config.rest_bias_file
+                else None
+            ),
+        )
+        self._log_console(counters, previous)
+        self._last_counters = dataclasses.replace(counters)
+        self._last_report_time = now
+        status = DiagnosticStatus(
+            level=bytes([report.level]),
+            name=f'{self.get_name()}: FOG temperature compensation',
+            message=report.message,
+            hardware_id=self.config.coefficients.frame_id,
+            values=[KeyValue(key=k, value=v) for k, v in report.values],
+        )
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._diag_pub.publish(array)

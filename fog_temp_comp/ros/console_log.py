@@ -1,0 +1,115 @@
+"""Console lines of the compensator node: its configuration, warm-up, and what went wrong.
+
+What went wrong: no temperature, stale temperature, clamped temperature or Tdot, gyro frame_id
+mismatch. Each kind of warning has its own call (rclpy throttles per call site), at most one
+line per ``log_throttle_s`` seconds.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rclpy.subscription import Subscription
+
+from fog_temp_comp.ros.node_parameters import ParametersMixin
+
+
+class ConsoleLogMixin(ParametersMixin):
+    """The console (rclpy logger) lines of :class:`CompensatorShell` (a Node mixin)."""
+
+    _throttle_s: float
+    _temp_sub: Subscription
+    _require_frame_match: bool
+    frame_mismatches: int
+    _last_frame_mismatches: int
+    _warm_up_start_s: float | None
+
+    def _log_config(self, what: str) -> None:
+        cfg = self.config
+        self.get_logger().info(
+            f'{what}: coefficients {cfg.coefficients_file} '
+            f'(frame {cfg.coefficients.frame_id or "any"}), Tdot denoise {cfg.settings.method}'
+        )
+
+    def _track_warm_up(self, stamp_s: float, was_ready: bool) -> None:
+        """INFO once when the Tdot estimator becomes ready: its Tdot terms start to apply."""
+        if not self.compensator.status.estimator_ready:
+            if self._warm_up_start_s is None or was_ready:
+                self._warm_up_start_s = stamp_s
+            return
+        if not was_ready and self._warm_up_start_s is not None:
+            self.get_logger().info(
+                f'Tdot estimator {self.config.settings.method} warmed up after '
+                f'{stamp_s - self._warm_up_start_s:.1f} s of temperature: full correction '
+                'from now on (Tdot terms included)'
+            )
+        self._warm_up_start_s = None
+
+    def _log_console(self, counters: Any, previous: Any) -> None:
+        """Throttled console lines for what went wrong since the last report.
+
+        Each kind has its own call (rclpy throttles per call site), at most one line per
+        ``log_throttle_s``.
+        """
+        status = self.compensator.status
+        log = self.get_logger()
+        every = self._throttle_s
+        topic = self._temp_sub.topic_name
+        uncorrected = counters.imu_uncorrected - previous.imu_uncorrected
+        if uncorrected and not status.has_temperature:
+            log.warning(
+                f'no temperature received on {topic}: gyro passed through uncorrected '
+                f'({uncorrected} messages)',
+                throttle_duration_sec=every,
+            )
+        if counters.temperature_rejected > previous.temperature_rejected:
+            log.warning(
+                f'non-finite temperature on {topic}: samples rejected '
+                f'({counters.temperature_rejected - previous.temperature_rejected})',
+                throttle_duration_sec=every,
+            )
+        guard = self.compensator.guard
+        age_s = status.last_imu_stamp_s - status.last_temperature_stamp_s
+        if counters.imu_held > previous.imu_held:
+            log.warning(
+                f'temperature on {topic} stale: last sample {age_s:.1f} s before the gyro '
+                f'stamp (temperature_timeout_s {guard.temperature_timeout_s:g}): holding the '
+                'last correction',
+                throttle_duration_sec=every,
+            )
+        if uncorrected and status.has_temperature and status.temperature_stale:
+            log.error(
+                f'fallback to pass-through: temperature on {topic} stale, last sample '
+                f'{age_s:.1f} s before the gyro stamp (temperature_timeout_s '
+                f'{guard.temperature_timeout_s:g}, stale_policy none): gyro not corrected',
+                throttle_duration_sec=every,
+            )
+        if self._require_frame_match and self.frame_mismatches > self._last_frame_mismatches:
+            log.error(
+                'fallback to pass-through: gyro frame_id differs from the calibrated '
+                f'{self.config.coefficients.frame_id!r} (require_frame_id_match): '
+                f'{self.frame_mismatches - self._last_frame_mismatches} messages not corrected',
+                throttle_duration_sec=every,
+            )
+        self._last_frame_mismatches = self.frame_mismatches
+        model = self.config.coefficients.model
+        if counters.imu_temperature_clamped > previous.imu_temperature_clamped:
+            t_range = model.temperature_range_degC
+            log.warning(
+                f'temperature {status.temperature_degC:.2f} degC outside the calibrated '
+                f'[{t_range.low:.2f}, {t_range.high:.2f}] degC: clamped to '
+                f'{status.temperature_used_degC:.2f} degC',
+                throttle_duration_sec=every,
+            )
+        if counters.imu_tdot_clamped > previous.imu_tdot_clamped:
+            log.warning(
+                f'Tdot {status.tdot_degC_per_min:.3f} degC/min clamped to '
+                f'{status.tdot_used_degC_per_min:.3f} degC/min ('
+                + (
+                    'clamp_tdot: calibrated range'
+                    if guard.clamp_tdot
+                    else f'tdot_limit_degC_per_min {guard.tdot_limit_degC_per_min:g}'
+                )
+                + ')',
+                throttle_duration_sec=every,
+            )
