@@ -1,0 +1,164 @@
+"""Decoding a read path's raw messages into :class:`~fog_temp_comp.bag.streamchunk.Chunk` arrays.
+
+:class:`_StreamDecoding` is the part of :class:`~fog_temp_comp.bag.stream.BagStream` that every
+read path shares: the stream's settings and state, and the batch decoders of
+:mod:`fog_temp_comp.bag.cdr` applied to (raw messages or spans, log times ns); stamps in s,
+rates in rad/s, temperatures in degC. :func:`get_field` reads a ``--temp-field`` of any message.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fog_temp_comp.bag import cdr
+from fog_temp_comp.bag.bagio import IMU_TYPE, BagError, stamp_to_s
+from fog_temp_comp.bag.progress import Progress
+from fog_temp_comp.bag.salvage import Salvage
+from fog_temp_comp.bag.streamchunk import Chunk
+from fog_temp_comp.bag.unstamped import UnsetStamps
+from fog_temp_comp.core.units import NS_PER_S
+
+__all__ = ['get_field']
+
+
+def get_field(msg: Any, path: str) -> float:
+    """Numeric field ``a.b.c`` of a deserialized message."""
+    value = msg
+    for name in path.split('.'):
+        if not hasattr(value, name):
+            fields = sorted(getattr(value, '__dataclass_fields__', {}))
+            raise BagError(f'--temp-field {path}: no field {name!r} (fields: {fields})')
+        value = getattr(value, name)
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+        raise BagError(f'--temp-field {path}: not a number ({type(value).__name__})')
+    return float(value)
+
+
+def _decoder(conn: Any, is_ros2: bool) -> Any:
+    """Batch decoder of a connection's messages."""
+    imu = conn.msgtype == IMU_TYPE
+    if is_ros2:
+        return cdr.decode_imu_rates_cdr if imu else cdr.decode_temperature_cdr
+    seq = cdr.ros1_header_has_seq(conn.msgdef.data)
+    if imu:
+        return lambda raws: cdr.decode_imu_rates_ros1(raws, header_seq=seq)
+    return lambda raws: cdr.decode_temperature_ros1(raws, header_seq=seq)
+
+
+class _StreamDecoding:
+    """A bag stream's settings and state, and the decoding of raw batches into chunks.
+
+    The base of :class:`~fog_temp_comp.bag.stream.BagStream` (which sets these attributes)
+    and of its per-format read paths.
+    """
+
+    path: Path
+    time_source: str
+    temp_field: str | None
+    chunk_size: int
+    progress: Progress | None
+    imu_topic: str
+    temp_topic: str
+    frame_id: str
+    salvage: Salvage
+    unstamped: UnsetStamps
+    _gyro_topic: str | None
+    _temp_topic: str | None
+    _open: bool
+
+    def _kinds(self) -> dict[str, str]:
+        """Topic -> chunk kind."""
+        return {self.imu_topic: 'imu', self.temp_topic: 'temperature'}
+
+    def _from_spans(
+        self, batches: Iterable[tuple[str, NDArray[np.int64], cdr.Spans]], decoders: dict[str, Any]
+    ) -> Iterator[Chunk]:
+        """Chunks of at most ``chunk_size`` from the fast readers' (topic, log ns, spans).
+
+        The batches of one bag chunk (one buffer) are decoded before any is yielded: if one
+        does not decode (damage the chunk's framing did not reveal), the whole chunk is
+        skipped and recorded in :attr:`salvage`, as its other messages may be damaged too.
+        """
+        group: list[tuple[str, NDArray[np.int64], cdr.Spans]] = []
+        for item in batches:
+            if group and item[2].buffer is not group[0][2].buffer:
+                yield from self._decode_group(group, decoders)
+                group = []
+            group.append(item)
+        yield from self._decode_group(group, decoders)
+
+    def _decode_group(
+        self, group: list[tuple[str, NDArray[np.int64], cdr.Spans]], decoders: dict[str, Any]
+    ) -> list[Chunk]:
+        """Decoded chunks of the batches of one bag chunk, or [] (recorded) if one fails."""
+        kind_of = self._kinds()
+        out = []
+        try:
+            for topic, log_ns, spans in group:
+                for start in range(0, len(spans), self.chunk_size):
+                    part = slice(start, start + self.chunk_size)
+                    batch = (spans[part], log_ns[part], [topic])
+                    out.append(self._flush(kind_of[topic], batch, decoders))
+        except ValueError as err:
+            first = min(int(t.min()) for _, t, _ in group)
+            last = max(int(t.max()) for _, t, _ in group)
+            self.salvage.damage(
+                f'undecodable messages in a chunk ({err})',
+                chunks=1,
+                gap_ns=(first, last),
+                lost_messages=sum(t.size for _, t, _ in group),
+            )
+            return []
+        for _, log_ns, spans in group:
+            if self.progress is not None:
+                self.progress.update(len(spans), int(log_ns.max()), int(log_ns.min()))
+        return out
+
+    def _flush(
+        self,
+        kind: str,
+        batch: tuple[Any, Any, list[Any]],  # (raw messages or Spans, log times ns, owners)
+        decoders: dict[Any, Any],  # owner (connection id or topic) -> batch decoder
+    ) -> Chunk:
+        raws, logs, owners = batch
+        log_ns = np.asarray([] if logs is None else logs, dtype=np.int64)
+        receive = log_ns / NS_PER_S
+        if kind == 'temperature' and self.temp_field is not None:
+            field = self.temp_field
+            values = np.array([get_field(msg, field) for msg in raws])
+            stamps = np.array(
+                [stamp_to_s(m.header.stamp) if hasattr(m, 'header') else np.nan for m in raws]
+            )
+            stamps = np.where(np.isnan(stamps), receive, stamps)
+        else:
+            decode = decoders[owners[0]]
+            if any(o != owners[0] for o in owners):  # several connections on one topic
+                parts = [decoders[o]([r]) for o, r in zip(owners, raws, strict=True)]
+                batch_out = type(parts[0]).concatenate(parts)
+            else:
+                batch_out = decode(raws)
+            stamps = batch_out.stamps_s
+            if kind == 'imu':
+                values = batch_out.angular_velocity_rad_s
+                if not self.frame_id:
+                    self.frame_id = batch_out.frame_id
+            else:
+                values = batch_out.temperature_degC
+        if self.time_source == 'receive':
+            return Chunk(kind, receive, values)
+        return Chunk(kind, self._stamped(kind, stamps, log_ns), values)
+
+    def _stamped(self, kind: str, stamps: Any, log_ns: Any) -> Any:
+        """Header stamps, s; an unset one (0: a driver that never stamps) takes its receive time.
+
+        Counted per topic in :attr:`unstamped`.
+        """
+        if log_ns.size != np.size(stamps):
+            return stamps
+        topic = self.imu_topic if kind == 'imu' else self.temp_topic
+        return self.unstamped.fill(topic, stamps, log_ns)
