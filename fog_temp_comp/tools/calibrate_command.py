@@ -1,0 +1,359 @@
+"""``fog-temp-comp calibrate``: fit drift coefficients on bags and write the YAML (and report).
+
+:class:`CalibrateOptions` holds everything the command can be told; the fit is chosen by
+cross-validation, held-out runs, a fleet prior or as asked (:func:`_fit`); optional
+Earth-rate removal, validation replay and the HTML report (matplotlib, imported lazily).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+from fog_temp_comp.bag.reduce import reduce_record
+from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.core.calibration import CalibrationResult, calibrate_detailed
+from fog_temp_comp.core.coefficients import Coefficients, save
+from fog_temp_comp.core.compensator import GuardSettings
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS, DenoiseSettings
+from fog_temp_comp.core.earth import earth_rate_body_deg_h, parse_orientation, remove_earth_rate
+from fog_temp_comp.core.evaluate import format_scores, replay_record, score_record
+from fog_temp_comp.core.fitstats import format_fits
+from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, coefficient_key
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
+from fog_temp_comp.tools.atomic import AtomicOutputs
+from fog_temp_comp.tools.evaluate_command import clamp_notes
+from fog_temp_comp.tools.excitation import identifiable_terms
+from fog_temp_comp.tools.salvaged import Salvaged
+
+
+@dataclass(frozen=True)
+class CalibrateOptions:
+    """Everything ``fog-temp-comp calibrate`` can be told (units in the names)."""
+
+    gyro_topic: str | None = None
+    temp_topic: str | None = None
+    temp_field: str | None = None
+    time_source: str = 'header'
+    settings: DenoiseSettings = RECOMMENDED_SETTINGS
+    #: model terms; None (the default) lets calibrate choose the pipeline by cross-validation
+    terms: tuple[str, ...] | None = None
+    fit_coil_lag: bool = False
+    online_tdot: bool = False
+    hac_lag: int | None = None
+    latitude_deg: float | None = None
+    axes_orientation: str | None = None
+    no_constant: bool = False
+    heldout: tuple[Path, ...] = ()
+    leave_one_run_out: bool = False
+    #: keep the simplest candidate within this fraction of the best score
+    tolerance: float = 0.02
+    validate: tuple[Path, ...] = ()
+    report_dir: Path | None = None
+    clamp_tdot: bool = False
+    quiet: bool = True
+    #: fit without the terms the bags do not excite (with a warning) instead of refusing
+    drop_unidentifiable: bool = False
+    #: refuse damaged bags instead of reading them as far as they are intact
+    strict: bool = False
+    #: a fleet prior YAML (``fleet prior``): fit toward it (:mod:`fog_temp_comp.core.prior`)
+    prior: Path | None = None
+
+
+def calibrate_command(
+    bags: Sequence[Path],
+    output: Path,
+    *,
+    options: CalibrateOptions | None = None,
+    settings: DenoiseSettings | None = None,
+    gyro_topic: str | None = None,
+    temp_topic: str | None = None,
+    stdout: TextIO | None = None,
+) -> int:
+    """Fit coefficients on ``bags`` and write them to ``output`` (YAML).
+
+    Training bags are streamed and reduced to the Tdot grid (bounded memory); held-out and
+    validation bags are replayed through the compensator at full rate.
+    """
+    stdout = stdout or sys.stdout
+    if not output.parent.is_dir():
+        raise ValueError(f'-o {output}: directory {output.parent} does not exist')
+    report = options.report_dir if options else None
+    with AtomicOutputs(output, report) as outputs:  # -o, --report: complete, or not at all
+        return _calibrate(bags, output, outputs, options, settings, gyro_topic, temp_topic, stdout)
+
+
+def _calibrate(
+    bags: Sequence[Path],
+    output: Path,
+    outputs: AtomicOutputs,
+    options: CalibrateOptions | None,
+    settings: DenoiseSettings | None,
+    gyro_topic: str | None,
+    temp_topic: str | None,
+    stdout: TextIO,
+) -> int:
+    """:func:`calibrate_command` writing its outputs to the temporary paths of ``outputs``."""
+    opt = options or CalibrateOptions()
+    if opt.terms is not None and not opt.terms:
+        raise ValueError('--terms: give at least one model term')
+    opt = dataclasses.replace(
+        opt,
+        settings=settings or opt.settings,
+        gyro_topic=gyro_topic or opt.gyro_topic,
+        temp_topic=temp_topic or opt.temp_topic,
+    )
+    earth, provenance = _earth_correction(opt)
+    salvaged = Salvaged()
+    read: dict[str, Any] = dict(
+        gyro_topic=opt.gyro_topic,
+        temp_topic=opt.temp_topic,
+        temp_field=opt.temp_field,
+        time_source=opt.time_source,
+        quiet=opt.quiet,
+        strict=opt.strict,
+        on_salvage=salvaged.add,
+    )
+
+    def load_record(bag: Path) -> ChamberRecord:
+        """A held-out or validation bag's record with the Earth rate removed."""
+        return earth(read_record(bag, **read))
+
+    period = opt.settings.tdot_period_s
+    # a chunk skipped inside a run splits it: the grid never bridges what was lost
+    records = [
+        earth(piece) for b in bags for piece in salvaged.split(reduce_record(b, period, **read))
+    ]
+    if opt.prior is not None and (opt.terms or opt.fit_coil_lag or opt.heldout):
+        raise ValueError('--prior sets the terms and Tdot settings; drop --terms/--fit-coil-lag')
+    if opt.prior is None:  # with a fleet prior, the prior carries what a short run lacks
+        terms = identifiable_terms(records, opt.terms, drop=opt.drop_unidentifiable, stdout=stdout)
+        opt = dataclasses.replace(opt, terms=terms)
+    heldout = [load_record(b) for b in opt.heldout]
+    provenance = {**provenance, **salvaged.provenance()}
+    result = _fit(opt, records, heldout, provenance, stdout)
+    coeffs = result.coefficients
+    if opt.no_constant:
+        coeffs = _without_constant(coeffs)
+    save(coeffs, outputs.path(output))
+    _print_fit(result, coeffs, len(records), output, stdout)
+    runs = _validate(opt, coeffs, [(b.name, load_record(b)) for b in opt.validate], stdout)
+    if opt.report_dir is not None:
+        if not runs:  # no validation bags: show the training runs
+            guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
+            for record in records:
+                corrected, _ = replay_record(record, coeffs, guard=guard)
+                runs.append((f'{record.path.name} (training)', record, corrected))
+        report_dir = outputs.path(opt.report_dir, merge_into_dir=True)
+        index = _write_calibration_report(report_dir, bags, runs, result, coeffs, provenance)
+        print(f'report: {opt.report_dir / index.name}', file=stdout)
+    return 0
+
+
+def _fit(
+    opt: CalibrateOptions,
+    records: list[ChamberRecord],
+    heldout: list[ChamberRecord],
+    provenance: dict[str, Any],
+    stdout: TextIO,
+) -> CalibrationResult:
+    """The calibration result: chosen by cross-validation, by held-out runs, or as asked."""
+    automatic = (
+        opt.terms is None
+        and not opt.fit_coil_lag
+        and not opt.online_tdot
+        and not opt.leave_one_run_out
+        and opt.settings.method == 'kalman'
+    )
+    if opt.prior is not None:
+        from fog_temp_comp.core import prior
+
+        result = prior.calibrate_with_prior(
+            records, prior.load_prior(opt.prior), provenance=provenance
+        )
+        print(prior.format_prior_fit(result), file=stdout)
+        return result
+    if automatic:
+        from fog_temp_comp.core import model_choice
+
+        result, cv_scores, cv_chosen = model_choice.choose_and_calibrate(
+            records,
+            opt.settings,
+            heldout=heldout,
+            tolerance=opt.tolerance,
+            hac_lag=opt.hac_lag,
+            provenance=provenance,
+        )
+        print(model_choice.format_scores(cv_scores, cv_chosen), file=stdout)
+        return result
+    if opt.heldout or opt.leave_one_run_out:
+        candidates = default_candidates(opt.settings)
+        coeffs, chosen, results = select_and_calibrate(
+            candidates,
+            records,
+            heldout or None,
+            guard=GuardSettings(clamp_tdot=opt.clamp_tdot),
+            tolerance=opt.tolerance,
+        )
+        print(format_results(results, chosen), file=stdout)
+        candidate = chosen.candidate
+        return calibrate_detailed(
+            records,
+            coeffs.denoise,
+            terms=candidate.terms,
+            online_tdot=candidate.online_tdot,
+            hac_lag=opt.hac_lag,
+            provenance={**provenance, 'selection': coeffs.provenance.get('selection')},
+        )
+    return calibrate_detailed(
+        records,
+        opt.settings,
+        terms=opt.terms or PAPER_TERMS,
+        fit_coil_lag=opt.fit_coil_lag,
+        online_tdot=opt.online_tdot,
+        hac_lag=opt.hac_lag,
+        provenance=provenance,
+    )
+
+
+def _print_fit(
+    result: CalibrationResult, coeffs: Coefficients, n_bags: int, output: Path, stdout: TextIO
+) -> None:
+    """The fitted terms, each fit's statistics, the calibrated range and the warnings."""
+    model = coeffs.model
+    lag = coeffs.denoise.coil_lag_s
+    print(
+        f'fitted {", ".join(model.terms)} on {n_bags} bag(s), Tdot estimator '
+        f'{coeffs.denoise.method}'
+        + (f', coil lag {lag:.0f} s' if lag else '')
+        + f'; wrote {output}',
+        file=stdout,
+    )
+    for line in format_fits(result.fits):
+        print('  ' + line, file=stdout)
+    t_range, r_range = model.temperature_range_degC, model.tdot_range_degC_per_min
+    print(
+        f'  calibrated range: T [{t_range.low:.2f}, {t_range.high:.2f}] degC, '
+        f'Tdot [{r_range.low:.3f}, {r_range.high:.3f}] degC/min',
+        file=stdout,
+    )
+    for warning in result.warnings:
+        print(f'WARNING: {warning}', file=stdout)
+
+
+def _validate(
+    opt: CalibrateOptions,
+    coeffs: Coefficients,
+    named: list[tuple[str, ChamberRecord]],
+    stdout: TextIO,
+) -> list[tuple[str, ChamberRecord, Any]]:
+    """Replay the validation records, print their table; (name, record, corrected) each."""
+    runs: list[tuple[str, ChamberRecord, Any]] = []
+    if not named:
+        return runs
+    guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
+    scores = []
+    notes = []
+    for name, record in named:
+        corrected, status = replay_record(record, coeffs, guard=guard)
+        scores += score_record(name, record.imu_stamps_s, record.rates_rad_s, corrected)
+        notes += clamp_notes(name, status.counters, coeffs)
+        runs.append((name, record, corrected))
+    print('\nheld-out validation:', file=stdout)
+    print(format_scores(scores), file=stdout)
+    for note in notes:
+        print(note, file=stdout)
+    return runs
+
+
+def _write_calibration_report(
+    report_dir: Path,
+    bags: Sequence[Path],
+    runs: list[tuple[str, ChamberRecord, Any]],
+    result: CalibrationResult,
+    coeffs: Coefficients,
+    provenance: dict[str, Any],
+) -> Path:
+    """The HTML report of a calibration (matplotlib imported only here); its index page."""
+    from fog_temp_comp.tools.report import ReportRun, write_report
+
+    scores = []
+    report_runs = []
+    for name, record, corrected in runs:
+        scores += score_record(name, record.imu_stamps_s, record.rates_rad_s, corrected)
+        report_runs.append(
+            ReportRun(name, record.imu_stamps_s, record.rates_rad_s, corrected,
+                      record.temp_stamps_s, record.temperature_degC)
+        )  # fmt: skip
+    return write_report(
+        report_dir,
+        table=result.table,
+        model=coeffs.model,
+        fits=result.fits,
+        runs=report_runs,
+        scores=scores,
+        warnings=result.warnings,
+        context={
+            'bags': ', '.join(str(b) for b in bags),
+            'Tdot estimator': coeffs.denoise.method,
+            'Earth rate': str(provenance.get('earth_rate', 'not removed')),
+        },
+    )
+
+
+def _earth_correction(
+    opt: CalibrateOptions,
+) -> tuple[Callable[[ChamberRecord], ChamberRecord], dict[str, Any]]:
+    """Function removing the Earth-rate projection from a record, and its provenance."""
+    if opt.latitude_deg is None:
+        if opt.axes_orientation is not None:
+            raise ValueError('--axes-orientation needs --latitude-deg')
+        return (lambda record: record), {}
+    if opt.axes_orientation is None:
+        raise ValueError(
+            '--latitude-deg needs --axes-orientation (the sensor axes in ENU, e.g. enu, ned, '
+            'a quaternion x,y,z,w or a 3x3 matrix): a wrong default would shift D0 silently'
+        )
+    rotation = parse_orientation(opt.axes_orientation)
+    lat = opt.latitude_deg
+    body = earth_rate_body_deg_h(lat, rotation)
+    provenance = {
+        'earth_rate': {
+            'latitude_deg': lat,
+            'axes_orientation': opt.axes_orientation,
+            'removed_deg_h': [float(v) for v in body],
+        }
+    }
+    return (lambda record: remove_earth_rate(record, lat, rotation)), provenance
+
+
+def _without_constant(coeffs: Coefficients) -> Coefficients:
+    """The model without its constant term (ArduPilot style: the offset comes from elsewhere)."""
+    model = coeffs.model
+    if 'const' not in model.terms:
+        return coeffs
+    keep = [i for i, t in enumerate(model.terms) if t != 'const']
+    d0 = coefficient_key('const')
+    fit = {
+        axis: {
+            key: (
+                {k: v for k, v in value.items() if k != d0} if isinstance(value, dict) else value
+            )
+            for key, value in entry.items()
+        }
+        if isinstance(entry, dict)
+        else entry
+        for axis, entry in coeffs.fit.items()
+    }
+    reduced = DriftModel(
+        tuple(model.terms[i] for i in keep),
+        model.coefficients[keep],
+        model.temperature_range_degC,
+        model.tdot_range_degC_per_min,
+    )
+    return dataclasses.replace(coeffs, model=reduced, fit=fit)

@@ -1,0 +1,340 @@
+"""``fog-temp-comp compensate``: replay a bag through the compensator; inputs + corrected Imu out.
+
+The output is complete or absent (:class:`~fog_temp_comp.tools.atomic.AtomicOutputs`); a bag
+whose damage shows only when read is repaired and replayed. MCAP bags take the block path
+(:mod:`~fog_temp_comp.tools.blockreplay`), others the chunk path
+(:mod:`~fog_temp_comp.tools.chunkreplay`); the optional bias learner at rest reads and writes
+learned-bias files (deg/h).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+import sys
+from collections.abc import Callable
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+from fog_temp_comp.bag import bagio, mcapwrite
+from fog_temp_comp.bag.bagio import BagError, BagWriter
+from fog_temp_comp.bag.repair import repaired_bag
+from fog_temp_comp.bag.salvage import Salvage
+from fog_temp_comp.bag.unstamped import UnsetStamps
+from fog_temp_comp.core.coefficients import load
+from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
+from fog_temp_comp.core.rest import RestLearner, RestSettings
+from fog_temp_comp.core.restfile import (
+    check_learned_bias,
+    file_sha256,
+    learned_bias_from_status,
+    read_learned_bias,
+    write_learned_bias,
+)
+from fog_temp_comp.tools import blockreplay
+from fog_temp_comp.tools.atomic import AtomicOutputs
+from fog_temp_comp.tools.chunkreplay import ChunkReplayer, chunked
+from fog_temp_comp.tools.evaluate_command import effective_settings
+from fog_temp_comp.tools.salvaged import Salvaged
+
+
+def compensate_command(
+    in_bag: Path,
+    coeffs_path: Path,
+    out_bag: Path,
+    *,
+    gyro_topic: str | None = None,
+    temp_topic: str | None = None,
+    output_topic: str = '/imu/data',
+    denoise_method: str | None = None,
+    guard: GuardSettings | None = None,
+    strict: bool = False,
+    rest: RestSettings | None = None,
+    rest_bias_in: Path | None = None,
+    rest_bias_out: Path | None = None,
+    stdout: TextIO | None = None,
+    fast: bool = True,
+) -> int:
+    """Replay ``in_bag`` through a :class:`Compensator`; write all inputs plus corrected Imu.
+
+    Messages are processed in the bag's log-time order, i.e. the order a node sees on replay.
+    ``fast`` (the default) reads an MCAP bag a chunk at a time and writes blocks
+    (:mod:`~fog_temp_comp.tools.blockreplay`), other bags through ``AnyReader`` and
+    :meth:`BagWriter.write_many`; ``fast=False`` writes through rosbags one message at a time.
+    Both give the same bag. With ``rest`` (enabled) the bias learner at rest runs too, fed the
+    Imu's accelerometer (through ``AnyReader``: the MCAP block path decodes rates only); it
+    starts from the learned-bias file ``rest_bias_in`` (refused with an error if learned with
+    other coefficients) and writes what it learned to ``rest_bias_out``
+    (:mod:`~fog_temp_comp.core.restfile`, as the node's ``rest_bias_file``).
+    """
+    stdout = stdout or sys.stdout
+    coeffs = load(coeffs_path)
+    if out_bag.exists():
+        raise FileExistsError(f'{out_bag}: exists already, not overwriting')
+    settings = effective_settings(coeffs, denoise_method)
+    if (rest_bias_in or rest_bias_out) and not (rest is not None and rest.enabled):
+        raise ValueError('--rest-bias-in/--rest-bias-out need --rest-learning')
+
+    def new_compensator(out: TextIO | None = None) -> Compensator:
+        compensator = Compensator(coeffs.model, settings, guard, rest)
+        if rest_bias_in is not None:
+            _start_rest_from(compensator, rest_bias_in, coeffs_path, out)
+        return compensator
+
+    new_compensator(stdout)  # refuse a learned-bias file that does not fit, before reading
+    if output_topic and not output_topic.startswith('/'):
+        output_topic = '/' + output_topic
+    run = _Compensate(
+        in_bag=in_bag,
+        fmt=bagio.bag_format(in_bag),
+        topics=(gyro_topic, temp_topic, output_topic),
+        new_compensator=new_compensator,
+        fast=fast,
+    )
+    (n_out, counters), compensator = _replay_atomically(run, in_bag, out_bag, strict)
+    print(
+        f'wrote {out_bag}: {n_out} corrected Imu on {output_topic} '
+        f'({counters.imu_uncorrected} before the first temperature passed through)',
+        file=stdout,
+    )
+    if compensator.rest is not None:
+        _report_rest(compensator.rest, coeffs_path, rest_bias_out, stdout)
+    return 0
+
+
+def _replay_atomically(
+    run: _Compensate, in_bag: Path, out_bag: Path, strict: bool
+) -> tuple[tuple[int, CompensatorCounters], Compensator]:
+    """``run`` into ``out_bag``, complete or not at all: (written, counters), the compensator.
+
+    A bag whose damage shows only when read is repaired (what is intact copied) and replayed.
+    """
+    with AtomicOutputs(out_bag) as out:  # complete, or nothing at out_bag
+        target = out.path(out_bag)
+        try:
+            with repaired_bag(in_bag, out_bag.parent, strict=strict) as (source, salvage):
+                return run.into(target, source, salvage)
+        except ReplayError as err:  # damage that shows only when read: copy what is intact
+            remove_bag(target)
+            with repaired_bag(in_bag, out_bag.parent, strict=strict, failure=err) as (
+                source,
+                salvage,
+            ):
+                return run.into(target, source, salvage)
+
+
+def _report_rest(
+    learner: RestLearner, coeffs_path: Path, rest_bias_out: Path | None, stdout: TextIO
+) -> None:
+    """Print what the bias learner at rest learned (deg/h); write it to ``rest_bias_out``."""
+    st = learner.finish()
+    print(
+        f'rest learning: {st.windows_rest} rest windows learned from, '
+        f'{st.windows_motion} moving, {st.windows_tilting} tilting, '
+        f'{st.windows_over_limit} over the limit; learned '
+        + ', '.join(f'{v:.3f}' for v in st.learned_deg_h)
+        + ' deg/h (x, y, z), applied '
+        + ', '.join(f'{v:.3f}' for v in st.applied_deg_h)
+        + ' deg/h',
+        file=stdout,
+    )
+    if rest_bias_out is None:
+        return
+    bias = learned_bias_from_status(
+        st,
+        learner.settings,
+        coefficients_file=str(coeffs_path),
+        coefficients_sha256=file_sha256(coeffs_path),
+    )
+    if bias is None:
+        print(f'rest learning: nothing learned, {rest_bias_out} not written', file=stdout)
+    else:
+        write_learned_bias(rest_bias_out, bias)
+        print(f'wrote {rest_bias_out} (learned bias)', file=stdout)
+
+
+class ReplayError(BagError):
+    """Reading the input failed while replaying it (a damaged bag: copied and tried again)."""
+
+
+@dataclass
+class _Compensate:
+    """The settings of one ``compensate`` run, applied to a (possibly repaired) input."""
+
+    in_bag: Path
+    fmt: str
+    topics: tuple[str | None, str | None, str]  # gyro, temperature, output
+    new_compensator: Callable[[], Compensator]
+    fast: bool
+
+    def into(
+        self, target: Path, source: Path, salvage: Salvage | None
+    ) -> tuple[tuple[int, CompensatorCounters], Compensator]:
+        """Write ``target`` from ``source``; (written, counters) and the compensator used.
+
+        ``salvage`` (a repaired copy) is reported on stderr, and the spans it skipped inside
+        the run restart the Tdot estimate (no correction bridged across a hole).
+        """
+        if salvage is not None:
+            Salvaged().add(salvage)
+        holes = [(a, b) for a, b in (salvage.gap_spans_s() if salvage else []) if b is not None]
+        gyro_topic, temp_topic, output_topic = self.topics
+        compensator = self.new_compensator()
+        compensator.mark_holes(holes)
+        opened = ExitStack()
+        try:
+            reader = opened.enter_context(bagio.open_bag(source))
+        except BagError as err:
+            if salvage is not None:
+                raise
+            raise ReplayError(str(err)) from err  # a stale metadata.yaml, ...: copy it
+        with opened:
+            job = _CompensateJob(
+                reader=reader,
+                in_bag=self.in_bag,
+                out_bag=target,
+                fmt=self.fmt,
+                imu_name=bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic'),
+                temp_name=bagio.resolve_topic(
+                    reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic'
+                ),
+                output_topic=output_topic,
+                compress=self.fmt == 'mcap' and _compressed_mcap(source),
+            )
+            if output_topic in reader.topics:
+                raise BagError(
+                    f'--output-topic {output_topic}: already in {self.in_bag}; choose another'
+                )
+            mcap = None
+            block = self.fast and reader.is2 and compensator.rest is None
+            if block and not blockreplay.per_message_compressed(reader):
+                mcap = blockreplay.single_mcap_file(source)
+            if mcap is not None:
+                try:
+                    result = job.run(compensator, mcap=mcap)
+                    job.unstamped.warn(self.in_bag)
+                    return result, compensator
+                except (blockreplay.UnsupportedError, ValueError):
+                    remove_bag(target)  # the per-message path decides (and words any error)
+                    compensator = self.new_compensator()
+                    compensator.mark_holes(holes)
+                    job.unstamped = UnsetStamps()
+            result = job.run(compensator, batched=self.fast)
+            job.unstamped.warn(self.in_bag)
+            return result, compensator
+
+
+def _start_rest_from(
+    compensator: Compensator, path: Path, coeffs_path: Path, out: TextIO | None
+) -> None:
+    """Start the bias learner from a learned-bias file; ValueError if it does not fit."""
+    assert compensator.rest is not None
+    bias = read_learned_bias(path)
+    check_learned_bias(
+        bias,
+        coefficients_sha256=file_sha256(coeffs_path),
+        earth_rate_body_deg_h=compensator.rest.settings.earth_rate_body_deg_h,
+        path=path,
+    )
+    reason = compensator.rest.start_from(bias.bias_deg_h)
+    if reason is not None:
+        raise ValueError(f'{path}: {reason}')
+    if out is not None:
+        text = ', '.join(f'{v:.3f}' for v in bias.bias_deg_h)
+        print(f'rest learning: starting from {text} deg/h (x, y, z), {path}', file=out)
+
+
+def _compressed_mcap(bag: Path) -> bool:
+    """Whether an MCAP bag's (first file's first) chunk is compressed."""
+    files = [bag] if bag.is_file() else sorted(bag.glob('*.mcap'))
+    return bool(files) and mcapwrite.chunk_compression(files[0]) != ''
+
+
+@dataclass
+class _CompensateJob:
+    """One ``compensate`` output: the input reader, the topics, where to write."""
+
+    reader: Any
+    in_bag: Path
+    out_bag: Path
+    fmt: str
+    imu_name: str
+    temp_name: str
+    output_topic: str
+    compress: bool = False
+    #: unset header stamps (0) that took the receive time, per topic
+    unstamped: UnsetStamps = dataclasses.field(default_factory=UnsetStamps)
+
+    def run(
+        self, compensator: Compensator, *, mcap: Path | None = None, batched: bool = True
+    ) -> tuple[int, CompensatorCounters]:
+        """Write the output bag; (corrected Imu written, the compensator's counters).
+
+        With ``mcap``, :class:`blockreplay.UnsupportedError` and ``ValueError`` (damaged file)
+        pass through for the caller to fall back; other errors become :class:`BagError`.
+        The output is removed on any error.
+        """
+        try:
+            with BagWriter(self.out_bag, self.fmt, compress=self.compress) as writer:
+                self._add_topics(writer)
+                if mcap is not None:
+                    n_out = blockreplay.replay_mcap(
+                        mcap,
+                        writer,
+                        compensator,
+                        topics=set(self.reader.topics),
+                        imu_topic=self.imu_name,
+                        temp_topic=self.temp_name,
+                        output_topic=self.output_topic,
+                        unstamped=self.unstamped,
+                    )
+                else:
+                    n_out = self._replay_messages(writer, compensator, batched)
+        except Exception as err:
+            remove_bag(self.out_bag)  # no half-written output
+            if isinstance(err, BagError) or (
+                mcap is not None and isinstance(err, (blockreplay.UnsupportedError, ValueError))
+            ):
+                raise
+            raise ReplayError(
+                f'{self.in_bag}: failed while replaying (damaged bag?): {err}'
+            ) from err
+        return n_out, compensator.status.counters
+
+    def _add_topics(self, writer: BagWriter) -> None:
+        reader = self.reader
+        for conn in reader.connections:
+            if conn.topic not in writer.topics:
+                writer.add_topic(conn.topic, conn.msgtype, like=conn)
+        imu_conn = next(c for c in reader.connections if c.topic == self.imu_name)
+        # ROS 1: the corrected messages keep the input's layout (Header with seq)
+        writer.add_topic(
+            self.output_topic, bagio.IMU_TYPE, like=imu_conn if self.fmt == 'ros1' else None
+        )
+
+    def _replay_messages(self, writer: BagWriter, compensator: Compensator, batched: bool) -> int:
+        """Through ``AnyReader``, a chunk at a time, written as a block or one by one."""
+        messages = bagio.temperature_first(self.reader.messages(), self.temp_name)
+        replayer = ChunkReplayer(
+            compensator, self.reader, self.imu_name, self.temp_name, self.unstamped
+        )
+        n_out = 0
+        for chunk in chunked(messages, 20_000):
+            out = [(topic or self.output_topic, ns, raw) for topic, ns, raw in replayer.run(chunk)]
+            n_out += len(out) - len(chunk)
+            if batched:
+                writer.write_many(out)
+            else:
+                for topic, log_ns, raw in out:
+                    writer.write_raw(topic, log_ns, raw)
+        return n_out
+
+
+def remove_bag(path: Path) -> None:
+    """Delete a bag file or directory if it exists."""
+    if path.is_dir():
+        shutil.rmtree(path)
+    elif path.exists():
+        path.unlink()

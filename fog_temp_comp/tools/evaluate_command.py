@@ -1,0 +1,93 @@
+"""``fog-temp-comp evaluate``: bias stability and range (deg/h) before/after compensation.
+
+Also the replay settings (:func:`effective_settings`) and the calibrated-range guard's notes
+(:func:`clamp_notes`) that calibrate's validation and compensate share.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TextIO
+
+from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.core.coefficients import Coefficients, load
+from fog_temp_comp.core.compensator import CompensatorCounters, GuardSettings
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.evaluate import format_scores, replay_record, score_record
+from fog_temp_comp.tools.salvaged import Salvaged
+
+
+def evaluate_command(
+    bags: Sequence[Path],
+    coeffs_path: Path,
+    *,
+    gyro_topic: str | None = None,
+    temp_topic: str | None = None,
+    denoise_method: str | None = None,
+    guard: GuardSettings | None = None,
+    strict: bool = False,
+    stdout: TextIO | None = None,
+) -> int:
+    """Print stability and range before/after compensation for each bag and axis."""
+    stdout = stdout or sys.stdout
+    coeffs = load(coeffs_path)
+    scores = []
+    notes = []
+    salvaged = Salvaged()
+    for bag in bags:
+        record = read_record(
+            bag,
+            gyro_topic=gyro_topic,
+            temp_topic=temp_topic,
+            strict=strict,
+            on_salvage=salvaged.add,
+        )
+        corrected, status = replay_record(
+            record, coeffs, effective_settings(coeffs, denoise_method), guard
+        )
+        scores += score_record(bag.name, record.imu_stamps_s, record.rates_rad_s, corrected)
+        notes += clamp_notes(bag.name, status.counters, coeffs)
+    print(format_scores(scores), file=stdout)
+    for note in notes:
+        print(note, file=stdout)
+    return 0
+
+
+def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) -> list[str]:
+    """Say when the calibrated-range guard limited or extrapolated the correction of a run."""
+    notes = []
+    total = max(counters.imu_total, 1)
+    model = coeffs.model
+    t_rng, r_rng = model.temperature_range_degC, model.tdot_range_degC_per_min
+    for count, text in (
+        (
+            counters.imu_temperature_clamped,
+            f'temperature left the calibrated range [{t_rng.low:.3g}, {t_rng.high:.3g}] degC '
+            'and was clamped',
+        ),
+        (
+            counters.imu_tdot_clamped,
+            'Tdot was clamped (to the calibrated range with --clamp-tdot, else to '
+            'tdot_limit_degC_per_min)',
+        ),
+        (
+            counters.imu_tdot_extrapolated,
+            f'Tdot left the calibrated range [{r_rng.low:.3g}, {r_rng.high:.3g}] degC/min; the '
+            'linear Tdot terms were applied beyond it',
+        ),
+    ):
+        if count:
+            notes.append(
+                f'note: {name}: {text} for {100 * count / total:.0f} % of the gyro samples'
+            )
+    return notes
+
+
+def effective_settings(coeffs: Coefficients, denoise_method: str | None) -> DenoiseSettings:
+    """The coefficients file's denoise settings, with the method overridden if given."""
+    if denoise_method is None:
+        return coeffs.denoise
+    return dataclasses.replace(coeffs.denoise, method=denoise_method)
