@@ -6,163 +6,47 @@ messages fed before it. The node feeds it one message at a time (:meth:`Compensa
 the offline tools feed it the gyro messages between two temperature samples as one block
 (:meth:`Compensator.correct_block`), which gives the same output, bit for bit, and the same
 counters and status, without a Python call per message.
+
+This module holds :class:`Compensator` (the per-message path, the temperature guards) and
+:func:`replay`; the block path is its base class in :mod:`fog_temp_comp.core.compensator_arrays`,
+and :class:`GuardSettings`, :class:`CompensatorCounters` and :class:`CompensatorStatus` live in
+:mod:`fog_temp_comp.core.compensator_types` (re-exported here).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
-from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.compensator_arrays import BoolArray as BoolArray
+from fog_temp_comp.core.compensator_arrays import FloatArray, _BlockCorrection
+from fog_temp_comp.core.compensator_types import (
+    STALE_POLICIES,
+    CompensatorCounters,
+    CompensatorStatus,
+    GuardSettings,
+)
+from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.model import SCALAR_TERMS, DriftModel
-from fog_temp_comp.core.names import TDOT_LIMIT_DEGC_PER_MIN
 from fog_temp_comp.core.rest import RestLearner, RestSettings
-from fog_temp_comp.core.tdot import TdotEstimate, TdotEstimator, make_estimator
+from fog_temp_comp.core.tdot import make_estimator
+from fog_temp_comp.core.tdot_estimate import TdotEstimate, TdotEstimator
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H, S_PER_MIN
 
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
-STALE_POLICIES = ('hold', 'none')
+__all__ = [
+    'STALE_POLICIES',
+    'Compensator',
+    'CompensatorCounters',
+    'CompensatorStatus',
+    'GuardSettings',
+    'replay',
+]
 
 
-@dataclass(frozen=True)
-class GuardSettings:
-    """How the compensator treats missing, stale or implausible input.
-
-    Attributes
-    ----------
-    temperature_timeout_s : float
-        Temperature older (or newer) than this relative to a gyro stamp is stale; a gap this long
-        between temperature samples restarts the Tdot estimate.
-    stale_policy : str
-        With stale temperature: ``'hold'`` keeps applying the last correction, ``'none'`` passes
-        the gyro rate through uncorrected.
-    clamp_temperature : bool
-        Clamp T to the calibrated range (a polynomial in T is not extrapolated; reported).
-    clamp_tdot : bool
-        Clamp Tdot to the calibrated range. Off by default: the Tdot terms are linear physics
-        (the Shupe effect), so a model fitted on a 0.2 degC/min ramp is applied to a faster
-        warm-up, up to ``tdot_limit_degC_per_min``; beyond the calibrated range is reported
-        (``tdot_out_of_range``, counter ``imu_tdot_extrapolated``).
-    tdot_limit_degC_per_min : float
-        Bound on ``|Tdot|`` (and the lagged Tdot) fed to the model when ``clamp_tdot`` is off,
-        degC/min; values beyond it are clamped to it (reported as clamped).
-    time_jump_threshold_s : float
-        A stamp this far behind the previous one is a time jump (bag looped, clock reset) and
-        resets the filter state; a smaller step back is an out-of-order message.
-    max_temperature_step_degC : float
-        A temperature sample further than this (plus ``max_temperature_rate_degC_per_min`` times
-        the elapsed time) from the previous one is rejected as a glitch, unless
-        ``step_confirm_samples`` consecutive samples agree on the new level (a real step, which
-        restarts the Tdot estimate).
-
-    """
-
-    temperature_timeout_s: float = 10.0
-    stale_policy: str = 'hold'
-    clamp_temperature: bool = True
-    clamp_tdot: bool = False
-    tdot_limit_degC_per_min: float = TDOT_LIMIT_DEGC_PER_MIN
-    time_jump_threshold_s: float = 1.0
-    max_temperature_step_degC: float = 2.0
-    max_temperature_rate_degC_per_min: float = 20.0
-    step_confirm_samples: int = 5
-
-    def __post_init__(self) -> None:
-        if self.stale_policy not in STALE_POLICIES:
-            raise ValueError(
-                f'stale_policy must be one of {STALE_POLICIES}, got {self.stale_policy!r}'
-            )
-        for name in (
-            'temperature_timeout_s',
-            'time_jump_threshold_s',
-            'max_temperature_step_degC',
-            'max_temperature_rate_degC_per_min',
-            'tdot_limit_degC_per_min',
-        ):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and value > 0 and math.isfinite(value)):
-                raise ValueError(f'{name} must be a finite number > 0, got {value!r}')
-        if not (isinstance(self.step_confirm_samples, int) and self.step_confirm_samples >= 1):
-            raise ValueError(
-                f'step_confirm_samples must be an integer >= 1, got {self.step_confirm_samples!r}'
-            )
-
-
-@dataclass
-class CompensatorCounters:
-    """Message counts since start (for diagnostics); every input lands in exactly one group."""
-
-    imu_corrected: int = 0
-    imu_uncorrected: int = 0  # no temperature yet, or stale with stale_policy 'none'
-    imu_held: int = 0  # corrected with a held correction (stale temperature, 'hold')
-    imu_duplicate: int = 0  # dropped: same stamp as the previous gyro message
-    # flags, each also counted in one of the groups above:
-    imu_out_of_order: int = 0  # stamp earlier than the previous one (still corrected)
-    imu_nonfinite: int = 0  # NaN/inf component(s) left as they were, others corrected
-    imu_zero_stamp: int = 0  # no usable stamp: corrected with the current correction
-    imu_temperature_clamped: int = 0  # corrected with T clamped to the calibrated range
-    imu_tdot_clamped: int = 0  # corrected with Tdot clamped (calibrated range, or the limit)
-    imu_tdot_extrapolated: int = 0  # corrected with Tdot beyond the calibrated range (linear)
-    temperature_accepted: int = 0
-    temperature_rejected: int = 0  # NaN/inf value or stamp
-    temperature_duplicate: int = 0
-    temperature_out_of_order: int = 0
-    temperature_glitches: int = 0  # implausible jump, rejected
-    temperature_steps: int = 0  # confirmed step, estimate restarted
-    temperature_gaps: int = 0  # gap longer than the timeout, estimate restarted
-    time_jumps: int = 0
-
-    @property
-    def imu_total(self) -> int:
-        """Gyro messages received (each is counted once in one of the first four groups)."""
-        return self.imu_corrected + self.imu_uncorrected + self.imu_held + self.imu_duplicate
-
-    @property
-    def temperature_total(self) -> int:
-        """Temperature messages received."""
-        return (
-            self.temperature_accepted
-            + self.temperature_rejected
-            + self.temperature_duplicate
-            + self.temperature_out_of_order
-            + self.temperature_glitches
-        )
-
-
-@dataclass
-class CompensatorStatus:
-    """What the compensator is applying now (for diagnostics).
-
-    ``correction_deg_h`` (shape (3,)) is the drift subtracted from each axis at the last gyro
-    message; it is zero until the first temperature sample.
-    """
-
-    has_temperature: bool = False
-    temperature_degC: float = math.nan
-    tdot_degC_per_min: float = 0.0
-    tdot_raw_degC_per_min: float = math.nan
-    temperature_used_degC: float = math.nan
-    tdot_used_degC_per_min: float = 0.0
-    tdot_lag_used_degC_per_min: float = 0.0
-    tdot_std_degC_per_min: float = math.nan
-    temperature_clamped: bool = False
-    tdot_clamped: bool = False
-    temperature_out_of_range: bool = False
-    tdot_out_of_range: bool = False
-    temperature_stale: bool = False
-    estimator_ready: bool = False
-    last_temperature_stamp_s: float = -math.inf
-    last_imu_stamp_s: float = -math.inf
-    correction_deg_h: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    counters: CompensatorCounters = field(default_factory=CompensatorCounters)
-
-
-class Compensator:
+class Compensator(_BlockCorrection):
     """Online temperature-drift compensation for a 3-axis gyro.
 
     Parameters
@@ -412,271 +296,6 @@ class Compensator:
         else:
             bx, by, bz = self.rest.applied_rad_s
         return (x - bx, y - by, z - bz)
-
-    # ------------------------------------------------------------------ gyro, a block at a time
-    def correct_block(
-        self,
-        stamps_s: ArrayLike,
-        rates_rad_s: ArrayLike,
-        accel_m_s2: ArrayLike | None = None,
-    ) -> tuple[FloatArray, BoolArray]:
-        """:meth:`correct_xyz` on ``N`` gyro samples in a row, with no temperature between them.
-
-        Feed temperature samples with :meth:`add_temperature` between blocks, in the order they
-        arrive (a block is the gyro messages between two temperature samples, or any part of
-        them), or hand both streams to :meth:`correct_interleaved`. The output, the counters
-        and the status are those of ``N`` calls to :meth:`correct_xyz`, bit for bit (tested).
-
-        Parameters
-        ----------
-        stamps_s : array_like, shape (N,)
-            Gyro stamps, s.
-        rates_rad_s : array_like, shape (N, 3)
-            Angular rates, rad/s.
-        accel_m_s2 : array_like, shape (N, 3), optional
-            Accelerometer, m/s^2 (used by the bias learner at rest only).
-
-        Returns
-        -------
-        corrected : ndarray, shape (N, 3)
-            Corrected rates, rad/s; rows of dropped samples (repeated stamp) are NaN.
-        kept : ndarray of bool, shape (N,)
-            False where :meth:`correct_xyz` would have returned None (dropped).
-
-        """
-        return self.correct_interleaved(stamps_s, rates_rad_s, [], [], [], accel_m_s2)
-
-    def correct_interleaved(
-        self,
-        stamps_s: ArrayLike,
-        rates_rad_s: ArrayLike,
-        temp_stamps_s: ArrayLike,
-        temperature_degC: ArrayLike,
-        gyro_before: ArrayLike,
-        accel_m_s2: ArrayLike | None = None,
-    ) -> tuple[FloatArray, BoolArray]:
-        """Gyro and temperature messages as they arrived; what :meth:`correct_xyz` would return.
-
-        The same as, in arrival order, :meth:`add_temperature` for each temperature sample
-        ``j`` after the first ``gyro_before[j]`` gyro samples have gone through
-        :meth:`correct_xyz`: the same output, counters and status, bit for bit (tested).
-
-        How: a gyro sample does not change what a later temperature sample does, unless it
-        resets the state (a time jump). When no message can reset it (no bias learner at rest;
-        gyro stamps finite, positive and strictly increasing past the last one; temperature
-        stamps not decreasing), the temperatures go in first, one at a time, each leaving a
-        snapshot of the Tdot estimate, and every gyro sample is then corrected with the
-        snapshot before it, on arrays, with the same IEEE operations in the same order as
-        :meth:`_update_correction`. Otherwise the gyro samples between two temperatures go
-        through :meth:`correct_xyz` one at a time.
-
-        Parameters
-        ----------
-        stamps_s, rates_rad_s, accel_m_s2
-            The gyro samples, as for :meth:`correct_block`.
-        temp_stamps_s, temperature_degC : array_like, shape (M,)
-            The temperature samples, s and degC.
-        gyro_before : array_like of int, shape (M,)
-            How many gyro samples arrived before each temperature sample (not decreasing).
-
-        Returns
-        -------
-        corrected, kept
-            As :meth:`correct_block`.
-
-        """
-        t = np.asarray(stamps_s, dtype=np.float64).reshape(-1)
-        rates = np.asarray(rates_rad_s, dtype=np.float64).reshape(-1, 3)
-        temp_t = np.asarray(temp_stamps_s, dtype=np.float64).reshape(-1)
-        temp_v = np.asarray(temperature_degC, dtype=np.float64).reshape(-1)
-        before = np.asarray(gyro_before, dtype=np.int64).reshape(-1)
-        n = t.size
-        if rates.shape[0] != n:
-            raise ValueError(f'{n} stamps but {rates.shape[0]} rates')
-        if temp_v.size != temp_t.size or before.size != temp_t.size:
-            raise ValueError('temp_stamps_s, temperature_degC and gyro_before differ in length')
-        if before.size and (
-            before[0] < 0 or before[-1] > n or bool(np.any(before[1:] < before[:-1]))
-        ):
-            raise ValueError(f'gyro_before must not decrease and stay within 0..{n}')
-        accel = None if accel_m_s2 is None else np.asarray(accel_m_s2, np.float64).reshape(-1, 3)
-        if self.rest is None and self._no_reset_possible(t, temp_t):
-            return self._correct_arrays(t, rates, temp_t.tolist(), temp_v.tolist(), before)
-        corrected = np.full((n, 3), np.nan)
-        kept = np.ones(n, dtype=np.bool_)
-        done = 0
-        for stop, stamp, value in zip(
-            [*before.tolist(), n], [*temp_t.tolist(), None], [*temp_v.tolist(), None], strict=True
-        ):
-            for k in range(done, stop):
-                x, y, z = rates[k].tolist()
-                acc = None if accel is None else tuple(accel[k].tolist())
-                got = self.correct_xyz(float(t[k]), x, y, z, acc)
-                if got is None:
-                    kept[k] = False
-                else:
-                    corrected[k] = got
-            done = max(done, stop)
-            if stamp is not None and value is not None:
-                self.add_temperature(stamp, value)
-        return corrected, kept
-
-    def _no_reset_possible(self, t: FloatArray, temp_t: FloatArray) -> bool:
-        """Whether no message of the two streams can reset the state or be out of order."""
-        if t.size:
-            if not (bool(np.all(np.isfinite(t))) and t[0] > 0):
-                return False
-            if not (t[0] > self.status.last_imu_stamp_s and bool(np.all(t[1:] > t[:-1]))):
-                return False
-        usable = temp_t[np.isfinite(temp_t)]  # the others are rejected, nothing else
-        if usable.size:
-            if usable[0] < self.status.last_temperature_stamp_s:
-                return False
-            if bool(np.any(usable[1:] < usable[:-1])):
-                return False
-        return True
-
-    def _correct_arrays(
-        self,
-        t: FloatArray,
-        rates: FloatArray,
-        temp_t: list[float],
-        temp_v: list[float],
-        before: NDArray[np.int64],
-    ) -> tuple[FloatArray, BoolArray]:
-        """:meth:`correct_interleaved` when :meth:`_no_reset_possible`: on arrays.
-
-        Mirrors :meth:`correct_xyz` and :meth:`_update_correction` step by step; the comments
-        name the scalar statements the array statements stand for.
-        """
-        n = t.size
-        status = self.status
-        counters = status.counters
-        guard = self._guard
-        carried = np.array(self._correction)
-        # the state each gyro sample sees: snapshot s is taken after the s-th temperature
-        snaps = [self._snapshot()]
-        accepted = []
-        for stamp, value in zip(temp_t, temp_v, strict=True):
-            accepted.append(self.add_temperature(stamp, value))
-            snaps.append(self._snapshot())
-        kept = np.ones(n, dtype=np.bool_)
-        if n == 0:
-            return np.empty((0, 3)), kept
-        seg = np.repeat(np.arange(len(snaps)), np.diff([0, *before.tolist(), n]))
-        (has_s, last_s, ok_s, e_stamp_s, e_temp_s, e_tdot_s, e_lag_s) = (
-            np.array(v) for v in zip(*snaps, strict=True)
-        )
-        status.last_imu_stamp_s = float(t[-1])
-        counters.imu_nonfinite += int(np.count_nonzero(~np.isfinite(rates).all(axis=1)))
-        has = has_s[seg]
-        # abs(stamp_s - status.last_temperature_stamp_s) > guard.temperature_timeout_s
-        stale = has & (np.abs(t - last_s[seg]) > guard.temperature_timeout_s)
-        fresh = has & ~stale
-        n_stale = int(np.count_nonzero(stale))
-        n_fresh = int(np.count_nonzero(fresh))
-        counters.imu_uncorrected += n - n_stale - n_fresh  # no temperature yet
-        if guard.stale_policy == 'none':
-            counters.imu_uncorrected += n_stale
-        else:
-            counters.imu_held += n_stale
-        counters.imu_corrected += n_fresh
-        if has.any():
-            last_has = int(np.flatnonzero(has)[-1])
-            if not any(accepted[seg[last_has] :]):  # no temperature accepted after it
-                status.temperature_stale = bool(stale[last_has])
-        # the rows that set the correction: no temperature (zero), fresh with an estimate
-        update = np.flatnonzero(fresh & ok_s[seg])
-        rows = seg[update]
-        deg_h = self._drift_deg_h(
-            t[update], e_stamp_s[rows], e_temp_s[rows], e_tdot_s[rows], e_lag_s[rows]
-        )
-        table = np.zeros((n, 3))
-        table[update] = deg_h * RAD_S_PER_DEG_H
-        setter = ~has
-        setter[update] = True
-        source = np.maximum.accumulate(np.where(setter, np.arange(n), -1))
-        applied = np.where((source >= 0)[:, None], table[source], carried)
-        out = rates - applied
-        passed = ~has if guard.stale_policy == 'hold' else ~fresh
-        out[passed] = rates[passed]
-        if setter.any():
-            last = int(np.flatnonzero(setter)[-1])
-            if has[last]:
-                self._set_correction(tuple(deg_h[-1].tolist()))
-            else:
-                self._set_correction((0.0, 0.0, 0.0))
-        return out, kept
-
-    def _snapshot(self) -> tuple[bool, float, bool, float, float, float, float]:
-        """What a gyro sample reads of the temperature state (for :meth:`_correct_arrays`)."""
-        status = self.status
-        estimate = self._estimator.estimate
-        if estimate is None:
-            return (status.has_temperature, status.last_temperature_stamp_s, False, 0, 0, 0, 0)
-        return (
-            status.has_temperature,
-            status.last_temperature_stamp_s,
-            True,
-            estimate.stamp_s,
-            estimate.temperature_degC,
-            estimate.tdot_degC_per_min,
-            estimate.tdot_lag_degC_per_min,
-        )
-
-    def _drift_deg_h(
-        self,
-        t: FloatArray,
-        e_stamp: FloatArray,
-        e_temperature: FloatArray,
-        e_tdot: FloatArray,
-        e_tdot_lag: FloatArray,
-    ) -> FloatArray:
-        """:meth:`_update_correction` at each stamp ``t`` with its estimate; deg/h, (K, 3).
-
-        Counts the clamps and leaves the status as the last of the calls would.
-        """
-        status = self.status
-        counters = status.counters
-        guard = self._guard
-        tdot = e_tdot
-        # if math.isnan(tdot_lag): tdot_lag = tdot
-        tdot_lag = np.where(np.isnan(e_tdot_lag), tdot, e_tdot_lag)
-        # min(max(stamp_s - estimate.stamp_s, 0.0), self._horizon_s)
-        elapsed_s = np.minimum(np.maximum(t - e_stamp, 0.0), self._horizon_s)
-        temperature = e_temperature + tdot * elapsed_s / S_PER_MIN
-        t_range, r_range = self.model.temperature_range_degC, self.model.tdot_range_degC_per_min
-        t_low, t_high, r_low, r_high = t_range.low, t_range.high, r_range.low, r_range.high
-        t_out = ~((t_low <= temperature) & (temperature <= t_high))
-        r_out = ~((r_low <= tdot) & (tdot <= r_high))
-        if guard.clamp_temperature:
-            t_used = np.minimum(np.maximum(temperature, t_low), t_high)
-        else:
-            t_used = temperature
-        if not guard.clamp_tdot:
-            r_high = guard.tdot_limit_degC_per_min
-            r_low = -r_high
-        r_used = np.minimum(np.maximum(tdot, r_low), r_high)
-        rl_used = np.minimum(np.maximum(tdot_lag, r_low), r_high)
-        t_clamped = t_used != temperature
-        r_clamped = (r_used != tdot) | (rl_used != tdot_lag)
-        counters.imu_temperature_clamped += int(np.count_nonzero(t_clamped))
-        counters.imu_tdot_clamped += int(np.count_nonzero(r_clamped))
-        counters.imu_tdot_extrapolated += int(np.count_nonzero(~r_clamped & r_out))
-        if t.size:
-            status.temperature_out_of_range = bool(t_out[-1])
-            status.tdot_out_of_range = bool(r_out[-1])
-            status.temperature_clamped = bool(t_clamped[-1])
-            status.tdot_clamped = bool(r_clamped[-1])
-            status.temperature_used_degC = float(t_used[-1])
-            status.tdot_used_degC_per_min = float(r_used[-1])
-            status.tdot_lag_used_degC_per_min = float(rl_used[-1])
-        # cx = 0.0; cx += term(t_used, r_used, rl_used) * row[0]; ... in the terms' order
-        drift = np.zeros((t.size, 3))
-        for term, row in zip(self._term_functions, self._coefficient_rows, strict=True):
-            value = np.asarray(term(t_used, r_used, rl_used))  # type: ignore[arg-type]
-            drift = drift + value.reshape(-1, 1) * np.array(row)
-        return drift
 
     def _set_correction(self, correction_deg_h: tuple[float, float, float]) -> None:
         self.status.correction_deg_h = correction_deg_h

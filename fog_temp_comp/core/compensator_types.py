@@ -1,0 +1,150 @@
+"""The compensator's settings and diagnostics: input guards, message counters, status.
+
+:class:`GuardSettings` says how missing, stale or implausible input is treated (times in s,
+temperatures in degC, Tdot in degC/min); :class:`CompensatorCounters` and
+:class:`CompensatorStatus` are what the compensator reports (the node's diagnostics).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from fog_temp_comp.core.names import TDOT_LIMIT_DEGC_PER_MIN
+
+__all__ = ['STALE_POLICIES', 'CompensatorCounters', 'CompensatorStatus', 'GuardSettings']
+
+STALE_POLICIES = ('hold', 'none')
+
+
+@dataclass(frozen=True)
+class GuardSettings:
+    """How the compensator treats missing, stale or implausible input.
+
+    Attributes
+    ----------
+    temperature_timeout_s : float
+        Temperature older (or newer) than this relative to a gyro stamp is stale; a gap this long
+        between temperature samples restarts the Tdot estimate.
+    stale_policy : str
+        With stale temperature: ``'hold'`` keeps applying the last correction, ``'none'`` passes
+        the gyro rate through uncorrected.
+    clamp_temperature : bool
+        Clamp T to the calibrated range (a polynomial in T is not extrapolated; reported).
+    clamp_tdot : bool
+        Clamp Tdot to the calibrated range. Off by default: the Tdot terms are linear physics
+        (the Shupe effect), so a model fitted on a 0.2 degC/min ramp is applied to a faster
+        warm-up, up to ``tdot_limit_degC_per_min``; beyond the calibrated range is reported
+        (``tdot_out_of_range``, counter ``imu_tdot_extrapolated``).
+    tdot_limit_degC_per_min : float
+        Bound on ``|Tdot|`` (and the lagged Tdot) fed to the model when ``clamp_tdot`` is off,
+        degC/min; values beyond it are clamped to it (reported as clamped).
+    time_jump_threshold_s : float
+        A stamp this far behind the previous one is a time jump (bag looped, clock reset) and
+        resets the filter state; a smaller step back is an out-of-order message.
+    max_temperature_step_degC : float
+        A temperature sample further than this (plus ``max_temperature_rate_degC_per_min`` times
+        the elapsed time) from the previous one is rejected as a glitch, unless
+        ``step_confirm_samples`` consecutive samples agree on the new level (a real step, which
+        restarts the Tdot estimate).
+
+    """
+
+    temperature_timeout_s: float = 10.0
+    stale_policy: str = 'hold'
+    clamp_temperature: bool = True
+    clamp_tdot: bool = False
+    tdot_limit_degC_per_min: float = TDOT_LIMIT_DEGC_PER_MIN
+    time_jump_threshold_s: float = 1.0
+    max_temperature_step_degC: float = 2.0
+    max_temperature_rate_degC_per_min: float = 20.0
+    step_confirm_samples: int = 5
+
+    def __post_init__(self) -> None:
+        if self.stale_policy not in STALE_POLICIES:
+            raise ValueError(
+                f'stale_policy must be one of {STALE_POLICIES}, got {self.stale_policy!r}'
+            )
+        for name in (
+            'temperature_timeout_s',
+            'time_jump_threshold_s',
+            'max_temperature_step_degC',
+            'max_temperature_rate_degC_per_min',
+            'tdot_limit_degC_per_min',
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and value > 0 and math.isfinite(value)):
+                raise ValueError(f'{name} must be a finite number > 0, got {value!r}')
+        if not (isinstance(self.step_confirm_samples, int) and self.step_confirm_samples >= 1):
+            raise ValueError(
+                f'step_confirm_samples must be an integer >= 1, got {self.step_confirm_samples!r}'
+            )
+
+
+@dataclass
+class CompensatorCounters:
+    """Message counts since start (for diagnostics); every input lands in exactly one group."""
+
+    imu_corrected: int = 0
+    imu_uncorrected: int = 0  # no temperature yet, or stale with stale_policy 'none'
+    imu_held: int = 0  # corrected with a held correction (stale temperature, 'hold')
+    imu_duplicate: int = 0  # dropped: same stamp as the previous gyro message
+    # flags, each also counted in one of the groups above:
+    imu_out_of_order: int = 0  # stamp earlier than the previous one (still corrected)
+    imu_nonfinite: int = 0  # NaN/inf component(s) left as they were, others corrected
+    imu_zero_stamp: int = 0  # no usable stamp: corrected with the current correction
+    imu_temperature_clamped: int = 0  # corrected with T clamped to the calibrated range
+    imu_tdot_clamped: int = 0  # corrected with Tdot clamped (calibrated range, or the limit)
+    imu_tdot_extrapolated: int = 0  # corrected with Tdot beyond the calibrated range (linear)
+    temperature_accepted: int = 0
+    temperature_rejected: int = 0  # NaN/inf value or stamp
+    temperature_duplicate: int = 0
+    temperature_out_of_order: int = 0
+    temperature_glitches: int = 0  # implausible jump, rejected
+    temperature_steps: int = 0  # confirmed step, estimate restarted
+    temperature_gaps: int = 0  # gap longer than the timeout, estimate restarted
+    time_jumps: int = 0
+
+    @property
+    def imu_total(self) -> int:
+        """Gyro messages received (each is counted once in one of the first four groups)."""
+        return self.imu_corrected + self.imu_uncorrected + self.imu_held + self.imu_duplicate
+
+    @property
+    def temperature_total(self) -> int:
+        """Temperature messages received."""
+        return (
+            self.temperature_accepted
+            + self.temperature_rejected
+            + self.temperature_duplicate
+            + self.temperature_out_of_order
+            + self.temperature_glitches
+        )
+
+
+@dataclass
+class CompensatorStatus:
+    """What the compensator is applying now (for diagnostics).
+
+    ``correction_deg_h`` (shape (3,)) is the drift subtracted from each axis at the last gyro
+    message; it is zero until the first temperature sample.
+    """
+
+    has_temperature: bool = False
+    temperature_degC: float = math.nan
+    tdot_degC_per_min: float = 0.0
+    tdot_raw_degC_per_min: float = math.nan
+    temperature_used_degC: float = math.nan
+    tdot_used_degC_per_min: float = 0.0
+    tdot_lag_used_degC_per_min: float = 0.0
+    tdot_std_degC_per_min: float = math.nan
+    temperature_clamped: bool = False
+    tdot_clamped: bool = False
+    temperature_out_of_range: bool = False
+    tdot_out_of_range: bool = False
+    temperature_stale: bool = False
+    estimator_ready: bool = False
+    last_temperature_stamp_s: float = -math.inf
+    last_imu_stamp_s: float = -math.inf
+    correction_deg_h: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    counters: CompensatorCounters = field(default_factory=CompensatorCounters)

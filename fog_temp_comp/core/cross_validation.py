@@ -1,0 +1,213 @@
+"""Cross-validation of the candidate pipelines: the held-out score of every :class:`Structure`.
+
+The Kalman Tdot series of each random walk are computed once per record (and cached while
+:func:`~fog_temp_comp.core.model_choice.choose_and_calibrate` runs); the candidates that share
+an estimator setting share its grid tables and folds (:mod:`fog_temp_comp.core.cv_folds`).
+"""
+
+from __future__ import annotations
+
+import contextvars
+import dataclasses
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from fog_temp_comp.core.calibration import (
+    CalibrationError,
+    GridTable,
+    check_identifiable,
+    table_of,
+)
+from fog_temp_comp.core.cv_folds import _Fold, _parts, _score
+from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.model_candidates import Structure, StructureScore
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.tdot import offline_estimates
+from fog_temp_comp.core.tdot_estimate import EstimateSeries
+
+__all__ = ['MAX_SHRINK_FRACTION', 'cross_validate']
+
+#: the shrinkage threshold may reach at most this fraction of the training run's typical
+#: |Tdot| (90th percentile): the garrote must be nearly linear over the calibrated range, or a
+#: fit on a slow ramp, whose Tdot it shrinks, would not extrapolate to a fast one
+MAX_SHRINK_FRACTION = 0.1
+
+
+#: the Kalman series of :func:`_series` while :func:`choose_and_calibrate` runs (it asks for
+#: the same records and walk several times); keyed by the records' ids, which it keeps alive
+_SERIES_CACHE: contextvars.ContextVar[dict[Any, Any] | None] = contextvars.ContextVar(
+    '_SERIES_CACHE', default=None
+)
+
+
+def _series(
+    records: Sequence[ChamberRecord], base: DenoiseSettings, walk: float
+) -> list[EstimateSeries]:
+    cache = _SERIES_CACHE.get()
+    key = (tuple(id(r) for r in records), base, walk)
+    if cache is not None and key in cache:
+        return list(cache[key][1])
+    series = _compute_series(records, base, walk)
+    if cache is not None:
+        cache[key] = (list(records), series)
+    return list(series)
+
+
+def _compute_series(
+    records: Sequence[ChamberRecord], base: DenoiseSettings, walk: float
+) -> list[EstimateSeries]:
+    settings = dataclasses.replace(
+        base,
+        method='kalman',
+        kalman_rate_walk_degC_per_min_per_sqrt_s=walk,
+        tdot_shrink_sigmas=0.0,
+        tdot_lag_s=0.0,
+        coil_lag_s=0.0,
+    )
+    return [
+        offline_estimates(settings, r.temp_stamps_s, r.temperature_degC, coil_lag=False)
+        for r in records
+    ]
+
+
+def _shrink_threshold(series: Sequence[EstimateSeries], sigmas: float) -> tuple[float, float]:
+    """Steady-state shrinkage threshold and the 90th percentile of |Tdot|, degC/min."""
+    std = np.concatenate(
+        [s.tdot_std_degC_per_min for s in series if s.tdot_std_degC_per_min is not None]
+    )
+    ready = np.concatenate([s.ready for s in series if s.ready is not None])
+    tdot = np.concatenate([s.tdot_degC_per_min for s in series])
+    steady = std[ready] if ready.size == std.size and np.any(ready) else std
+    threshold = sigmas * float(np.median(steady)) if steady.size else 0.0
+    typical = float(np.percentile(np.abs(tdot), 90)) if tdot.size else 0.0
+    return threshold, typical
+
+
+def _shrinkage_refusal(
+    structure: Structure,
+    series: Sequence[EstimateSeries],
+    thresholds: dict[tuple[float, float], tuple[float, float]],
+) -> str:
+    """Why the structure's shrinkage is too strong on these series ('' if it is not).
+
+    ``thresholds`` caches :func:`_shrink_threshold` per (walk, shrinkage).
+    """
+    key = (structure.walk, structure.shrink_sigmas)
+    if key not in thresholds:
+        thresholds[key] = _shrink_threshold(series, structure.shrink_sigmas)
+    threshold, typical = thresholds[key]
+    if threshold > MAX_SHRINK_FRACTION * typical:
+        return (
+            f'shrinkage threshold {threshold:.3g} degC/min exceeds '
+            f'{MAX_SHRINK_FRACTION:g} of the typical |Tdot| {typical:.3g} degC/min'
+        )
+    return ''
+
+
+def cross_validate(
+    records: Sequence[ChamberRecord],
+    base: DenoiseSettings,
+    structures: Sequence[Structure],
+    heldout: Sequence[ChamberRecord] = (),
+) -> list[StructureScore]:
+    """Held-out score of every structure (see the module docstring for the folds).
+
+    Parameters
+    ----------
+    records : sequence of ChamberRecord
+        Training runs (the gyro may be reduced to grid means).
+    base : DenoiseSettings
+        Kalman settings with the sensor's noise; each structure sets its own free settings.
+    structures : sequence of Structure
+        The candidates.
+    heldout : sequence of ChamberRecord
+        Runs to score on instead of folds of the training runs.
+
+    Returns
+    -------
+    list of StructureScore
+        In the order of ``structures``.
+
+    """
+    period = base.tdot_period_s
+    cache: dict[float, tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
+    # the series through each coil lag, and the grid tables and folds of each estimator
+    # setting, are shared by the structures that differ only in their terms or fit
+    lagged: dict[tuple[float, float], tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
+    folds_cache: dict[tuple[float, float, float, float], tuple[GridTable, list[_Fold]]] = {}
+    thresholds: dict[tuple[float, float], tuple[float, float]] = {}
+    identifiable: dict[tuple[Any, ...], CalibrationError | None] = {}
+    scores = []
+    for structure in structures:
+        result = StructureScore(structure)
+        scores.append(result)
+        if structure.walk not in cache:
+            cache[structure.walk] = (
+                _series(records, base, structure.walk),
+                _series(heldout, base, structure.walk),
+            )
+        train_series, test_series = cache[structure.walk]
+        lag = structure.tdot_lag_s if 'Tdot_lag' in structure.terms else 0.0
+        result.error = _shrinkage_refusal(structure, train_series, thresholds)
+        if result.error:
+            continue
+        try:
+            coil, shrink = structure.coil_lag_s, structure.shrink_sigmas
+            key = (structure.walk, shrink, lag, coil)
+            if key not in folds_cache:
+                if (structure.walk, coil) not in lagged:
+                    lagged[structure.walk, coil] = (
+                        [s.lagged(coil) for s in train_series],
+                        [s.lagged(coil) for s in test_series],
+                    )
+                train_lagged, test_lagged = lagged[structure.walk, coil]
+                folds_cache[key] = _folds(
+                    records, heldout, train_lagged, test_lagged, shrink, lag, period
+                )
+            whole, folds = folds_cache[key]
+            # a structure the final fit would refuse (e.g. a coil lag so long that the lagged
+            # temperature no longer swings) is not a candidate; the check reads T and Tdot
+            # only, which the Tdot lag does not change
+            checked = (structure.walk, shrink, coil, tuple(structure.terms))
+            if checked not in identifiable:
+                identifiable[checked] = _refusal(whole, structure.terms)
+            refused = identifiable[checked]
+            if refused is not None:
+                raise refused
+            result.criterion, result.parts = _score(folds, structure.terms, period, structure.fit)
+        except CalibrationError as err:
+            result.error = str(err)
+    return scores
+
+
+def _folds(
+    records: Sequence[ChamberRecord],
+    heldout: Sequence[ChamberRecord],
+    train_series: Sequence[EstimateSeries],
+    test_series: Sequence[EstimateSeries],
+    shrink_sigmas: float,
+    tdot_lag_s: float,
+    period_s: float,
+) -> tuple[GridTable, list[_Fold]]:
+    """The training rows of one estimator setting (shrinkage, Tdot lag in s), and its folds."""
+    tables = [
+        table_of(r, s.shaped(shrink_sigmas, tdot_lag_s), period_s)
+        for r, s in zip(records, train_series, strict=True)
+    ]
+    tests = [
+        table_of(r, s.shaped(shrink_sigmas, tdot_lag_s), period_s)
+        for r, s in zip(heldout, test_series, strict=True)
+    ]
+    folds = [_Fold(train, parts, period_s) for train, parts in _parts(tables, tests)]
+    return GridTable.concatenate(tables), folds
+
+
+def _refusal(table: GridTable, terms: Sequence[str]) -> CalibrationError | None:
+    """Why the final fit would refuse ``terms`` on these rows (None: it would not)."""
+    try:
+        check_identifiable(table, terms)
+    except CalibrationError as err:
+        return err
+    return None

@@ -1,0 +1,131 @@
+"""The candidate pipelines of ``calibrate``'s model choice, and their cross-validated scores.
+
+A :class:`Structure` is model terms plus the Kalman Tdot estimator's free settings (random walk
+in degC/min per sqrt(s), shrinkage in standard deviations, time constants in s);
+:func:`default_structures` lists every candidate, :class:`StructureScore` holds one's score.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.model import CANDIDATE_TERMS
+
+__all__ = [
+    'KALMAN_WALKS',
+    'SHRINK_SIGMAS',
+    'TDOT_LAGS_S',
+    'Structure',
+    'StructureScore',
+    'default_structures',
+]
+
+#: Kalman Tdot random-walk intensities tried, degC/min per sqrt(s)
+KALMAN_WALKS = (0.001, 0.003, 0.01)
+#: Tdot shrinkage levels tried, posterior standard deviations (each also keeps Tdot out of the
+#: model while the Kalman filter warms up)
+SHRINK_SIGMAS = (0.5, 1.0, 2.0, 3.0)
+#: lead-lag time constants tried for the ``Tdot_lag`` term, s
+TDOT_LAGS_S = (30.0, 60.0, 120.0, 240.0, 480.0, 960.0)
+
+
+@dataclass(frozen=True)
+class Structure:
+    """One candidate pipeline: model terms and the Tdot estimator's free settings.
+
+    Attributes
+    ----------
+    terms : tuple of str
+        Model terms.
+    walk : float
+        Kalman Tdot random walk, degC/min per sqrt(s).
+    shrink_sigmas : float
+        Tdot shrinkage, posterior standard deviations.
+    tdot_lag_s : float
+        Time constant of ``Tdot_lag`` (0 without that term), s.
+    coil_lag_s : float
+        Sensor-to-coil lag applied to the estimated temperature and Tdot (0: none), s.
+    fit : str
+        ``'gls'``: least squares prewhitened for the wandering bias
+        (:mod:`fog_temp_comp.core.gls`); ``'ols'``: ordinary least squares.
+
+    """
+
+    terms: tuple[str, ...]
+    walk: float
+    shrink_sigmas: float
+    tdot_lag_s: float = 0.0
+    coil_lag_s: float = 0.0
+    fit: str = 'ols'
+
+    @property
+    def model(self) -> str:
+        """The structure without the estimator settings, e.g. ``'const,T,Tdot,Tdot_lag'``."""
+        return ','.join(self.terms) + (' + coil lag' if self.coil_lag_s else '')
+
+    @property
+    def complexity(self) -> int:
+        """Fitted parameters per axis, plus one for a time constant (lead-lag or coil lag)."""
+        return len(self.terms) + int('Tdot_lag' in self.terms) + int(self.coil_lag_s > 0)
+
+    @property
+    def name(self) -> str:
+        """Label for reports."""
+        lag = f', tdot_lag_s {self.tdot_lag_s:g}' if 'Tdot_lag' in self.terms else ''
+        coil = f', coil_lag_s {self.coil_lag_s:g}' if self.coil_lag_s else ''
+        return (
+            f'{self.model} (walk {self.walk:g}, shrink {self.shrink_sigmas:g}{lag}{coil}, '
+            f'{self.fit})'
+        )
+
+    def settings(self, base: DenoiseSettings) -> DenoiseSettings:
+        """``base`` (a Kalman setting) with this structure's estimator settings."""
+        return dataclasses.replace(
+            base,
+            method='kalman',
+            kalman_rate_walk_degC_per_min_per_sqrt_s=self.walk,
+            tdot_shrink_sigmas=self.shrink_sigmas,
+            tdot_lag_s=self.tdot_lag_s if 'Tdot_lag' in self.terms else 0.0,
+            coil_lag_s=self.coil_lag_s,
+        )
+
+
+def default_structures(
+    walks: Sequence[float] = KALMAN_WALKS,
+    shrinks: Sequence[float] = SHRINK_SIGMAS,
+    lags_s: Sequence[float] = TDOT_LAGS_S,
+) -> list[Structure]:
+    """Every candidate: the paper's terms and extras; plain, with a lead-lag, or a coil lag.
+
+    The terms are the paper's, ``+T2``, ``+T_Tdot`` or both (:data:`CANDIDATE_TERMS`).
+
+    ``T_Tdot`` is a rate sensitivity that changes with temperature (the fibre's Shupe factor
+    does), ``T2`` a bent static drift; neither is in the paper, and either is kept only where
+    held-out data asks for it.
+
+    The lead-lag ``Tdot_lag`` fits a sensor ahead of or behind the coil; the coil lag lags the
+    estimated temperature and Tdot (a coil behind the sensor); each at every time constant of
+    ``lags_s`` and with every estimator setting.
+    """
+    out = []
+    for walk in walks:
+        for shrink in shrinks:
+            for terms in CANDIDATE_TERMS:
+                out.append(Structure(terms, walk, shrink))
+                out += [Structure((*terms, 'Tdot_lag'), walk, shrink, lag) for lag in lags_s]
+                out += [Structure(terms, walk, shrink, coil_lag_s=lag) for lag in lags_s]
+    return out
+
+
+@dataclass
+class StructureScore:
+    """Cross-validated score of one structure (lower is better; ``inf`` if it failed)."""
+
+    structure: Structure
+    criterion: float = math.inf
+    error: str = ''
+    parts: list[float] = field(default_factory=list)

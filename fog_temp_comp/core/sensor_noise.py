@@ -1,0 +1,71 @@
+"""The temperature sensor as the training bags show it: quantization step and white noise, degC.
+
+:func:`sensor_noise` measures both from the raw temperature samples; :class:`SensorNoise` puts
+them into the Kalman filter's measurement model (:class:`DenoiseSettings`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.record import ChamberRecord
+
+__all__ = ['SensorNoise', 'sensor_noise']
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """The temperature sensor as the bags show it: step and white noise, degC."""
+
+    quantum_degC: float
+    noise_degC: float
+
+    def apply(self, settings: DenoiseSettings) -> DenoiseSettings:
+        """``settings`` with this sensor's quantization and noise (Kalman measurement model)."""
+        return dataclasses.replace(
+            settings,
+            temperature_quantum_degC=self.quantum_degC,
+            temperature_noise_degC=self.noise_degC,
+        )
+
+
+def sensor_noise(records: Sequence[ChamberRecord]) -> SensorNoise:
+    """Quantization step and white noise of the temperature sensor, from the raw samples.
+
+    The step is the smallest difference between distinct readings when most differences are
+    whole multiples of it (else 0: not quantized). The noise is from the second differences,
+    whose variance is 6 times that of white noise (a smooth chamber temperature adds nothing
+    at that lag); the quantization's ``step^2 / 12`` is taken out of it.
+
+    Parameters
+    ----------
+    records : sequence of ChamberRecord
+        Training runs (temperature samples at their full rate).
+
+    Returns
+    -------
+    SensorNoise
+
+    """
+    values = np.concatenate([r.temperature_degC for r in records])
+    levels = np.unique(values)
+    diffs = np.diff(levels)
+    diffs = diffs[diffs > 1e-9]
+    quantum = 0.0
+    if diffs.size:
+        step = float(diffs.min())
+        multiples = diffs / step
+        if step >= 1e-4 and np.mean(np.abs(multiples - np.round(multiples)) < 0.01) > 0.9:
+            quantum = step
+    second = np.concatenate([np.diff(r.temperature_degC, 2) for r in records])
+    total = float(np.mean(second * second) / 6.0) if second.size else 0.0
+    noise = math.sqrt(max(total - quantum * quantum / 12.0, 0.0))
+    if quantum == 0.0:
+        noise = max(noise, 1e-4)  # a model needs some measurement noise
+    return SensorNoise(quantum, noise)

@@ -1,0 +1,147 @@
+"""What the Tdot estimators produce and share: one estimate, the interface, a series of estimates.
+
+:class:`TdotEstimate` is one estimate (stamp s, temperature degC, Tdot degC/min),
+:class:`TdotEstimator` the interface of the online estimators, :class:`EstimateSeries` a stream
+of estimates as arrays (with the offline coil lag and Tdot shaping).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fog_temp_comp.core.coil import coil_lag
+
+FloatArray = NDArray[np.float64]
+
+__all__ = ['EstimateSeries', 'TdotEstimate', 'TdotEstimator']
+
+
+@dataclass(frozen=True)
+class TdotEstimate:
+    """An estimate valid at ``stamp_s``: temperature (degC) and its rate (degC/min).
+
+    ``tdot_std_degC_per_min`` is the estimator's posterior standard deviation of Tdot (NaN where
+    the estimator has none), ``ready`` whether that estimator had finished warming up;
+    ``tdot_lag_degC_per_min`` is Tdot through the ``tdot_lag_s`` lag (NaN before
+    :class:`TdotShaper`).
+    """
+
+    stamp_s: float
+    temperature_degC: float
+    tdot_degC_per_min: float
+    raw_tdot_degC_per_min: float = math.nan
+    tdot_std_degC_per_min: float = math.nan
+    tdot_lag_degC_per_min: float = math.nan
+    ready: bool = True
+
+
+class TdotEstimator(Protocol):
+    """Interface of the online Tdot estimators."""
+
+    def add(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Feed one finite sample (stamps increasing); return True if the estimate changed."""
+        ...
+
+    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
+        """Feed samples shape (n,) in order; return the new estimates, oldest first."""
+        ...
+
+    @property
+    def estimate(self) -> TdotEstimate | None:
+        """The latest estimate, None before the first sample."""
+        ...
+
+    @property
+    def ready(self) -> bool:
+        """Whether warm-up is over (the estimate has its full quality)."""
+        ...
+
+    def reset(self) -> None:
+        """Forget all samples."""
+        ...
+
+
+def _pairs(stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[tuple[float, float]]:
+    t = np.asarray(stamps_s, dtype=np.float64).ravel()
+    x = np.asarray(temperature_degC, dtype=np.float64).ravel()
+    if t.shape != x.shape:
+        raise ValueError(f'stamps and temperatures must have equal length, got {t.size}, {x.size}')
+    return list(zip(t.tolist(), x.tolist(), strict=True))
+
+
+def _add_each(
+    estimator: TdotEstimator, stamps_s: ArrayLike, temperature_degC: ArrayLike
+) -> list[TdotEstimate]:
+    """``add`` each sample in order; the estimates of the samples that produced one."""
+    out = []
+    for stamp, value in _pairs(stamps_s, temperature_degC):
+        if estimator.add(stamp, value):
+            estimate = estimator.estimate
+            assert estimate is not None
+            out.append(estimate)
+    return out
+
+
+@dataclass(frozen=True)
+class EstimateSeries:
+    """A stream of estimates as arrays, each shape (n,): stamp s, degC, degC/min.
+
+    ``tdot_std_degC_per_min`` (posterior std, NaN where unknown), ``ready`` (estimator warmed
+    up) and ``tdot_lag_degC_per_min`` (Tdot through the ``tdot_lag_s`` lag; None until
+    :meth:`shaped`) are optional.
+    """
+
+    stamp_s: FloatArray
+    temperature_degC: FloatArray
+    tdot_degC_per_min: FloatArray
+    tdot_std_degC_per_min: FloatArray | None = None
+    tdot_lag_degC_per_min: FloatArray | None = None
+    ready: NDArray[np.bool_] | None = None
+
+    @staticmethod
+    def from_estimates(estimates: list[TdotEstimate]) -> EstimateSeries:
+        """Arrays of a list of :class:`TdotEstimate`."""
+        return EstimateSeries(
+            np.array([e.stamp_s for e in estimates], dtype=np.float64),
+            np.array([e.temperature_degC for e in estimates], dtype=np.float64),
+            np.array([e.tdot_degC_per_min for e in estimates], dtype=np.float64),
+            np.array([e.tdot_std_degC_per_min for e in estimates], dtype=np.float64),
+            np.array([e.tdot_lag_degC_per_min for e in estimates], dtype=np.float64),
+            np.array([e.ready for e in estimates], dtype=bool),
+        )
+
+    def lagged(self, coil_lag_s: float) -> EstimateSeries:
+        """Temperature and Tdot through the coil lag (:func:`fog_temp_comp.core.coil.coil_lag`)."""
+        if coil_lag_s == 0:
+            return self
+        return EstimateSeries(
+            self.stamp_s,
+            coil_lag(self.stamp_s, self.temperature_degC, coil_lag_s),
+            coil_lag(self.stamp_s, self.tdot_degC_per_min, coil_lag_s),
+            self.tdot_std_degC_per_min,
+            ready=self.ready,
+        )
+
+    def shaped(self, tdot_shrink_sigmas: float, tdot_lag_s: float) -> EstimateSeries:
+        """What :class:`TdotShaper` does online, on the whole series (same result)."""
+        tdot = self.tdot_degC_per_min
+        std = self.tdot_std_degC_per_min
+        if tdot_shrink_sigmas > 0 and std is not None:
+            known = ~np.isnan(std)
+            threshold = tdot_shrink_sigmas * np.where(known, std, 0.0)
+            with np.errstate(divide='ignore', invalid='ignore'):
+                gain = np.where(np.abs(tdot) > threshold, 1.0 - (threshold / tdot) ** 2, 0.0)
+            if self.ready is not None:
+                gain = np.where(known & ~self.ready, 0.0, gain)
+            tdot = np.where(known, tdot * gain, tdot)
+        return dataclasses.replace(
+            self,
+            tdot_degC_per_min=tdot,
+            tdot_lag_degC_per_min=coil_lag(self.stamp_s, tdot, tdot_lag_s),
+        )

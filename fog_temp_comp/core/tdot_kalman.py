@@ -1,0 +1,199 @@
+"""The Kalman filter on temperature and its rate (method ``'kalman'``), once per sample.
+
+Stamps in s, temperatures in degC, Tdot in degC/min (the state holds it in degC/s).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.tdot_estimate import EstimateSeries, TdotEstimate, _add_each
+from fog_temp_comp.core.units import S_PER_MIN
+
+__all__ = ['KalmanTdotEstimator']
+
+
+class KalmanTdotEstimator:
+    """Kalman filter on temperature and its rate (method ``'kalman'``), once per sample.
+
+    State ``[T (degC), Tdot (degC/s)]``; process: ``T`` integrates ``Tdot``, and ``Tdot`` is a
+    random walk of intensity ``q = (kalman_rate_walk_degC_per_min_per_sqrt_s / 60)^2``
+    (degC^2/s^3), i.e. ``Q = q [[dt^3/3, dt^2/2], [dt^2/2, dt]]``; measurement: one reading of
+    variance ``temperature_noise_degC^2 + temperature_quantum_degC^2 / 12`` (white noise plus
+    uniform quantization error, so the filter knows the quantization step). Irregular sample
+    intervals are handled exactly; a sample not after the previous one is ignored.
+
+    Parameters
+    ----------
+    settings : DenoiseSettings
+        ``kalman_rate_walk_degC_per_min_per_sqrt_s``, ``temperature_noise_degC`` and
+        ``temperature_quantum_degC``.
+
+    Notes
+    -----
+    The first sample sets ``T``, with ``Tdot = 0`` and a prior standard deviation of 1 degC/min.
+    In steady state the filter is an alpha-beta filter; its Tdot bandwidth is about
+    ``(q / R)^(1/4)`` rad/s, i.e. it averages over roughly ``(R / q)^(1/4)`` seconds.
+
+    """
+
+    #: prior standard deviation of Tdot at start-up, degC/min
+    PRIOR_TDOT_DEGC_PER_MIN = 1.0
+
+    def __init__(self, settings: DenoiseSettings) -> None:
+        self.settings = settings
+        self.q = (settings.kalman_rate_walk_degC_per_min_per_sqrt_s / S_PER_MIN) ** 2
+        self.r = settings.measurement_variance_degC2
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all samples."""
+        self._stamp = math.nan
+        self._t = 0.0
+        self._v = 0.0  # degC/s
+        self._p00 = self._p01 = self._p11 = 0.0
+        self._ready = False
+        self._estimate: TdotEstimate | None = None
+
+    def add(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Predict to ``stamp_s`` and update with the reading; return True (estimate changed)."""
+        z = temperature_degC
+        if self._estimate is None:
+            self._stamp = stamp_s
+            self._t, self._v = z, 0.0
+            self._p00, self._p01 = self.r, 0.0
+            self._p11 = (self.PRIOR_TDOT_DEGC_PER_MIN / S_PER_MIN) ** 2
+            self._estimate = TdotEstimate(
+                stamp_s, z, 0.0, tdot_std_degC_per_min=self.PRIOR_TDOT_DEGC_PER_MIN, ready=False
+            )
+            return True
+        dt = stamp_s - self._stamp
+        if not dt > 0.0:
+            return False
+        q = self.q
+        # predict: x = F x, P = F P F' + Q
+        t = self._t + dt * self._v
+        p00 = self._p00 + 2.0 * dt * self._p01 + dt * dt * self._p11 + q * dt**3 / 3.0
+        p01 = self._p01 + dt * self._p11 + q * dt * dt / 2.0
+        p11 = self._p11 + q * dt
+        # update with z = T + noise
+        s = p00 + self.r
+        k0, k1 = p00 / s, p01 / s
+        innovation = z - t
+        self._t = t + k0 * innovation
+        self._v += k1 * innovation
+        previous = self._p11
+        self._p00, self._p01, self._p11 = p00 - k0 * p00, p01 - k0 * p01, p11 - k1 * p01
+        self._stamp = stamp_s
+        if not self._ready and abs(self._p11 - previous) <= 1e-3 * self._p11:
+            self._ready = True
+        self._estimate = TdotEstimate(
+            stamp_s,
+            self._t,
+            self._v * S_PER_MIN,
+            tdot_std_degC_per_min=math.sqrt(max(self._p11, 0.0)) * S_PER_MIN,
+            ready=self._ready,
+        )
+        return True
+
+    def add_series(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> EstimateSeries:
+        """Feed samples shape (n,) in order; the estimates as arrays (one per used sample).
+
+        The same arithmetic as :meth:`add`, bit for bit, without an object per sample (what
+        calibration runs over a whole record).
+        """
+        t_in = np.asarray(stamps_s, dtype=np.float64).ravel().tolist()
+        z_in = np.asarray(temperature_degC, dtype=np.float64).ravel().tolist()
+        if len(t_in) != len(z_in):
+            raise ValueError('stamps and temperatures must have equal length')
+        out_t: list[float] = []
+        out_x: list[float] = []
+        out_v: list[float] = []
+        out_p: list[float] = []
+        out_ready: list[bool] = []
+        k = 0
+        if self._estimate is None and t_in:
+            self.add(t_in[0], z_in[0])
+            out_t.append(t_in[0])
+            out_x.append(z_in[0])
+            out_v.append(0.0)
+            out_p.append(self._p11)
+            out_ready.append(False)
+            k = 1
+        q, r = self.q, self.r
+        stamp, t, v = self._stamp, self._t, self._v
+        p00, p01, p11, ready = self._p00, self._p01, self._p11, self._ready
+        # The covariance is a function of itself and dt only: once a step with some dt leaves
+        # it unchanged (the filter's steady state, to the last bit), further steps with that dt
+        # leave it unchanged too, and their gains are the last ones; they are not recomputed.
+        steady_dt = math.nan
+        k0 = k1 = 0.0
+        for ts, z in zip(t_in[k:], z_in[k:], strict=True):
+            dt = ts - stamp
+            if not dt > 0.0:
+                continue
+            tp = t + dt * v
+            innovation = z - tp
+            if dt != steady_dt:
+                a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
+                a01 = p01 + dt * p11 + q * dt * dt / 2.0
+                a11 = p11 + q * dt
+                sv = a00 + r
+                k0, k1 = a00 / sv, a01 / sv
+                previous = (p00, p01, p11)
+                p00, p01, p11 = a00 - k0 * a00, a01 - k0 * a01, a11 - k1 * a01
+                if previous == (p00, p01, p11):
+                    steady_dt = dt
+                else:
+                    steady_dt = math.nan
+                    if not ready and abs(p11 - previous[2]) <= 1e-3 * p11:
+                        ready = True
+            t = tp + k0 * innovation
+            v += k1 * innovation
+            stamp = ts
+            ready = ready or steady_dt == dt
+            out_t.append(ts)
+            out_x.append(t)
+            out_v.append(v)
+            out_p.append(p11)
+            out_ready.append(ready)
+        self._stamp, self._t, self._v = stamp, t, v
+        self._p00, self._p01, self._p11, self._ready = p00, p01, p11, ready
+        if out_t:
+            self._estimate = TdotEstimate(
+                out_t[-1],
+                t,
+                v * S_PER_MIN,
+                tdot_std_degC_per_min=math.sqrt(max(p11, 0.0)) * S_PER_MIN,
+                ready=ready,
+            )
+        return EstimateSeries(
+            np.array(out_t),
+            np.array(out_x),
+            np.array(out_v) * S_PER_MIN,
+            np.sqrt(np.maximum(np.array(out_p), 0.0)) * S_PER_MIN,
+            ready=np.array(out_ready, dtype=bool),
+        )
+
+    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
+        """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
+        return _add_each(self, stamps_s, temperature_degC)
+
+    @property
+    def estimate(self) -> TdotEstimate | None:
+        """Filtered temperature and Tdot at the latest sample."""
+        return self._estimate
+
+    @property
+    def ready(self) -> bool:
+        """True once the Tdot variance has converged (changes < 0.1 % per sample)."""
+        return self._ready
+
+    @property
+    def tdot_std_degC_per_min(self) -> float:
+        """Current posterior standard deviation of Tdot, degC/min."""
+        return math.sqrt(max(self._p11, 0.0)) * S_PER_MIN
