@@ -211,6 +211,33 @@ def hac_covariance(design: ArrayLike, residuals: ArrayLike, lag: int) -> FloatAr
     return np.asarray(q_inv @ s @ q_inv * (n / (n - p)), dtype=np.float64)
 
 
+def _checked_fit_inputs(
+    design: ArrayLike, y: ArrayLike, names: Sequence[str], axes: Sequence[str] | None
+) -> tuple[FloatArray, FloatArray, Sequence[str]]:
+    """:func:`fit_ols`'s inputs as arrays, design (N, p) and y (N, M), and the axis names."""
+    x = np.asarray(design, dtype=np.float64)
+    yy = np.asarray(y, dtype=np.float64)
+    if x.ndim != 2:
+        raise ValueError(f'design must be (N, p), got shape {x.shape}')
+    n, p = x.shape
+    if yy.ndim == 1:
+        yy = yy[:, None]
+    if yy.ndim != 2 or yy.shape[0] != n:
+        raise ValueError(f'y must be ({n},) or ({n}, M), got shape {np.shape(y)}')
+    if len(names) != p:
+        raise ValueError(f'{len(names)} names for {p} design columns')
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(yy))):
+        raise ValueError('design and y must be finite')
+    if n <= p:
+        raise ValueError(f'{n} rows cannot fit {p} coefficients')
+    m = yy.shape[1]
+    if axes is None:
+        axes = AXES if m == len(AXES) else tuple(str(k) for k in range(m))
+    if len(axes) != m:
+        raise ValueError(f'{len(axes)} axis names for {m} columns of y')
+    return x, yy, axes
+
+
 def fit_ols(
     design: ArrayLike,
     y: ArrayLike,
@@ -245,26 +272,8 @@ def fit_ols(
         Shapes disagree, non-finite data, ``N <= p``, or a rank-deficient design.
 
     """
-    x = np.asarray(design, dtype=np.float64)
-    yy = np.asarray(y, dtype=np.float64)
-    if x.ndim != 2:
-        raise ValueError(f'design must be (N, p), got shape {x.shape}')
-    n, p = x.shape
-    if yy.ndim == 1:
-        yy = yy[:, None]
-    if yy.ndim != 2 or yy.shape[0] != n:
-        raise ValueError(f'y must be ({n},) or ({n}, M), got shape {np.shape(y)}')
-    if len(names) != p:
-        raise ValueError(f'{len(names)} names for {p} design columns')
-    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(yy))):
-        raise ValueError('design and y must be finite')
-    if n <= p:
-        raise ValueError(f'{n} rows cannot fit {p} coefficients')
-    m = yy.shape[1]
-    if axes is None:
-        axes = AXES if m == len(AXES) else tuple(str(k) for k in range(m))
-    if len(axes) != m:
-        raise ValueError(f'{len(axes)} axis names for {m} columns of y')
+    x, yy, axes = _checked_fit_inputs(design, y, names, axes)
+    (n, p), m = x.shape, yy.shape[1]
     coeffs, _, rank, _ = np.linalg.lstsq(x, yy, rcond=None)
     if rank < p:
         raise ValueError(f'design has rank {rank} < {p}: the terms are not identifiable')
@@ -324,6 +333,39 @@ class Problem:
         return self.message
 
 
+def _coverage_problems(
+    t: FloatArray,
+    r: FloatArray,
+    terms: Sequence[str],
+    min_swing_degC: float,
+    min_tdot_spread_degC_per_min: float,
+) -> list[Problem]:
+    """Errors for a temperature swing (degC) or a Tdot spread (degC/min) too small to fit."""
+    problems: list[Problem] = []
+    if 'T' in terms:
+        swing = float(np.ptp(t))
+        if swing < min_swing_degC:
+            problems.append(
+                Problem(
+                    'error',
+                    f'temperature swing {swing:.2f} degC is below {min_swing_degC:g} degC: '
+                    'the temperature coefficient cannot be identified; use a chamber cycle',
+                )
+            )
+    if 'Tdot' in terms:
+        spread = float(np.ptp(r))
+        if spread < min_tdot_spread_degC_per_min:
+            problems.append(
+                Problem(
+                    'error',
+                    f'Tdot spread {spread:.3f} degC/min is below '
+                    f'{min_tdot_spread_degC_per_min:g} degC/min: the Tdot coefficient cannot '
+                    'be identified; use a ramp',
+                )
+            )
+    return problems
+
+
 def identifiability(
     temperature_degC: ArrayLike,
     tdot_degC_per_min: ArrayLike,
@@ -362,27 +404,7 @@ def identifiability(
         return [Problem('error', 'no calibration rows: gyro and temperature do not overlap')]
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(r))):
         return [Problem('error', 'temperature or Tdot holds non-finite values')]
-    if 'T' in terms:
-        swing = float(np.ptp(t))
-        if swing < min_swing_degC:
-            problems.append(
-                Problem(
-                    'error',
-                    f'temperature swing {swing:.2f} degC is below {min_swing_degC:g} degC: '
-                    'the temperature coefficient cannot be identified; use a chamber cycle',
-                )
-            )
-    if 'Tdot' in terms:
-        spread = float(np.ptp(r))
-        if spread < min_tdot_spread_degC_per_min:
-            problems.append(
-                Problem(
-                    'error',
-                    f'Tdot spread {spread:.3f} degC/min is below '
-                    f'{min_tdot_spread_degC_per_min:g} degC/min: the Tdot coefficient cannot '
-                    'be identified; use a ramp',
-                )
-            )
+    problems += _coverage_problems(t, r, terms, min_swing_degC, min_tdot_spread_degC_per_min)
     if t.size <= len(terms):
         problems.append(
             Problem('error', f'{t.size} grid rows cannot fit {len(terms)} coefficients')
