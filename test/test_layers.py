@@ -123,6 +123,40 @@ def test_the_check_finds_a_cycle(tmp_path: Path) -> None:
     assert any('import cycle' in p for p in violations(root))
 
 
+#: a module holds one job; past this many lines it holds several (split it where a seam exists)
+MAX_MODULE_LINES = 600
+#: likewise a function
+MAX_FUNCTION_LINES = 80
+
+
+def oversized(root: Path) -> list[str]:
+    """Modules over :data:`MAX_MODULE_LINES` and functions over :data:`MAX_FUNCTION_LINES`."""
+    found = []
+    for path in sorted(root.rglob('*.py')):
+        text = path.read_text(encoding='utf-8')
+        lines = len(text.splitlines())
+        if lines > MAX_MODULE_LINES:
+            found.append(f'{path.relative_to(root)}: {lines} lines')
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                length = (node.end_lineno or node.lineno) - node.lineno + 1
+                if length > MAX_FUNCTION_LINES:
+                    found.append(f'{path.relative_to(root)}: {node.name}() {length} lines')
+    return found
+
+
+def test_no_module_or_function_outgrows_one_job(tmp_path: Path) -> None:
+    assert oversized(ROOT) == []
+    # the check itself finds both
+    (tmp_path / 'big.py').write_text('x = 1\n' * (MAX_MODULE_LINES + 1))
+    body = ''.join(f'    y{k} = {k}\n' for k in range(MAX_FUNCTION_LINES))
+    (tmp_path / 'long.py').write_text(f'def f():\n{body}')
+    assert oversized(tmp_path) == [
+        f'big.py: {MAX_MODULE_LINES + 1} lines',
+        f'long.py: f() {MAX_FUNCTION_LINES + 1} lines',
+    ]
+
+
 def test_the_core_imports_without_ros_or_bag_libraries() -> None:
     """Importing every core module pulls in neither rclpy, rosbags, matplotlib nor dask."""
     code = (
