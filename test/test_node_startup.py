@@ -107,6 +107,7 @@ def test_no_start_up_spike_on_the_node(
         default_coefficients.denoise,
         kalman_rate_walk_degC_per_min_per_sqrt_s=0.01,
         tdot_shrink_sigmas=0.0,
+        tdot_wiener_window_s=0.0,
     )
     spiky = replay(
         Compensator(default_coefficients.model, previous),
@@ -146,6 +147,7 @@ def test_soak_gets_no_estimator_noise_on_the_node(
         default_coefficients.denoise,
         kalman_rate_walk_degC_per_min_per_sqrt_s=0.01,
         tdot_shrink_sigmas=0.0,
+        tdot_wiener_window_s=0.0,
     )
     noisy = replay(
         Compensator(default_coefficients.model, previous),

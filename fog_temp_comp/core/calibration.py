@@ -156,6 +156,7 @@ def grid_table(
             series = (
                 EstimateSeries(stamp, temp, tdot)
                 .lagged(settings.coil_lag_s)
+                .wiener(settings.tdot_wiener_window_s)
                 .shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s)
             )
         else:
@@ -344,7 +345,9 @@ def _fit_coil_lag(
         return [
             table_of(
                 r,
-                b.lagged(tau).shaped(lagged.tdot_shrink_sigmas, lagged.tdot_lag_s),
+                b.lagged(tau)
+                .wiener(lagged.tdot_wiener_window_s)
+                .shaped(lagged.tdot_shrink_sigmas, lagged.tdot_lag_s),
                 lagged.tdot_period_s,
             )
             for r, b in zip(records, bases, strict=True)

@@ -63,6 +63,7 @@ def _compute_series(
         method='kalman',
         kalman_rate_walk_degC_per_min_per_sqrt_s=walk,
         tdot_shrink_sigmas=0.0,
+        tdot_wiener_window_s=0.0,
         tdot_lag_s=0.0,
         coil_lag_s=0.0,
     )
@@ -135,8 +136,10 @@ def cross_validate(
     cache: dict[float, tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
     # the series through each coil lag, and the grid tables and folds of each estimator
     # setting, are shared by the structures that differ only in their terms or fit
-    lagged: dict[tuple[float, float], tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
-    folds_cache: dict[tuple[float, float, float, float], tuple[GridTable, list[_Fold]]] = {}
+    lagged: dict[
+        tuple[float, float, float], tuple[list[EstimateSeries], list[EstimateSeries]]
+    ] = {}
+    folds_cache: dict[tuple[float, ...], tuple[GridTable, list[_Fold]]] = {}
     thresholds: dict[tuple[float, float], tuple[float, float]] = {}
     identifiable: dict[tuple[Any, ...], CalibrationError | None] = {}
     scores = []
@@ -155,14 +158,15 @@ def cross_validate(
             continue
         try:
             coil, shrink = structure.coil_lag_s, structure.shrink_sigmas
-            key = (structure.walk, shrink, lag, coil)
+            wiener = structure.wiener_window_s
+            key = (structure.walk, shrink, lag, coil, wiener)
             if key not in folds_cache:
-                if (structure.walk, coil) not in lagged:
-                    lagged[structure.walk, coil] = (
-                        [s.lagged(coil) for s in train_series],
-                        [s.lagged(coil) for s in test_series],
+                if (structure.walk, coil, wiener) not in lagged:
+                    lagged[structure.walk, coil, wiener] = (
+                        [s.lagged(coil).wiener(wiener) for s in train_series],
+                        [s.lagged(coil).wiener(wiener) for s in test_series],
                     )
-                train_lagged, test_lagged = lagged[structure.walk, coil]
+                train_lagged, test_lagged = lagged[structure.walk, coil, wiener]
                 folds_cache[key] = _folds(
                     records, heldout, train_lagged, test_lagged, shrink, lag, period
                 )

@@ -89,6 +89,12 @@ class DenoiseSettings:
         ``sigma`` the estimator's posterior standard deviation of Tdot (method ``'kalman'``
         only; 0: off). Large at start-up, so the Tdot terms enter as the estimate becomes
         trustworthy; at constant temperature it keeps estimator noise out of the output.
+    tdot_wiener_window_s : float
+        Multiply Tdot by its Wiener gain ``max(0, 1 - sigma^2 / m2)``, ``m2`` the mean square
+        of Tdot over an exponential window of this many s and ``sigma`` the posterior standard
+        deviation (:mod:`fog_temp_comp.core.tdot_wiener`; method ``'kalman'`` only; 0: off).
+        Near 1 on ramps, near 0 on a soak whose wobble the sensor does not resolve; applied
+        before the shrinkage.
 
     """
 
@@ -111,6 +117,7 @@ class DenoiseSettings:
     coil_lag_s: float = 0.0
     tdot_lag_s: float = 0.0
     tdot_shrink_sigmas: float = 0.0
+    tdot_wiener_window_s: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field; raise ValueError naming the offending field."""
@@ -165,6 +172,7 @@ class DenoiseSettings:
             'coil_lag_s',
             'tdot_lag_s',
             'tdot_shrink_sigmas',
+            'tdot_wiener_window_s',
         ):
             value = _check_float(name, getattr(self, name))
             if value < 0.0:

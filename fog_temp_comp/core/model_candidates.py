@@ -19,6 +19,7 @@ __all__ = [
     'KALMAN_WALKS',
     'SHRINK_SIGMAS',
     'TDOT_LAGS_S',
+    'WIENER_WINDOW_S',
     'Structure',
     'StructureScore',
     'default_structures',
@@ -29,6 +30,9 @@ KALMAN_WALKS = (0.001, 0.003, 0.01)
 #: Tdot shrinkage levels tried, posterior standard deviations (each also keeps Tdot out of the
 #: model while the Kalman filter warms up)
 SHRINK_SIGMAS = (0.5, 1.0, 2.0, 3.0)
+#: window of the Tdot Wiener gain of every candidate, s (:mod:`fog_temp_comp.core.tdot_wiener`):
+#: longer than the noise's correlation time of the slowest walk, short against a soak
+WIENER_WINDOW_S = 600.0
 #: lead-lag time constants tried for the ``Tdot_lag`` term, s
 TDOT_LAGS_S = (30.0, 60.0, 120.0, 240.0, 480.0, 960.0)
 
@@ -52,6 +56,8 @@ class Structure:
     fit : str
         ``'gls'``: least squares prewhitened for the wandering bias
         (:mod:`fog_temp_comp.core.gls`); ``'ols'``: ordinary least squares.
+    wiener_window_s : float
+        Window of the Tdot Wiener gain, s (0: off).
 
     """
 
@@ -61,6 +67,7 @@ class Structure:
     tdot_lag_s: float = 0.0
     coil_lag_s: float = 0.0
     fit: str = 'ols'
+    wiener_window_s: float = WIENER_WINDOW_S
 
     @property
     def model(self) -> str:
@@ -91,6 +98,7 @@ class Structure:
             tdot_shrink_sigmas=self.shrink_sigmas,
             tdot_lag_s=self.tdot_lag_s if 'Tdot_lag' in self.terms else 0.0,
             coil_lag_s=self.coil_lag_s,
+            tdot_wiener_window_s=self.wiener_window_s,
         )
 
 

@@ -379,7 +379,9 @@ def unit_coil_lag(records: Sequence[ChamberRecord], prior: FleetPrior) -> float:
         parts = [
             table_of(
                 r,
-                b.lagged(tau).shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s),
+                b.lagged(tau)
+                .wiener(settings.tdot_wiener_window_s)
+                .shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s),
                 settings.tdot_period_s,
             )
             for r, b in zip(records, bases, strict=True)

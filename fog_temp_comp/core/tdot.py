@@ -147,11 +147,17 @@ def offline_estimates(
             series = KalmanTdotEstimator(settings).add_series(stamps_s, temperature_degC)
         else:
             unshaped = dataclasses.replace(
-                settings, coil_lag_s=0.0, tdot_lag_s=0.0, tdot_shrink_sigmas=0.0
+                settings,
+                coil_lag_s=0.0,
+                tdot_lag_s=0.0,
+                tdot_shrink_sigmas=0.0,
+                tdot_wiener_window_s=0.0,
             )
             series = run_estimator(unshaped, stamps_s, temperature_degC)
     if not coil_lag:
         return series
-    return series.lagged(settings.coil_lag_s).shaped(
-        settings.tdot_shrink_sigmas, settings.tdot_lag_s
+    return (
+        series.lagged(settings.coil_lag_s)
+        .wiener(settings.tdot_wiener_window_s)
+        .shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s)
     )

@@ -128,6 +128,20 @@ class EstimateSeries:
             ready=self.ready,
         )
 
+    def wiener(self, window_s: float) -> EstimateSeries:
+        """Tdot times its Wiener gain over ``window_s`` s (:mod:`fog_temp_comp.core.tdot_wiener`).
+
+        What :class:`TdotShaper` does online before the shrinkage; unchanged for a window of 0
+        or without posterior standard deviations.
+        """
+        std = self.tdot_std_degC_per_min
+        if window_s == 0 or std is None:
+            return self
+        from fog_temp_comp.core.tdot_wiener import wiener_gains
+
+        gains = wiener_gains(self.stamp_s, self.tdot_degC_per_min, std, window_s)
+        return dataclasses.replace(self, tdot_degC_per_min=self.tdot_degC_per_min * gains)
+
     def shaped(self, tdot_shrink_sigmas: float, tdot_lag_s: float) -> EstimateSeries:
         """What :class:`TdotShaper` does online, on the whole series (same result)."""
         tdot = self.tdot_degC_per_min

@@ -14,6 +14,7 @@ from numpy.typing import ArrayLike
 from fog_temp_comp.core.coil import CoilLag
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.tdot_estimate import TdotEstimate, TdotEstimator
+from fog_temp_comp.core.tdot_wiener import WienerGain
 
 __all__ = ['CoilLagEstimator', 'TdotShaper', 'shrink_tdot']
 
@@ -107,29 +108,33 @@ def shrink_tdot(
 
 
 class TdotShaper(_FollowingEstimator):
-    """Any estimator followed by the Tdot shrinkage and the ``Tdot_lag`` lag.
+    """Any estimator followed by the Wiener gain, the Tdot shrinkage and the ``Tdot_lag`` lag.
 
-    Tdot is shrunk toward 0 by :func:`shrink_tdot` with ``settings.tdot_shrink_sigmas`` (and
-    is 0 while an estimator with a posterior standard deviation warms up), then
-    its lag of ``settings.tdot_lag_s`` (s) fills ``tdot_lag_degC_per_min`` (the shrunk Tdot
-    itself when the time constant is 0).
+    Tdot is multiplied by its Wiener gain over ``settings.tdot_wiener_window_s``
+    (:class:`~fog_temp_comp.core.tdot_wiener.WienerGain`), then shrunk toward 0 by
+    :func:`shrink_tdot` with ``settings.tdot_shrink_sigmas`` (and is 0 while an estimator with a
+    posterior standard deviation warms up), then its lag of ``settings.tdot_lag_s`` (s) fills
+    ``tdot_lag_degC_per_min`` (the shrunk Tdot itself when the time constant is 0).
 
     Parameters
     ----------
     inner : TdotEstimator
         The estimator (possibly with the coil lag).
     settings : DenoiseSettings
-        ``tdot_shrink_sigmas`` and ``tdot_lag_s``.
+        ``tdot_wiener_window_s``, ``tdot_shrink_sigmas`` and ``tdot_lag_s``.
 
     """
 
     def __init__(self, inner: TdotEstimator, settings: DenoiseSettings) -> None:
         super().__init__(inner)
+        self._wiener = WienerGain(settings.tdot_wiener_window_s)
         self._sigmas = settings.tdot_shrink_sigmas
         self._lag = CoilLag(settings.tdot_lag_s)
 
     def _apply(self, e: TdotEstimate) -> TdotEstimate:
-        tdot = shrink_tdot(e.tdot_degC_per_min, e.tdot_std_degC_per_min, self._sigmas, e.ready)
+        std = e.tdot_std_degC_per_min
+        tdot = e.tdot_degC_per_min * self._wiener.update(e.stamp_s, e.tdot_degC_per_min, std)
+        tdot = shrink_tdot(tdot, std, self._sigmas, e.ready)
         self._estimate = TdotEstimate(  # not dataclasses.replace: this runs per sample
             e.stamp_s,
             e.temperature_degC,
@@ -144,5 +149,6 @@ class TdotShaper(_FollowingEstimator):
     def reset(self) -> None:
         """Forget all samples."""
         self.inner.reset()
+        self._wiener.reset()
         self._lag.reset()
         self._estimate = None

@@ -97,6 +97,12 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
         _T.DOUBLE,
         'shrink Tdot toward 0 below this many posterior std (start-up, soaks), kalman; 0 = off',
     ),
+    'tdot_wiener_window_s': (
+        'tdot_wiener_window_s',
+        _T.DOUBLE,
+        'window (s) of the Tdot Wiener gain: Tdot times the share of its recent power that is '
+        'not estimator noise (quiet soaks), kalman; 0 = off',
+    ),
 }
 _GUARD_DEFAULTS = GuardSettings()
 #: input guards: name -> (default, text)
