@@ -40,6 +40,9 @@ SETTINGS = {
     'llr': DenoiseSettings(method='llr', llr_window_s=120.0),
     'kalman': DenoiseSettings(method='kalman'),
     'kalman_lag': DenoiseSettings(method='kalman', coil_lag_s=90.0),
+    'kalman_wiener': DenoiseSettings(
+        method='kalman', coil_lag_s=60.0, tdot_wiener_window_s=300.0, tdot_lag_s=120.0
+    ),
     'llr_lag': DenoiseSettings(method='llr', coil_lag_s=60.0),
 }
 
@@ -275,7 +278,7 @@ def test_grid_estimator_matches_offline_iir() -> None:
 
 def test_offline_estimates_online_methods_run_the_estimator() -> None:
     stamps, temps = noisy_ramp(np.random.default_rng(7), 600)
-    for name in ('kalman', 'llr', 'kalman_lag'):
+    for name in ('kalman', 'llr', 'kalman_lag', 'kalman_wiener'):
         settings = SETTINGS[name]
         series = offline_estimates(settings, stamps, temps)
         online = as_array(make_estimator(settings).add_block(stamps, temps))
