@@ -155,8 +155,8 @@ def grid_table(
             tdot = denoise_offline(tdot_raw, settings)
             series = (
                 EstimateSeries(stamp, temp, tdot)
-                .lagged(settings.coil_lag_s)
                 .wiener(settings.tdot_wiener_window_s)
+                .lagged(settings.coil_lag_s)
                 .shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s)
             )
         else:
@@ -345,8 +345,8 @@ def _fit_coil_lag(
         return [
             table_of(
                 r,
-                b.lagged(tau)
-                .wiener(lagged.tdot_wiener_window_s)
+                b.wiener(lagged.tdot_wiener_window_s)
+                .lagged(tau)
                 .shaped(lagged.tdot_shrink_sigmas, lagged.tdot_lag_s),
                 lagged.tdot_period_s,
             )

@@ -163,8 +163,8 @@ def cross_validate(
             if key not in folds_cache:
                 if (structure.walk, coil, wiener) not in lagged:
                     lagged[structure.walk, coil, wiener] = (
-                        [s.lagged(coil).wiener(wiener) for s in train_series],
-                        [s.lagged(coil).wiener(wiener) for s in test_series],
+                        [s.wiener(wiener).lagged(coil) for s in train_series],
+                        [s.wiener(wiener).lagged(coil) for s in test_series],
                     )
                 train_lagged, test_lagged = lagged[structure.walk, coil, wiener]
                 folds_cache[key] = _folds(

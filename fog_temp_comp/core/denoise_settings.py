@@ -93,8 +93,8 @@ class DenoiseSettings:
         Multiply Tdot by its Wiener gain ``max(0, 1 - sigma^2 / m2)``, ``m2`` the mean square
         of Tdot over an exponential window of this many s and ``sigma`` the posterior standard
         deviation (:mod:`fog_temp_comp.core.tdot_wiener`; method ``'kalman'`` only; 0: off).
-        Near 1 on ramps, near 0 on a soak whose wobble the sensor does not resolve; applied
-        before the shrinkage.
+        Near 1 on ramps, near 0 on a soak whose wobble the sensor does not resolve; applied to
+        the estimator's output, before the coil lag and the shrinkage.
 
     """
 

@@ -379,8 +379,8 @@ def unit_coil_lag(records: Sequence[ChamberRecord], prior: FleetPrior) -> float:
         parts = [
             table_of(
                 r,
-                b.lagged(tau)
-                .wiener(settings.tdot_wiener_window_s)
+                b.wiener(settings.tdot_wiener_window_s)
+                .lagged(tau)
                 .shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s),
                 settings.tdot_period_s,
             )

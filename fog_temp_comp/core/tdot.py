@@ -19,7 +19,9 @@ kalman     :class:`KalmanTdotEstimator`: Kalman filter on (T, Tdot) with a rando
            whose measurement noise includes the sensor's quantization, once per sample
 ========== =============================================================================
 
-With ``coil_lag_s > 0`` the estimate (temperature and Tdot) passes through the sensor-to-coil
+With ``tdot_wiener_window_s > 0`` Tdot is first multiplied by its Wiener gain
+(:class:`WienerTdotEstimator`: near 0 where it is mostly the estimator's own noise). With
+``coil_lag_s > 0`` the estimate (temperature and Tdot) passes through the sensor-to-coil
 lag (:class:`CoilLagEstimator`, :mod:`fog_temp_comp.core.coil`). Last, :class:`TdotShaper` shrinks
 an insignificant Tdot toward 0 (``tdot_shrink_sigmas``) and makes the lagged Tdot of the model
 term ``Tdot_lag`` (``tdot_lag_s``).
@@ -34,7 +36,8 @@ re-exports the rest from where it lives:
   interface and :class:`EstimateSeries`;
 * :mod:`fog_temp_comp.core.tdot_grid` -- the per-bin estimators (grid denoising, ``'llr'``);
 * :mod:`fog_temp_comp.core.tdot_kalman` -- the Kalman filter;
-* :mod:`fog_temp_comp.core.tdot_following` -- the coil lag, the Tdot shrinkage and ``Tdot_lag``.
+* :mod:`fog_temp_comp.core.tdot_following` -- the Wiener gain, the coil lag, the Tdot shrinkage and
+  ``Tdot_lag``; :mod:`fog_temp_comp.core.tdot_wiener` -- the Wiener gain itself.
 """
 
 from __future__ import annotations
@@ -48,7 +51,12 @@ from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.grid import temperature_grid
 from fog_temp_comp.core.names import GRID_METHODS
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, TdotEstimate, TdotEstimator
-from fog_temp_comp.core.tdot_following import CoilLagEstimator, TdotShaper, shrink_tdot
+from fog_temp_comp.core.tdot_following import (
+    CoilLagEstimator,
+    TdotShaper,
+    WienerTdotEstimator,
+    shrink_tdot,
+)
 from fog_temp_comp.core.tdot_grid import GridTdotEstimator, LocalLinearTdotEstimator
 from fog_temp_comp.core.tdot_kalman import KalmanTdotEstimator
 
@@ -61,6 +69,7 @@ __all__ = [
     'TdotEstimate',
     'TdotEstimator',
     'TdotShaper',
+    'WienerTdotEstimator',
     'make_estimator',
     'offline_estimates',
     'run_estimator',
@@ -86,6 +95,8 @@ def _lagged_estimator(settings: DenoiseSettings) -> TdotEstimator:
         base = KalmanTdotEstimator(settings)
     else:  # DenoiseSettings validates method
         raise ValueError(f'unknown method {settings.method!r}')
+    if settings.tdot_wiener_window_s > 0:
+        base = WienerTdotEstimator(base, settings.tdot_wiener_window_s)
     if settings.coil_lag_s > 0:
         return CoilLagEstimator(base, settings.coil_lag_s)
     return base
@@ -157,7 +168,7 @@ def offline_estimates(
     if not coil_lag:
         return series
     return (
-        series.lagged(settings.coil_lag_s)
-        .wiener(settings.tdot_wiener_window_s)
+        series.wiener(settings.tdot_wiener_window_s)
+        .lagged(settings.coil_lag_s)
         .shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s)
     )

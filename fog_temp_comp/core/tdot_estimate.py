@@ -131,8 +131,8 @@ class EstimateSeries:
     def wiener(self, window_s: float) -> EstimateSeries:
         """Tdot times its Wiener gain over ``window_s`` s (:mod:`fog_temp_comp.core.tdot_wiener`).
 
-        What :class:`TdotShaper` does online before the shrinkage; unchanged for a window of 0
-        or without posterior standard deviations.
+        What :class:`~fog_temp_comp.core.tdot_following.WienerTdotEstimator` does online (before
+        the coil lag); unchanged for a window of 0 or without posterior standard deviations.
         """
         std = self.tdot_std_degC_per_min
         if window_s == 0 or std is None:

@@ -1,5 +1,6 @@
-"""Estimators that follow another one: the sensor-to-coil lag, and the Tdot shrinkage and lag.
+"""Estimators that follow another one: Wiener gain, sensor-to-coil lag, Tdot shrinkage and lag.
 
+:class:`WienerTdotEstimator` multiplies Tdot by its Wiener gain (quiet soaks);
 :class:`CoilLagEstimator` passes an estimator's temperature and Tdot through the coil lag (s);
 :class:`TdotShaper` shrinks an insignificant Tdot toward 0 (:func:`shrink_tdot`) and makes
 ``Tdot_lag``.  Tdot in degC/min.
@@ -16,7 +17,7 @@ from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.tdot_estimate import TdotEstimate, TdotEstimator
 from fog_temp_comp.core.tdot_wiener import WienerGain
 
-__all__ = ['CoilLagEstimator', 'TdotShaper', 'shrink_tdot']
+__all__ = ['CoilLagEstimator', 'TdotShaper', 'WienerTdotEstimator', 'shrink_tdot']
 
 
 class _FollowingEstimator:
@@ -51,6 +52,46 @@ class _FollowingEstimator:
     def ready(self) -> bool:
         """Whether the inner estimator is warmed up."""
         return self.inner.ready
+
+
+class WienerTdotEstimator(_FollowingEstimator):
+    """Any estimator followed by the Tdot Wiener gain (:mod:`fog_temp_comp.core.tdot_wiener`).
+
+    Tdot is multiplied by the share of its recent mean square that is not the estimator's own
+    posterior variance; it comes before the coil lag, so the gain weighs the estimator's output
+    against the estimator's own noise.
+
+    Parameters
+    ----------
+    inner : TdotEstimator
+        The estimator on the sensor's temperature (one with a posterior standard deviation;
+        others pass unchanged).
+    window_s : float
+        Window of the mean square, s (> 0).
+
+    """
+
+    def __init__(self, inner: TdotEstimator, window_s: float) -> None:
+        super().__init__(inner)
+        self._gain = WienerGain(window_s)
+
+    def _apply(self, e: TdotEstimate) -> TdotEstimate:
+        gain = self._gain.update(e.stamp_s, e.tdot_degC_per_min, e.tdot_std_degC_per_min)
+        self._estimate = TdotEstimate(  # not dataclasses.replace: this runs per sample
+            e.stamp_s,
+            e.temperature_degC,
+            e.tdot_degC_per_min * gain,
+            e.raw_tdot_degC_per_min,
+            e.tdot_std_degC_per_min,
+            ready=e.ready,
+        )
+        return self._estimate
+
+    def reset(self) -> None:
+        """Forget all samples."""
+        self.inner.reset()
+        self._gain.reset()
+        self._estimate = None
 
 
 class CoilLagEstimator(_FollowingEstimator):
@@ -108,33 +149,29 @@ def shrink_tdot(
 
 
 class TdotShaper(_FollowingEstimator):
-    """Any estimator followed by the Wiener gain, the Tdot shrinkage and the ``Tdot_lag`` lag.
+    """Any estimator followed by the Tdot shrinkage and the ``Tdot_lag`` lag.
 
-    Tdot is multiplied by its Wiener gain over ``settings.tdot_wiener_window_s``
-    (:class:`~fog_temp_comp.core.tdot_wiener.WienerGain`), then shrunk toward 0 by
-    :func:`shrink_tdot` with ``settings.tdot_shrink_sigmas`` (and is 0 while an estimator with a
-    posterior standard deviation warms up), then its lag of ``settings.tdot_lag_s`` (s) fills
-    ``tdot_lag_degC_per_min`` (the shrunk Tdot itself when the time constant is 0).
+    Tdot is shrunk toward 0 by :func:`shrink_tdot` with ``settings.tdot_shrink_sigmas`` (and is
+    0 while an estimator with a posterior standard deviation warms up), then its lag of
+    ``settings.tdot_lag_s`` (s) fills ``tdot_lag_degC_per_min`` (the shrunk Tdot itself when
+    the time constant is 0).
 
     Parameters
     ----------
     inner : TdotEstimator
         The estimator (possibly with the coil lag).
     settings : DenoiseSettings
-        ``tdot_wiener_window_s``, ``tdot_shrink_sigmas`` and ``tdot_lag_s``.
+        ``tdot_shrink_sigmas`` and ``tdot_lag_s``.
 
     """
 
     def __init__(self, inner: TdotEstimator, settings: DenoiseSettings) -> None:
         super().__init__(inner)
-        self._wiener = WienerGain(settings.tdot_wiener_window_s)
         self._sigmas = settings.tdot_shrink_sigmas
         self._lag = CoilLag(settings.tdot_lag_s)
 
     def _apply(self, e: TdotEstimate) -> TdotEstimate:
-        std = e.tdot_std_degC_per_min
-        tdot = e.tdot_degC_per_min * self._wiener.update(e.stamp_s, e.tdot_degC_per_min, std)
-        tdot = shrink_tdot(tdot, std, self._sigmas, e.ready)
+        tdot = shrink_tdot(e.tdot_degC_per_min, e.tdot_std_degC_per_min, self._sigmas, e.ready)
         self._estimate = TdotEstimate(  # not dataclasses.replace: this runs per sample
             e.stamp_s,
             e.temperature_degC,
@@ -149,6 +186,5 @@ class TdotShaper(_FollowingEstimator):
     def reset(self) -> None:
         """Forget all samples."""
         self.inner.reset()
-        self._wiener.reset()
         self._lag.reset()
         self._estimate = None
