@@ -335,7 +335,7 @@ def _fit_coil_lag(
     bases = [
         offline_estimates(
             settings, r.temp_stamps_s, r.temperature_degC, coil_lag=False, online=online_tdot
-        )
+        ).wiener(settings.tdot_wiener_window_s)  # before the coil lag, once for every tau
         for r in records
     ]
     width = round(highpass_s / settings.tdot_period_s)
@@ -345,9 +345,7 @@ def _fit_coil_lag(
         return [
             table_of(
                 r,
-                b.wiener(lagged.tdot_wiener_window_s)
-                .lagged(tau)
-                .shaped(lagged.tdot_shrink_sigmas, lagged.tdot_lag_s),
+                b.lagged(tau).shaped(lagged.tdot_shrink_sigmas, lagged.tdot_lag_s),
                 lagged.tdot_period_s,
             )
             for r, b in zip(records, bases, strict=True)

@@ -140,6 +140,7 @@ def cross_validate(
         tuple[float, float, float], tuple[list[EstimateSeries], list[EstimateSeries]]
     ] = {}
     folds_cache: dict[tuple[float, ...], tuple[GridTable, list[_Fold]]] = {}
+    gained: dict[tuple[float, float], tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
     thresholds: dict[tuple[float, float], tuple[float, float]] = {}
     identifiable: dict[tuple[Any, ...], CalibrationError | None] = {}
     scores = []
@@ -161,12 +162,9 @@ def cross_validate(
             wiener = structure.wiener_window_s
             key = (structure.walk, shrink, lag, coil, wiener)
             if key not in folds_cache:
-                if (structure.walk, coil, wiener) not in lagged:
-                    lagged[structure.walk, coil, wiener] = (
-                        [s.wiener(wiener).lagged(coil) for s in train_series],
-                        [s.wiener(wiener).lagged(coil) for s in test_series],
-                    )
-                train_lagged, test_lagged = lagged[structure.walk, coil, wiener]
+                train_lagged, test_lagged = _through_coil(
+                    structure, (train_series, test_series), gained, lagged
+                )
                 folds_cache[key] = _folds(
                     records, heldout, train_lagged, test_lagged, shrink, lag, period
                 )
@@ -174,7 +172,7 @@ def cross_validate(
             # a structure the final fit would refuse (e.g. a coil lag so long that the lagged
             # temperature no longer swings) is not a candidate; the check reads T and Tdot
             # only, which the Tdot lag does not change
-            checked = (structure.walk, shrink, coil, tuple(structure.terms))
+            checked = (structure.walk, shrink, coil, wiener, tuple(structure.terms))
             if checked not in identifiable:
                 identifiable[checked] = _refusal(whole, structure.terms)
             refused = identifiable[checked]
@@ -184,6 +182,32 @@ def cross_validate(
         except CalibrationError as err:
             result.error = str(err)
     return scores
+
+
+def _through_coil(
+    structure: Structure,
+    series: tuple[list[EstimateSeries], list[EstimateSeries]],
+    gained: dict[tuple[float, float], tuple[list[EstimateSeries], list[EstimateSeries]]],
+    lagged: dict[tuple[float, float, float], tuple[list[EstimateSeries], list[EstimateSeries]]],
+) -> tuple[list[EstimateSeries], list[EstimateSeries]]:
+    """Training and held-out series through the structure's Wiener gain, then its coil lag.
+
+    ``gained`` caches the gain per (walk, window) and ``lagged`` the lag per (walk, coil lag,
+    window): the gain comes before the lag, so it is computed once for every coil lag.
+    """
+    walk, coil, wiener = structure.walk, structure.coil_lag_s, structure.wiener_window_s
+    if (walk, wiener) not in gained:
+        gained[walk, wiener] = (
+            [s.wiener(wiener) for s in series[0]],
+            [s.wiener(wiener) for s in series[1]],
+        )
+    if (walk, coil, wiener) not in lagged:
+        train, test = gained[walk, wiener]
+        lagged[walk, coil, wiener] = (
+            [s.lagged(coil) for s in train],
+            [s.lagged(coil) for s in test],
+        )
+    return lagged[walk, coil, wiener]
 
 
 def _folds(

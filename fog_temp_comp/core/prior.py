@@ -370,7 +370,9 @@ def unit_coil_lag(records: Sequence[ChamberRecord], prior: FleetPrior) -> float:
 
     settings = prior.settings
     bases = [
-        offline_estimates(settings, r.temp_stamps_s, r.temperature_degC, coil_lag=False)
+        offline_estimates(settings, r.temp_stamps_s, r.temperature_degC, coil_lag=False).wiener(
+            settings.tdot_wiener_window_s
+        )  # before the coil lag, once for every tau
         for r in records
     ]
     width = round(1800.0 / settings.tdot_period_s)
@@ -379,9 +381,7 @@ def unit_coil_lag(records: Sequence[ChamberRecord], prior: FleetPrior) -> float:
         parts = [
             table_of(
                 r,
-                b.wiener(settings.tdot_wiener_window_s)
-                .lagged(tau)
-                .shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s),
+                b.lagged(tau).shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s),
                 settings.tdot_period_s,
             )
             for r, b in zip(records, bases, strict=True)

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fog_temp_comp.core.coil import coil_lag
+from fog_temp_comp.core.tdot_wiener import wiener_gains
 
 FloatArray = NDArray[np.float64]
 
@@ -137,8 +138,6 @@ class EstimateSeries:
         std = self.tdot_std_degC_per_min
         if window_s == 0 or std is None:
             return self
-        from fog_temp_comp.core.tdot_wiener import wiener_gains
-
         gains = wiener_gains(self.stamp_s, self.tdot_degC_per_min, std, window_s)
         return dataclasses.replace(self, tdot_degC_per_min=self.tdot_degC_per_min * gains)
 
