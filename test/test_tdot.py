@@ -189,7 +189,7 @@ def test_kalman_matches_naive_matrix_filter() -> None:
         temperature_quantum_degC=0.1,
     )
     assert settings.measurement_variance_degC2 == pytest.approx(0.03**2 + 0.1**2 / 12)
-    ours = as_array(make_estimator(settings).add_block(stamps, temps))
+    ours = as_array(KalmanTdotEstimator(settings).add_block(stamps, temps))
     ref = ref_kalman(stamps, temps, 0.02, 0.03**2 + 0.1**2 / 12)
     assert_allclose(ours[:, 0] - T0, ref[:, 0] - T0, rtol=0, atol=1e-9)
     assert_allclose(ours[:, 1:], ref[:, 1:], rtol=1e-9, atol=1e-12)
@@ -346,12 +346,19 @@ def test_coil_lag_of_a_ramp_lags_by_tau() -> None:
 
 
 def test_coil_lag_estimator_lags_inner_output() -> None:
+    """The coil lag filters the estimator's own output; the warm-up zeroing comes after it."""
     stamps, temps = noisy_ramp(np.random.default_rng(10), 900)
-    inner = as_array(make_estimator(SETTINGS['kalman']).add_block(stamps, temps))
+    estimates = KalmanTdotEstimator(SETTINGS['kalman']).add_block(stamps, temps)
+    inner = as_array(estimates)
+    ready = np.array([e.ready for e in estimates])
+    assert 0 < np.argmax(ready) < 200  # a warm-up, then ready for good
+    assert np.all(ready[np.argmax(ready) :])
     lagged = as_array(make_estimator(SETTINGS['kalman_lag']).add_block(stamps, temps))
     assert_array_equal(lagged[:, 0], inner[:, 0])
     assert_allclose(lagged[:, 1], CoilLag(90.0).update_block(inner[:, 0], inner[:, 1]), atol=0)
-    assert_allclose(lagged[:, 2], CoilLag(90.0).update_block(inner[:, 0], inner[:, 2]), atol=0)
+    tdot = CoilLag(90.0).update_block(inner[:, 0], inner[:, 2])
+    assert_allclose(lagged[:, 2], np.where(ready, tdot, 0.0), atol=0)
+    assert np.any(tdot[~ready] != 0.0)
 
 
 def test_search_time_constant_finds_interior_and_zero_minima() -> None:

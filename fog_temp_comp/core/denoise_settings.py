@@ -89,6 +89,7 @@ class DenoiseSettings:
         ``sigma`` the estimator's posterior standard deviation of Tdot (method ``'kalman'``
         only; 0: off). Large at start-up, so the Tdot terms enter as the estimate becomes
         trustworthy; at constant temperature it keeps estimator noise out of the output.
+        Whatever this value, Tdot is 0 until the Kalman filter has warmed up.
     tdot_wiener_window_s : float
         Multiply Tdot by its Wiener gain ``max(0, 1 - sigma^2 / m2)``, ``m2`` the mean square
         of Tdot over an exponential window of this many s and ``sigma`` the posterior standard

@@ -145,13 +145,15 @@ class EstimateSeries:
         """What :class:`TdotShaper` does online, on the whole series (same result)."""
         tdot = self.tdot_degC_per_min
         std = self.tdot_std_degC_per_min
-        if tdot_shrink_sigmas > 0 and std is not None:
+        if std is not None:
             known = ~np.isnan(std)
-            threshold = tdot_shrink_sigmas * np.where(known, std, 0.0)
-            with np.errstate(divide='ignore', invalid='ignore'):
-                gain = np.where(np.abs(tdot) > threshold, 1.0 - (threshold / tdot) ** 2, 0.0)
+            gain = np.ones_like(tdot)
+            if tdot_shrink_sigmas > 0:
+                threshold = tdot_shrink_sigmas * np.where(known, std, 0.0)
+                with np.errstate(divide='ignore', invalid='ignore'):
+                    gain = np.where(np.abs(tdot) > threshold, 1.0 - (threshold / tdot) ** 2, 0.0)
             if self.ready is not None:
-                gain = np.where(known & ~self.ready, 0.0, gain)
+                gain = np.where(self.ready, gain, 0.0)
             tdot = np.where(known, tdot * gain, tdot)
         return dataclasses.replace(
             self,

@@ -135,13 +135,17 @@ def shrink_tdot(
 ) -> float:
     """Non-negative garrote of Tdot: ``tdot * max(0, 1 - (sigmas * std / tdot)^2)``, degC/min.
 
-    0 while the estimator warms up (``ready`` False); unchanged when ``sigmas`` is 0 or the
-    standard deviation is unknown (NaN: estimators without one).
+    0 while an estimator with a standard deviation warms up (``ready`` False), whatever
+    ``sigmas`` (so a power-on reads no spike with the shrinkage off too); unchanged when the
+    standard deviation is unknown (NaN: estimators without one), or when ``sigmas`` is 0 after
+    the warm-up.
     """
-    if not sigmas > 0.0 or math.isnan(std_degC_per_min):
+    if math.isnan(std_degC_per_min):
         return tdot_degC_per_min
     if not ready:
         return 0.0
+    if not sigmas > 0.0:
+        return tdot_degC_per_min
     threshold = sigmas * std_degC_per_min
     if abs(tdot_degC_per_min) <= threshold:
         return 0.0
@@ -152,7 +156,8 @@ class TdotShaper(_FollowingEstimator):
     """Any estimator followed by the Tdot shrinkage and the ``Tdot_lag`` lag.
 
     Tdot is shrunk toward 0 by :func:`shrink_tdot` with ``settings.tdot_shrink_sigmas`` (and is
-    0 while an estimator with a posterior standard deviation warms up), then its lag of
+    0 while an estimator with a posterior standard deviation warms up, shrinkage or not), then
+    its lag of
     ``settings.tdot_lag_s`` (s) fills ``tdot_lag_degC_per_min`` (the shrunk Tdot itself when
     the time constant is 0).
 
