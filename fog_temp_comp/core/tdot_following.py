@@ -157,9 +157,8 @@ class TdotShaper(_FollowingEstimator):
 
     Tdot is shrunk toward 0 by :func:`shrink_tdot` with ``settings.tdot_shrink_sigmas`` (and is
     0 while an estimator with a posterior standard deviation warms up, shrinkage or not), then
-    its lag of
-    ``settings.tdot_lag_s`` (s) fills ``tdot_lag_degC_per_min`` (the shrunk Tdot itself when
-    the time constant is 0).
+    its lag of ``settings.tdot_lag_s`` (s) fills ``tdot_lag_degC_per_min`` (the shrunk Tdot
+    itself when the time constant is 0).
 
     Parameters
     ----------
