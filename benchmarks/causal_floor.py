@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -118,24 +119,38 @@ def study(plant: int, seed: int) -> list[str]:
     return lines
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+def behind_plants_cli(
+    argv: list[str] | None,
+    description: str,
+    header: str,
+    study_plant: Callable[[int, int], list[str]],
+) -> int:
+    """Command line of the behind-the-coil studies: print ``header`` and every plant's rows.
+
+    ``--plants`` (default: the tuning plants with the sensor behind the coil) and ``--seed``.
+    """
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument('--plants', type=int, nargs='+')
     parser.add_argument('--seed', type=int, default=0)
     args = parser.parse_args(argv)
     plants = args.plants or [
         p for p in TUNING_PLANTS if draw_plant(p).sensor_lag_s > 0 and not draw_plant(p).coil_lag_s
     ]
-    print(
+    print(header)
+    print('|---' * (header.count('|') - 1) + '|')
+    for plant in plants:
+        for line in study_plant(plant, args.seed):
+            print(line, flush=True)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    header = (
         '| plant | seed | sensor lag s | quantum degC | temp Hz | Kalman time scale s '
         '| RMS coil Tdot error on cycle_1, degC/min | oracle 100 s deg/h | 100 s deg/h '
         '| / oracle | 10 s ratio - oracle | range cycles - oracle | range soaks - oracle |'
     )
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|')
-    for plant in plants:
-        for line in study(plant, args.seed):
-            print(line, flush=True)
-    return 0
+    return behind_plants_cli(argv, __doc__.split('\n')[0], header, study)
 
 
 if __name__ == '__main__':

@@ -28,7 +28,6 @@ oracle's), for this filter and for the package's default.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -38,7 +37,7 @@ from scipy import linalg
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from accuracy import TRAINING_RUN, metrics
-from causal_floor import coil_estimates, sensor_behind_model
+from causal_floor import behind_plants_cli, coil_estimates, sensor_behind_model
 
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.evaluate import compensate_record
@@ -47,7 +46,7 @@ from fog_temp_comp.core.model import design_matrix
 from fog_temp_comp.core.model_choice import choose_and_calibrate
 from fog_temp_comp.core.tdot_wiener import wiener_gains
 from fog_temp_comp.core.units import DEG_H_PER_RAD_S, RAD_S_PER_DEG_H, S_PER_MIN
-from fog_temp_comp.tools.plants import TUNING_PLANTS, draw_plant
+from fog_temp_comp.tools.plants import draw_plant
 from fog_temp_comp.tools.simulate import SimulatedRun, simulate_plan
 
 TERMS = ('const', 'T', 'Tdot', 'T2')
@@ -128,22 +127,11 @@ def study(plant: int, seed: int) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--plants', type=int, nargs='+')
-    parser.add_argument('--seed', type=int, default=0)
-    args = parser.parse_args(argv)
-    plants = args.plants or [
-        p for p in TUNING_PLANTS if draw_plant(p).sensor_lag_s > 0 and not draw_plant(p).coil_lag_s
-    ]
-    print(
+    header = (
         '| plant | seed | true sensor lag s | chosen lag s | time scale s | pipeline '
         '| 10 s ratio - oracle | 100 s / oracle | range cycles - oracle | range soaks - oracle |'
     )
-    print('|---|---|---|---|---|---|---|---|---|---|')
-    for plant in plants:
-        for line in study(plant, args.seed):
-            print(line, flush=True)
-    return 0
+    return behind_plants_cli(argv, __doc__.split('\n')[0], header, study)
 
 
 if __name__ == '__main__':
