@@ -23,8 +23,10 @@ from fog_temp_comp.core.tdot import (
     GridTdotEstimator,
     KalmanTdotEstimator,
     LocalLinearTdotEstimator,
+    SensorLagKalmanTdotEstimator,
     TdotEstimate,
     TdotShaper,
+    WienerTdotEstimator,
     make_estimator,
     offline_estimates,
     run_estimator,
@@ -44,6 +46,9 @@ SETTINGS = {
         method='kalman', coil_lag_s=60.0, tdot_wiener_window_s=300.0, tdot_lag_s=120.0
     ),
     'llr_lag': DenoiseSettings(method='llr', coil_lag_s=60.0),
+    'kalman_sensor_lag': DenoiseSettings(
+        method='kalman', sensor_lag_s=240.0, tdot_wiener_window_s=300.0, tdot_shrink_sigmas=0.5
+    ),
 }
 
 
@@ -140,6 +145,9 @@ def test_make_estimator_types() -> None:
     lagged = inner(SETTINGS['kalman_lag'])
     assert type(lagged) is CoilLagEstimator
     assert type(lagged.inner) is KalmanTdotEstimator
+    gained = inner(SETTINGS['kalman_sensor_lag'])
+    assert type(gained) is WienerTdotEstimator
+    assert type(gained.inner) is SensorLagKalmanTdotEstimator
 
 
 def test_wavelet_runs_one_dwt_per_grid_bin_not_per_sample() -> None:

@@ -35,6 +35,9 @@ __all__ = ['MAX_SHRINK_FRACTION', 'cross_validate']
 MAX_SHRINK_FRACTION = 0.1
 
 
+#: training and held-out series
+_Pair = tuple[list[EstimateSeries], list[EstimateSeries]]
+
 #: the Kalman series of :func:`_series` while :func:`choose_and_calibrate` runs (it asks for
 #: the same records and walk several times); keyed by the records' ids, which it keeps alive
 _SERIES_CACHE: contextvars.ContextVar[dict[Any, Any] | None] = contextvars.ContextVar(
@@ -43,25 +46,28 @@ _SERIES_CACHE: contextvars.ContextVar[dict[Any, Any] | None] = contextvars.Conte
 
 
 def _series(
-    records: Sequence[ChamberRecord], base: DenoiseSettings, walk: float
+    records: Sequence[ChamberRecord], base: DenoiseSettings, estimator: tuple[float, float]
 ) -> list[EstimateSeries]:
+    """The Kalman series of ``estimator`` = (walk, sensor lag s) on each record (cached)."""
     cache = _SERIES_CACHE.get()
-    key = (tuple(id(r) for r in records), base, walk)
+    key = (tuple(id(r) for r in records), base, estimator)
     if cache is not None and key in cache:
         return list(cache[key][1])
-    series = _compute_series(records, base, walk)
+    series = _compute_series(records, base, estimator)
     if cache is not None:
         cache[key] = (list(records), series)
     return list(series)
 
 
 def _compute_series(
-    records: Sequence[ChamberRecord], base: DenoiseSettings, walk: float
+    records: Sequence[ChamberRecord], base: DenoiseSettings, estimator: tuple[float, float]
 ) -> list[EstimateSeries]:
+    walk, sensor_lag_s = estimator
     settings = dataclasses.replace(
         base,
         method='kalman',
         kalman_rate_walk_degC_per_min_per_sqrt_s=walk,
+        sensor_lag_s=sensor_lag_s,
         tdot_shrink_sigmas=0.0,
         tdot_wiener_window_s=0.0,
         tdot_lag_s=0.0,
@@ -89,13 +95,13 @@ def _shrink_threshold(series: Sequence[EstimateSeries], sigmas: float) -> tuple[
 def _shrinkage_refusal(
     structure: Structure,
     series: Sequence[EstimateSeries],
-    thresholds: dict[tuple[float, float], tuple[float, float]],
+    thresholds: dict[tuple[Any, float], tuple[float, float]],
 ) -> str:
     """Why the structure's shrinkage is too strong on these series ('' if it is not).
 
-    ``thresholds`` caches :func:`_shrink_threshold` per (walk, shrinkage).
+    ``thresholds`` caches :func:`_shrink_threshold` per (estimator, shrinkage).
     """
-    key = (structure.walk, structure.shrink_sigmas)
+    key = (structure.estimator, structure.shrink_sigmas)
     if key not in thresholds:
         thresholds[key] = _shrink_threshold(series, structure.shrink_sigmas)
     threshold, typical = thresholds[key]
@@ -133,26 +139,24 @@ def cross_validate(
 
     """
     period = base.tdot_period_s
-    cache: dict[float, tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
+    cache: dict[tuple[float, float], tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
     # the series through each coil lag, and the grid tables and folds of each estimator
     # setting, are shared by the structures that differ only in their terms or fit
-    lagged: dict[
-        tuple[float, float, float], tuple[list[EstimateSeries], list[EstimateSeries]]
-    ] = {}
-    folds_cache: dict[tuple[float, ...], tuple[GridTable, list[_Fold]]] = {}
-    gained: dict[tuple[float, float], tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
-    thresholds: dict[tuple[float, float], tuple[float, float]] = {}
+    lagged: dict[tuple[Any, ...], _Pair] = {}
+    folds_cache: dict[tuple[Any, ...], tuple[GridTable, list[_Fold]]] = {}
+    gained: dict[tuple[Any, ...], _Pair] = {}
+    thresholds: dict[tuple[Any, float], tuple[float, float]] = {}
     identifiable: dict[tuple[Any, ...], CalibrationError | None] = {}
     scores = []
     for structure in structures:
         result = StructureScore(structure)
         scores.append(result)
-        if structure.walk not in cache:
-            cache[structure.walk] = (
-                _series(records, base, structure.walk),
-                _series(heldout, base, structure.walk),
+        if structure.estimator not in cache:
+            cache[structure.estimator] = (
+                _series(records, base, structure.estimator),
+                _series(heldout, base, structure.estimator),
             )
-        train_series, test_series = cache[structure.walk]
+        train_series, test_series = cache[structure.estimator]
         lag = structure.tdot_lag_s if 'Tdot_lag' in structure.terms else 0.0
         result.error = _shrinkage_refusal(structure, train_series, thresholds)
         if result.error:
@@ -160,7 +164,7 @@ def cross_validate(
         try:
             coil, shrink = structure.coil_lag_s, structure.shrink_sigmas
             wiener = structure.wiener_window_s
-            key = (structure.walk, shrink, lag, coil, wiener)
+            key = (structure.estimator, shrink, lag, coil, wiener)
             if key not in folds_cache:
                 train_lagged, test_lagged = _through_coil(
                     structure, (train_series, test_series), gained, lagged
@@ -172,7 +176,7 @@ def cross_validate(
             # a structure the final fit would refuse (e.g. a coil lag so long that the lagged
             # temperature no longer swings) is not a candidate; the check reads T and Tdot
             # only, which the Tdot lag does not change
-            checked = (structure.walk, shrink, coil, wiener, tuple(structure.terms))
+            checked = (structure.estimator, shrink, coil, wiener, tuple(structure.terms))
             if checked not in identifiable:
                 identifiable[checked] = _refusal(whole, structure.terms)
             refused = identifiable[checked]
@@ -186,16 +190,16 @@ def cross_validate(
 
 def _through_coil(
     structure: Structure,
-    series: tuple[list[EstimateSeries], list[EstimateSeries]],
-    gained: dict[tuple[float, float], tuple[list[EstimateSeries], list[EstimateSeries]]],
-    lagged: dict[tuple[float, float, float], tuple[list[EstimateSeries], list[EstimateSeries]]],
-) -> tuple[list[EstimateSeries], list[EstimateSeries]]:
+    series: _Pair,
+    gained: dict[tuple[Any, ...], _Pair],
+    lagged: dict[tuple[Any, ...], _Pair],
+) -> _Pair:
     """Training and held-out series through the structure's Wiener gain, then its coil lag.
 
-    ``gained`` caches the gain per (walk, window) and ``lagged`` the lag per (walk, coil lag,
-    window): the gain comes before the lag, so it is computed once for every coil lag.
+    ``gained`` caches the gain per (estimator, window) and ``lagged`` the lag per (estimator,
+    coil lag, window): the gain comes before the lag, so it is computed once for every coil lag.
     """
-    walk, coil, wiener = structure.walk, structure.coil_lag_s, structure.wiener_window_s
+    walk, coil, wiener = structure.estimator, structure.coil_lag_s, structure.wiener_window_s
     if (walk, wiener) not in gained:
         gained[walk, wiener] = (
             [s.wiener(wiener) for s in series[0]],

@@ -75,6 +75,11 @@ class DenoiseSettings:
     temperature_quantum_degC : float
         Method ``'kalman'``: quantization step of the temperature sensor, degC (0: none). The
         measurement variance is ``temperature_noise_degC**2 + temperature_quantum_degC**2 / 12``.
+    sensor_lag_s : float
+        Method ``'kalman'``: time constant of the first-order lag through which the temperature
+        sensor reads the coil, s (0: the sensor reads the coil). With a lag, the Kalman filter
+        estimates the coil's temperature and Tdot on the states (coil T, coil Tdot, sensor T)
+        (:mod:`fog_temp_comp.core.tdot_kalman_lag`); ``calibrate`` chooses it.
     coil_lag_s : float
         Time constant of the first-order lag from the temperature sensor to the fibre coil, s
         (0: the sensor reads the coil). Any method: its temperature and Tdot output pass
@@ -115,6 +120,7 @@ class DenoiseSettings:
     kalman_rate_walk_degC_per_min_per_sqrt_s: float = 0.01
     temperature_noise_degC: float = 0.02
     temperature_quantum_degC: float = 0.0625
+    sensor_lag_s: float = 0.0
     coil_lag_s: float = 0.0
     tdot_lag_s: float = 0.0
     tdot_shrink_sigmas: float = 0.0
@@ -170,6 +176,7 @@ class DenoiseSettings:
         for name in (
             'temperature_noise_degC',
             'temperature_quantum_degC',
+            'sensor_lag_s',
             'coil_lag_s',
             'tdot_lag_s',
             'tdot_shrink_sigmas',

@@ -58,6 +58,9 @@ class Structure:
         (:mod:`fog_temp_comp.core.gls`); ``'ols'``: ordinary least squares.
     wiener_window_s : float
         Window of the Tdot Wiener gain, s (0: off).
+    sensor_lag_s : float
+        The sensor's lag behind the coil that the Kalman filter models (0: none), s
+        (:mod:`fog_temp_comp.core.tdot_kalman_lag`).
 
     """
 
@@ -68,22 +71,38 @@ class Structure:
     coil_lag_s: float = 0.0
     fit: str = 'ols'
     wiener_window_s: float = WIENER_WINDOW_S
+    sensor_lag_s: float = 0.0
 
     @property
     def model(self) -> str:
         """The structure without the estimator settings, e.g. ``'const,T,Tdot,Tdot_lag'``."""
-        return ','.join(self.terms) + (' + coil lag' if self.coil_lag_s else '')
+        return (
+            ','.join(self.terms)
+            + (' + coil lag' if self.coil_lag_s else '')
+            + (' + sensor lag' if self.sensor_lag_s else '')
+        )
 
     @property
     def complexity(self) -> int:
-        """Fitted parameters per axis, plus one for a time constant (lead-lag or coil lag)."""
-        return len(self.terms) + int('Tdot_lag' in self.terms) + int(self.coil_lag_s > 0)
+        """Fitted parameters per axis, plus one per time constant (lead-lag, coil, sensor lag)."""
+        return (
+            len(self.terms)
+            + int('Tdot_lag' in self.terms)
+            + int(self.coil_lag_s > 0)
+            + int(self.sensor_lag_s > 0)
+        )
+
+    @property
+    def estimator(self) -> tuple[float, float]:
+        """What the Kalman series depend on: (walk, sensor lag in s)."""
+        return (self.walk, self.sensor_lag_s)
 
     @property
     def name(self) -> str:
         """Label for reports."""
         lag = f', tdot_lag_s {self.tdot_lag_s:g}' if 'Tdot_lag' in self.terms else ''
         coil = f', coil_lag_s {self.coil_lag_s:g}' if self.coil_lag_s else ''
+        coil += f', sensor_lag_s {self.sensor_lag_s:g}' if self.sensor_lag_s else ''
         return (
             f'{self.model} (walk {self.walk:g}, shrink {self.shrink_sigmas:g}{lag}{coil}, '
             f'{self.fit})'
@@ -98,6 +117,7 @@ class Structure:
             tdot_shrink_sigmas=self.shrink_sigmas,
             tdot_lag_s=self.tdot_lag_s if 'Tdot_lag' in self.terms else 0.0,
             coil_lag_s=self.coil_lag_s,
+            sensor_lag_s=self.sensor_lag_s,
             tdot_wiener_window_s=self.wiener_window_s,
         )
 
@@ -116,8 +136,9 @@ def default_structures(
     held-out data asks for it.
 
     The lead-lag ``Tdot_lag`` fits a sensor ahead of or behind the coil; the coil lag lags the
-    estimated temperature and Tdot (a coil behind the sensor); each at every time constant of
-    ``lags_s`` and with every estimator setting.
+    estimated temperature and Tdot (a coil behind the sensor); the sensor lag is a Kalman filter
+    that estimates the coil's temperature and Tdot from a sensor behind it; each at every time
+    constant of ``lags_s`` and with every estimator setting.
     """
     out = []
     for walk in walks:
@@ -126,6 +147,7 @@ def default_structures(
                 out.append(Structure(terms, walk, shrink))
                 out += [Structure((*terms, 'Tdot_lag'), walk, shrink, lag) for lag in lags_s]
                 out += [Structure(terms, walk, shrink, coil_lag_s=lag) for lag in lags_s]
+                out += [Structure(terms, walk, shrink, sensor_lag_s=lag) for lag in lags_s]
     return out
 
 

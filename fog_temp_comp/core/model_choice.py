@@ -127,7 +127,7 @@ def refine_time_constant(
     base: DenoiseSettings,
     heldout: Sequence[ChamberRecord] = (),
 ) -> StructureScore:
-    """The chosen structure with its time constant (lead-lag or coil lag) refined.
+    """The chosen structure with its time constant (lead-lag, coil or sensor lag) refined.
 
     A bounded Brent search on log(tau) between the grid's neighbours of the chosen value
     (:data:`TDOT_LAGS_S`), on the same cross-validated score; the grid value is kept unless the
@@ -139,6 +139,8 @@ def refine_time_constant(
         if 'Tdot_lag' in structure.terms
         else 'coil_lag_s'
         if structure.coil_lag_s
+        else 'sensor_lag_s'
+        if structure.sensor_lag_s
         else ''
     )
     if not field_name or not math.isfinite(chosen.criterion):
@@ -153,11 +155,8 @@ def refine_time_constant(
     def objective(log_tau: float) -> float:
         nonlocal best
         value = float(math.exp(log_tau))
-        candidate = (
-            dataclasses.replace(structure, tdot_lag_s=value)
-            if field_name == 'tdot_lag_s'
-            else dataclasses.replace(structure, coil_lag_s=value)
-        )
+        changes: dict[str, Any] = {field_name: value}
+        candidate = dataclasses.replace(structure, **changes)
         (score,) = cross_validate(records, base, [candidate], heldout)
         if score.criterion < best.criterion:
             best = score
@@ -267,7 +266,7 @@ def _choose_and_calibrate(
         GridTable.concatenate(
             [
                 table_of(r, s, base.tdot_period_s)
-                for r, s in zip(records, _series(records, base, paper[0].walk), strict=True)
+                for r, s in zip(records, _series(records, base, paper[0].estimator), strict=True)
             ]
         ),
         PAPER_TERMS,
@@ -281,7 +280,7 @@ def _choose_and_calibrate(
         tolerance,
     )
     period = base.tdot_period_s
-    walk = chosen.structure.walk
+    walk = chosen.structure.estimator
     mode = fold_mode(
         [
             table_of(r, s, period)

@@ -16,7 +16,9 @@ none       :class:`GridTdotEstimator`, raw slope between bin means
 llr        :class:`LocalLinearTdotEstimator`: least-squares line through the raw samples of
            the last ``llr_window_s`` seconds, once per new bin
 kalman     :class:`KalmanTdotEstimator`: Kalman filter on (T, Tdot) with a random-walk Tdot,
-           whose measurement noise includes the sensor's quantization, once per sample
+           whose measurement noise includes the sensor's quantization, once per sample;
+           with ``sensor_lag_s > 0`` :class:`SensorLagKalmanTdotEstimator`, on the coil's
+           (T, Tdot) read through the sensor's first-order lag
 ========== =============================================================================
 
 With ``tdot_wiener_window_s > 0`` Tdot is first multiplied by its Wiener gain
@@ -36,6 +38,7 @@ re-exports the rest from where it lives:
   interface and :class:`EstimateSeries`;
 * :mod:`fog_temp_comp.core.tdot_grid` -- the per-bin estimators (grid denoising, ``'llr'``);
 * :mod:`fog_temp_comp.core.tdot_kalman` -- the Kalman filter;
+  :mod:`fog_temp_comp.core.tdot_kalman_lag` -- the one that knows the sensor's lag;
 * :mod:`fog_temp_comp.core.tdot_following` -- the Wiener gain, the coil lag, the Tdot shrinkage and
   ``Tdot_lag``; :mod:`fog_temp_comp.core.tdot_wiener` -- the Wiener gain itself.
 """
@@ -59,6 +62,7 @@ from fog_temp_comp.core.tdot_following import (
 )
 from fog_temp_comp.core.tdot_grid import GridTdotEstimator, LocalLinearTdotEstimator
 from fog_temp_comp.core.tdot_kalman import KalmanTdotEstimator
+from fog_temp_comp.core.tdot_kalman_lag import SensorLagKalmanTdotEstimator
 
 __all__ = [
     'CoilLagEstimator',
@@ -66,10 +70,12 @@ __all__ = [
     'GridTdotEstimator',
     'KalmanTdotEstimator',
     'LocalLinearTdotEstimator',
+    'SensorLagKalmanTdotEstimator',
     'TdotEstimate',
     'TdotEstimator',
     'TdotShaper',
     'WienerTdotEstimator',
+    'kalman_estimator',
     'make_estimator',
     'offline_estimates',
     'run_estimator',
@@ -92,7 +98,7 @@ def _lagged_estimator(settings: DenoiseSettings) -> TdotEstimator:
     elif settings.method == 'llr':
         base = LocalLinearTdotEstimator(settings)
     elif settings.method == 'kalman':
-        base = KalmanTdotEstimator(settings)
+        base = kalman_estimator(settings)
     else:  # DenoiseSettings validates method
         raise ValueError(f'unknown method {settings.method!r}')
     if settings.tdot_wiener_window_s > 0:
@@ -100,6 +106,15 @@ def _lagged_estimator(settings: DenoiseSettings) -> TdotEstimator:
     if settings.coil_lag_s > 0:
         return CoilLagEstimator(base, settings.coil_lag_s)
     return base
+
+
+def kalman_estimator(
+    settings: DenoiseSettings,
+) -> KalmanTdotEstimator | SensorLagKalmanTdotEstimator:
+    """Method ``'kalman'``'s filter: on the coil through ``sensor_lag_s`` if > 0, else plain."""
+    if settings.sensor_lag_s > 0:
+        return SensorLagKalmanTdotEstimator(settings)
+    return KalmanTdotEstimator(settings)
 
 
 def run_estimator(
@@ -155,7 +170,7 @@ def offline_estimates(
         series = EstimateSeries(stamp[1:], temp[1:], denoise_offline(tdot_raw[1:], settings))
     else:
         if settings.method == 'kalman':
-            series = KalmanTdotEstimator(settings).add_series(stamps_s, temperature_degC)
+            series = kalman_estimator(settings).add_series(stamps_s, temperature_degC)
         else:
             unshaped = dataclasses.replace(
                 settings,

@@ -82,6 +82,12 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
         _T.DOUBLE,
         'temperature sensor resolution (degC), kalman',
     ),
+    'sensor_lag_s': (
+        'sensor_lag_s',
+        _T.DOUBLE,
+        'lag (s) of the temperature sensor behind the coil, modelled by the Kalman filter, '
+        'kalman; 0 = none',
+    ),
     'coil_lag_s': (
         'coil_lag_s',
         _T.DOUBLE,

@@ -226,11 +226,12 @@ def _print_fit(
 ) -> None:
     """The fitted terms, each fit's statistics, the calibrated range and the warnings."""
     model = coeffs.model
-    lag = coeffs.denoise.coil_lag_s
+    lag, sensor_lag = coeffs.denoise.coil_lag_s, coeffs.denoise.sensor_lag_s
     print(
         f'fitted {", ".join(model.terms)} on {n_bags} bag(s), Tdot estimator '
         f'{coeffs.denoise.method}'
         + (f', coil lag {lag:.0f} s' if lag else '')
+        + (f', sensor lag {sensor_lag:.0f} s' if sensor_lag else '')
         + f'; wrote {output}',
         file=stdout,
     )

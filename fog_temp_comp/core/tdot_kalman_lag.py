@@ -1,0 +1,280 @@
+"""The Kalman filter that knows the sensor lags the coil (``sensor_lag_s > 0``), once per sample.
+
+States ``[T_coil degC, Tdot_coil degC/s, T_sensor degC]``: the coil's temperature integrates its
+rate, the rate is a random walk, and the sensor reads a first-order lag of the coil with time
+constant ``sensor_lag_s``. The filter estimates the *coil's* temperature and Tdot directly, with
+the noise trade-off of the Kalman filter rather than a lead fitted on the ramps. Stamps in s,
+temperatures in degC, Tdot in degC/min (the state holds it in degC/s).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.tdot_estimate import EstimateSeries, TdotEstimate, _add_each
+from fog_temp_comp.core.units import S_PER_MIN
+
+__all__ = ['SensorLagKalmanTdotEstimator', 'sensor_lag_transition']
+
+#: below this dt / tau the transition's noise is integrated numerically
+_QUADRATURE_BELOW = 0.5
+_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(10)
+
+#: sample intervals are rounded to this many decimals of a second (10 us) before use: stamps
+#: of float64 epoch seconds jitter in their last bits, and the filter's steady state (and the
+#: cached transitions) need the same interval to repeat exactly
+_DT_DECIMALS = 5
+#: transitions kept, by interval
+_TRANSITION_CACHE_SIZE = 64
+
+#: covariance ``(cc, cv, cs, vv, vs, ss)`` of (coil T, coil Tdot, sensor T), upper triangle
+Cov = tuple[float, float, float, float, float, float]
+
+
+def sensor_lag_transition(
+    dt_s: float, tau_s: float, q: float
+) -> tuple[tuple[float, float, float], Cov]:
+    """Exact discretisation over ``dt_s`` s: ``(a, b, c)`` of the transition and ``Q``.
+
+    Transition: ``T_coil += dt Tdot``; ``Tdot`` unchanged; ``T_sensor = a T_sensor + b T_coil
+    + c Tdot`` with ``a = exp(-dt/tau)``, ``b = 1 - a``, ``c = dt - tau b`` (the lag's response
+    to the ramp over the step). ``Q`` is the integral of the white rate-walk noise of intensity
+    ``q`` (degC^2/s^3) through the states, in closed form (as :data:`Cov`).
+    """
+    x = dt_s / tau_s
+    e1 = -math.expm1(-x)  # 1 - exp(-x), accurate for small x
+    a, b = 1.0 - e1, e1
+    c = dt_s - tau_s * e1
+    if x < _QUADRATURE_BELOW:
+        # g(y) = y - 1 + exp(-y) is the lag's ramp response (in tau); its closed-form integrals
+        # cancel to nothing at small dt / tau, so integrate it by Gauss-Legendre (exact to
+        # rounding for this entire function on a short interval)
+        y = 0.5 * x * (_NODES + 1.0)
+        g = np.expm1(-y) + y
+        w = 0.5 * x * _WEIGHTS
+        int_g, int_yg, int_gg = float(w @ g), float(w @ (y * g)), float(w @ (g * g))
+    else:
+        e2 = -math.expm1(-2.0 * x)
+        int_g = x * x / 2.0 - x + e1
+        int_yg = x**3 / 3.0 - x * x / 2.0 + e1 - x * (1.0 - e1)
+        int_gg = ((x - 1.0) ** 3 + 1.0) / 3.0 - 2.0 * x * (1.0 - e1) + e2 / 2.0
+    tau2, tau3 = tau_s * tau_s, tau_s**3
+    q_cc = q * dt_s**3 / 3.0
+    q_cv = q * dt_s * dt_s / 2.0
+    q_vv = q * dt_s
+    q_vs = q * tau2 * int_g
+    q_cs = q * tau3 * int_yg
+    q_ss = q * tau3 * int_gg
+    return (a, b, c), (q_cc, q_cv, q_cs, q_vv, q_vs, q_ss)
+
+
+def _step(
+    p: Cov, dt: float, transition: tuple[tuple[float, float, float], Cov], r: float
+) -> tuple[Cov, tuple[float, float, float], Cov]:
+    """Predict ``p`` over ``dt`` and update with one reading: (prior, gain, posterior)."""
+    (a, b, c), (q_cc, q_cv, q_cs, q_vv, q_vs, q_ss) = transition
+    cc, cv, cs, vv, vs, ss = p
+    # F P F' + Q, with rows F = [1 dt 0], [0 1 0], [b c a]
+    n_cc = cc + 2.0 * dt * cv + dt * dt * vv
+    n_cv = cv + dt * vv
+    n_vv = vv
+    # row 3 of F P: (b cc + c cv + a cs, b cv + c vv + a vs, b cs + c vs + a ss)
+    f3_c = b * cc + c * cv + a * cs
+    f3_v = b * cv + c * vv + a * vs
+    f3_s = b * cs + c * vs + a * ss
+    n_cs = f3_c + dt * f3_v
+    n_vs = f3_v
+    n_ss = b * f3_c + c * f3_v + a * f3_s
+    prior = (
+        n_cc + q_cc,
+        n_cv + q_cv,
+        n_cs + q_cs,
+        n_vv + q_vv,
+        n_vs + q_vs,
+        n_ss + q_ss,
+    )
+    cc, cv, cs, vv, vs, ss = prior
+    s = ss + r
+    k_c, k_v, k_s = cs / s, vs / s, ss / s
+    posterior = (
+        cc - k_c * cs,
+        cv - k_c * vs,
+        cs - k_c * ss,
+        vv - k_v * vs,
+        vs - k_v * ss,
+        ss - k_s * ss,
+    )
+    return prior, (k_c, k_v, k_s), posterior
+
+
+class SensorLagKalmanTdotEstimator:
+    """Kalman filter on the coil's temperature and rate, read through the sensor's lag.
+
+    Method ``'kalman'`` with ``sensor_lag_s > 0``. Process as :class:`KalmanTdotEstimator`
+    (a random-walk Tdot of intensity ``q = (kalman_rate_walk_degC_per_min_per_sqrt_s / 60)^2``
+    degC^2/s^3), now of the coil; the sensor is its first-order lag of time constant
+    ``sensor_lag_s`` (:func:`sensor_lag_transition`); measurement: one sensor reading of
+    variance ``temperature_noise_degC^2 + temperature_quantum_degC^2 / 12``. The estimate is
+    the coil's temperature and Tdot, with Tdot's posterior standard deviation. Irregular sample
+    intervals are handled exactly (to 10 us); a sample not at least 10 us after the previous one
+    is ignored.
+
+    Notes
+    -----
+    The first sample sets both temperatures; Tdot starts at 0 with a prior standard deviation
+    of 1 degC/min, and the coil may lead the sensor by that rate times the lag (the prior
+    correlates them so). Ready once the Tdot variance changes by < 0.1 % per sample.
+
+    """
+
+    #: prior standard deviation of Tdot at start-up, degC/min
+    PRIOR_TDOT_DEGC_PER_MIN = 1.0
+
+    def __init__(self, settings: DenoiseSettings) -> None:
+        if not settings.sensor_lag_s > 0.0:
+            raise ValueError(f'sensor_lag_s must be > 0 s, got {settings.sensor_lag_s!r}')
+        self.settings = settings
+        self.tau = settings.sensor_lag_s
+        self.q = (settings.kalman_rate_walk_degC_per_min_per_sqrt_s / S_PER_MIN) ** 2
+        self.r = settings.measurement_variance_degC2
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all samples."""
+        self._stamp = math.nan
+        self._x = (0.0, 0.0, 0.0)  # coil degC, coil degC/s, sensor degC
+        self._p: Cov = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        self._ready = False
+        self._estimate: TdotEstimate | None = None
+        self._transitions: dict[float, tuple[tuple[float, float, float], Cov]] = {}
+
+    def _start(self, stamp_s: float, z: float) -> None:
+        v0 = (self.PRIOR_TDOT_DEGC_PER_MIN / S_PER_MIN) ** 2
+        r, tau = self.r, self.tau
+        self._stamp = stamp_s
+        self._x = (z, 0.0, z)
+        self._p = (r + tau * tau * v0, tau * v0, r, v0, 0.0, r)
+        self._estimate = TdotEstimate(
+            stamp_s, z, 0.0, tdot_std_degC_per_min=self.PRIOR_TDOT_DEGC_PER_MIN, ready=False
+        )
+
+    def _transition_for(self, dt: float) -> tuple[tuple[float, float, float], Cov]:
+        transition = self._transitions.get(dt)
+        if transition is None:
+            if len(self._transitions) >= _TRANSITION_CACHE_SIZE:
+                self._transitions.clear()
+            transition = self._transitions[dt] = sensor_lag_transition(dt, self.tau, self.q)
+        return transition
+
+    def add(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Predict to ``stamp_s`` and update with the reading; return True (estimate changed)."""
+        if self._estimate is None:
+            self._start(stamp_s, temperature_degC)
+            return True
+        dt = round(stamp_s - self._stamp, _DT_DECIMALS)
+        if not dt > 0.0:
+            return False
+        transition = self._transition_for(dt)
+        _, (k_c, k_v, k_s), posterior = _step(self._p, dt, transition, self.r)
+        (a, b, c), _ = transition
+        tc, v, ts = self._x
+        pc, ps = tc + dt * v, a * ts + b * tc + c * v
+        innovation = temperature_degC - ps
+        self._x = (pc + k_c * innovation, v + k_v * innovation, ps + k_s * innovation)
+        previous = self._p[3]
+        self._p = posterior
+        self._stamp = stamp_s
+        if not self._ready and abs(posterior[3] - previous) <= 1e-3 * posterior[3]:
+            self._ready = True
+        self._estimate = self._make_estimate()
+        return True
+
+    def _make_estimate(self) -> TdotEstimate:
+        return TdotEstimate(
+            self._stamp,
+            self._x[0],
+            self._x[1] * S_PER_MIN,
+            tdot_std_degC_per_min=math.sqrt(max(self._p[3], 0.0)) * S_PER_MIN,
+            ready=self._ready,
+        )
+
+    def add_series(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> EstimateSeries:
+        """Feed samples shape (n,) in order; the estimates as arrays (one per used sample).
+
+        The same arithmetic as :meth:`add`, bit for bit, without an object per sample; once the
+        covariance stops changing at a repeated ``dt`` (steady state, to the last bit) its
+        gains are reused rather than recomputed.
+        """
+        t_in = np.asarray(stamps_s, dtype=np.float64).ravel().tolist()
+        z_in = np.asarray(temperature_degC, dtype=np.float64).ravel().tolist()
+        if len(t_in) != len(z_in):
+            raise ValueError('stamps and temperatures must have equal length')
+        out: list[tuple[float, float, float, float, bool]] = []
+        k = 0
+        if self._estimate is None and t_in:
+            self._start(t_in[0], z_in[0])
+            out.append((t_in[0], z_in[0], 0.0, self._p[3], False))
+            k = 1
+        r = self.r
+        stamp, (tc, v, ts), p, ready = self._stamp, self._x, self._p, self._ready
+        steady_dt = math.nan
+        gains = (0.0, 0.0, 0.0)
+        for stamp_next, z in zip(t_in[k:], z_in[k:], strict=True):
+            dt = round(stamp_next - stamp, _DT_DECIMALS)
+            if not dt > 0.0:
+                continue
+            transition = self._transition_for(dt)
+            if dt != steady_dt:
+                _, gains, posterior = _step(p, dt, transition, r)
+                previous, p = p, posterior
+                if previous == p:
+                    steady_dt = dt
+                else:
+                    steady_dt = math.nan
+                    if not ready and abs(p[3] - previous[3]) <= 1e-3 * p[3]:
+                        ready = True
+            (a, b, c), _ = transition
+            pc, ps = tc + dt * v, a * ts + b * tc + c * v
+            innovation = z - ps
+            tc, v = pc + gains[0] * innovation, v + gains[1] * innovation
+            ts = ps + gains[2] * innovation
+            stamp = stamp_next
+            ready = ready or steady_dt == dt
+            out.append((stamp, tc, v, p[3], ready))
+        self._stamp, self._x, self._p, self._ready = stamp, (tc, v, ts), p, ready
+        if out:
+            self._estimate = self._make_estimate()
+        columns: list[tuple[Any, ...]] = (
+            list(zip(*out, strict=True)) if out else [(), (), (), (), ()]
+        )
+        return EstimateSeries(
+            np.array(columns[0], dtype=np.float64),
+            np.array(columns[1], dtype=np.float64),
+            np.array(columns[2], dtype=np.float64) * S_PER_MIN,
+            np.sqrt(np.maximum(np.array(columns[3], dtype=np.float64), 0.0)) * S_PER_MIN,
+            ready=np.array(columns[4], dtype=bool),
+        )
+
+    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
+        """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
+        return _add_each(self, stamps_s, temperature_degC)
+
+    @property
+    def estimate(self) -> TdotEstimate | None:
+        """Filtered coil temperature and Tdot at the latest sample."""
+        return self._estimate
+
+    @property
+    def ready(self) -> bool:
+        """True once the Tdot variance has converged (changes < 0.1 % per sample)."""
+        return self._ready
+
+    @property
+    def tdot_std_degC_per_min(self) -> float:
+        """Current posterior standard deviation of the coil's Tdot, degC/min."""
+        return math.sqrt(max(self._p[3], 0.0)) * S_PER_MIN
