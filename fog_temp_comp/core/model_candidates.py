@@ -17,6 +17,8 @@ from fog_temp_comp.core.model import CANDIDATE_TERMS
 
 __all__ = [
     'KALMAN_WALKS',
+    'SENSOR_LAGS_S',
+    'SENSOR_LAG_WALKS',
     'SHRINK_SIGMAS',
     'TDOT_LAGS_S',
     'WIENER_WINDOW_S',
@@ -35,6 +37,12 @@ SHRINK_SIGMAS = (0.5, 1.0, 2.0, 3.0)
 WIENER_WINDOW_S = 600.0
 #: lead-lag time constants tried for the ``Tdot_lag`` term, s
 TDOT_LAGS_S = (30.0, 60.0, 120.0, 240.0, 480.0, 960.0)
+#: the sensor's lags behind the coil tried by the Kalman filter that models it, s (each is a
+#: filter run over every record: fewer than the lead-lag's, and no shorter than 2 min, where
+#: the lead-lag does as well)
+SENSOR_LAGS_S = (120.0, 240.0, 480.0, 960.0)
+#: Kalman random walks tried with a sensor lag, degC/min per sqrt(s)
+SENSOR_LAG_WALKS = (0.001, 0.003)
 
 
 @dataclass(frozen=True)
@@ -126,6 +134,8 @@ def default_structures(
     walks: Sequence[float] = KALMAN_WALKS,
     shrinks: Sequence[float] = SHRINK_SIGMAS,
     lags_s: Sequence[float] = TDOT_LAGS_S,
+    sensor_lags_s: Sequence[float] = SENSOR_LAGS_S,
+    sensor_lag_walks: Sequence[float] = SENSOR_LAG_WALKS,
 ) -> list[Structure]:
     """Every candidate: the paper's terms and extras; plain, with a lead-lag, or a coil lag.
 
@@ -137,8 +147,10 @@ def default_structures(
 
     The lead-lag ``Tdot_lag`` fits a sensor ahead of or behind the coil; the coil lag lags the
     estimated temperature and Tdot (a coil behind the sensor); the sensor lag is a Kalman filter
-    that estimates the coil's temperature and Tdot from a sensor behind it; each at every time
-    constant of ``lags_s`` and with every estimator setting.
+    that estimates the coil's temperature and Tdot from a sensor behind it. The lead-lag and
+    the coil lag come at every time constant of ``lags_s`` and with every estimator setting;
+    the sensor lag at ``sensor_lags_s``, with the walks of ``sensor_lag_walks`` that are in
+    ``walks``.
     """
     out = []
     for walk in walks:
@@ -147,7 +159,10 @@ def default_structures(
                 out.append(Structure(terms, walk, shrink))
                 out += [Structure((*terms, 'Tdot_lag'), walk, shrink, lag) for lag in lags_s]
                 out += [Structure(terms, walk, shrink, coil_lag_s=lag) for lag in lags_s]
-                out += [Structure(terms, walk, shrink, sensor_lag_s=lag) for lag in lags_s]
+                if walk in sensor_lag_walks:
+                    out += [
+                        Structure(terms, walk, shrink, sensor_lag_s=lag) for lag in sensor_lags_s
+                    ]
     return out
 
 

@@ -68,6 +68,7 @@ from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.model import PAPER_TERMS
 from fog_temp_comp.core.model_candidates import (
     KALMAN_WALKS,
+    SENSOR_LAGS_S,
     SHRINK_SIGMAS,
     TDOT_LAGS_S,
     Structure,
@@ -146,7 +147,7 @@ def refine_time_constant(
     if not field_name or not math.isfinite(chosen.criterion):
         return chosen
     tau = getattr(structure, field_name)
-    grid = sorted({*TDOT_LAGS_S, tau})
+    grid = sorted({*(SENSOR_LAGS_S if field_name == 'sensor_lag_s' else TDOT_LAGS_S), tau})
     k = grid.index(tau)
     low = grid[k - 1] if k > 0 else tau / 2.0
     high = grid[k + 1] if k + 1 < len(grid) else tau * 2.0

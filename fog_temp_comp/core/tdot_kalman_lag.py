@@ -224,13 +224,21 @@ class SensorLagKalmanTdotEstimator:
         stamp, (tc, v, ts), p, ready = self._stamp, self._x, self._p, self._ready
         steady_dt = math.nan
         gains = (0.0, 0.0, 0.0)
+        raw_dt = dt = math.nan
+        a = b = c = k_c = k_v = k_s = 0.0
+        transition = self._transitions.get(1.0) or sensor_lag_transition(1.0, self.tau, self.q)
         for stamp_next, z in zip(t_in[k:], z_in[k:], strict=True):
-            dt = round(stamp_next - stamp, _DT_DECIMALS)
-            if not dt > 0.0:
-                continue
-            transition = self._transition_for(dt)
+            if stamp_next - stamp != raw_dt:  # else: the same interval as the last sample's
+                raw_dt = stamp_next - stamp
+                dt = round(raw_dt, _DT_DECIMALS)
+                if not dt > 0.0:
+                    raw_dt = math.nan
+                    continue
+                transition = self._transition_for(dt)
+                (a, b, c), _ = transition
             if dt != steady_dt:
                 _, gains, posterior = _step(p, dt, transition, r)
+                k_c, k_v, k_s = gains
                 previous, p = p, posterior
                 if previous == p:
                     steady_dt = dt
@@ -238,13 +246,11 @@ class SensorLagKalmanTdotEstimator:
                     steady_dt = math.nan
                     if not ready and abs(p[3] - previous[3]) <= 1e-3 * p[3]:
                         ready = True
-            (a, b, c), _ = transition
+                ready = ready or steady_dt == dt
             pc, ps = tc + dt * v, a * ts + b * tc + c * v
             innovation = z - ps
-            tc, v = pc + gains[0] * innovation, v + gains[1] * innovation
-            ts = ps + gains[2] * innovation
+            tc, v, ts = pc + k_c * innovation, v + k_v * innovation, ps + k_s * innovation
             stamp = stamp_next
-            ready = ready or steady_dt == dt
             out.append((stamp, tc, v, p[3], ready))
         self._stamp, self._x, self._p, self._ready = stamp, (tc, v, ts), p, ready
         if out:
