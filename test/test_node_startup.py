@@ -15,6 +15,7 @@ from fog_temp_comp.core.coil import coil_lag
 from fog_temp_comp.core.compensator import Compensator, replay
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.metrics import window_means
+from fog_temp_comp.core.model_candidates import Structure
 from fog_temp_comp.core.model_choice import choose_and_calibrate
 from fog_temp_comp.core.tdot_kalman import KalmanTdotEstimator
 from fog_temp_comp.core.units import DEG_H_PER_RAD_S
@@ -235,3 +236,31 @@ def test_unresolved_soak_is_within_the_oracles_range_on_the_node(
         soak.temperature_degC,
     )
     assert worst_range_ratio(noisy) > oracle + 0.03
+
+
+def test_sensor_lag_filter_on_the_node_is_the_offline_one_and_starts_quietly(
+    ros_context: object, tmp_path: Path, soak: SimulatedRun
+) -> None:
+    """A fit with the sensor-lag Kalman filter: the node outputs what a replay computes.
+
+    And from power-on its 10 s means are within the gyro's 10 s noise of the oracle's (the
+    coil's temperature, unknown at start, enters without a spike).
+    """
+    train = simulate_run('cycle', 0.2, PLANT, seed=21).as_record()
+    structure = Structure(('const', 'T', 'Tdot', 'T2'), 0.001, 0.5, sensor_lag_s=200.0)
+    result, _, chosen = choose_and_calibrate([train], RECOMMENDED_SETTINGS, structures=[structure])
+    coefficients = result.coefficients
+    assert coefficients.denoise.sensor_lag_s == chosen.structure.sensor_lag_s > 0
+    path = tmp_path / 'coeffs.yaml'
+    save(coefficients, path)
+    corrected = through_node(ros_context, path, soak)
+    offline = replay(
+        Compensator(coefficients.model, coefficients.denoise),
+        soak.imu_stamps_s,
+        soak.rates_rad_s,
+        soak.temp_stamps_s,
+        soak.temperature_degC,
+    )
+    np.testing.assert_allclose(corrected, offline, rtol=0, atol=1e-15)
+    bound = noise_10s_deg_h(soak)
+    assert np.all(np.abs(error_means_deg_h(soak, corrected)[:6]) <= bound)
