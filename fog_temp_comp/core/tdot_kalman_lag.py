@@ -29,6 +29,8 @@ _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(10)
 #: of float64 epoch seconds jitter in their last bits, and the filter's steady state (and the
 #: cached transitions) need the same interval to repeat exactly
 _DT_DECIMALS = 5
+#: readings closer than this (s) count as one, for the measurement variance (:meth:`_r_at`)
+INDEPENDENT_AFTER_S = 1.0
 #: transitions kept, by interval
 _TRANSITION_CACHE_SIZE = 64
 
@@ -119,7 +121,9 @@ class SensorLagKalmanTdotEstimator:
     (a random-walk Tdot of intensity ``q = (kalman_rate_walk_degC_per_min_per_sqrt_s / 60)^2``
     degC^2/s^3), now of the coil; the sensor is its first-order lag of time constant
     ``sensor_lag_s`` (:func:`sensor_lag_transition`); measurement: one sensor reading of
-    variance ``temperature_noise_degC^2 + temperature_quantum_degC^2 / 12``. The estimate is
+    variance ``R = temperature_noise_degC^2 + temperature_quantum_degC^2 / 12``, more for
+    readings less than 1 s apart (:meth:`_r_at`: a deconvolving filter must not take the
+    shared quantization error of a fast sensor for information). The estimate is
     the coil's temperature and Tdot, with Tdot's posterior standard deviation. Irregular sample
     intervals are handled exactly (to 10 us); a sample not at least 10 us after the previous one
     is ignored.
@@ -163,6 +167,15 @@ class SensorLagKalmanTdotEstimator:
             stamp_s, z, 0.0, tdot_std_degC_per_min=self.PRIOR_TDOT_DEGC_PER_MIN, ready=False
         )
 
+    def _r_at(self, dt: float) -> float:
+        """Variance of a reading ``dt`` s after the last, degC^2: R, more when it comes sooner.
+
+        Readings closer than :data:`INDEPENDENT_AFTER_S` share their quantization error (a
+        slow temperature stays on one step), so they are not independent: the information
+        rate is capped at one reading of variance R per that interval.
+        """
+        return self.r * max(1.0, INDEPENDENT_AFTER_S / dt)
+
     def _transition_for(self, dt: float) -> tuple[tuple[float, float, float], Cov]:
         transition = self._transitions.get(dt)
         if transition is None:
@@ -180,7 +193,7 @@ class SensorLagKalmanTdotEstimator:
         if not dt > 0.0:
             return False
         transition = self._transition_for(dt)
-        _, (k_c, k_v, k_s), posterior = _step(self._p, dt, transition, self.r)
+        _, (k_c, k_v, k_s), posterior = _step(self._p, dt, transition, self._r_at(dt))
         (a, b, c), _ = transition
         tc, v, ts = self._x
         pc, ps = tc + dt * v, a * ts + b * tc + c * v
@@ -220,7 +233,6 @@ class SensorLagKalmanTdotEstimator:
             self._start(t_in[0], z_in[0])
             out.append((t_in[0], z_in[0], 0.0, self._p[3], False))
             k = 1
-        r = self.r
         stamp, (tc, v, ts), p, ready = self._stamp, self._x, self._p, self._ready
         steady_dt = math.nan
         gains = (0.0, 0.0, 0.0)
@@ -237,7 +249,7 @@ class SensorLagKalmanTdotEstimator:
                 transition = self._transition_for(dt)
                 (a, b, c), _ = transition
             if dt != steady_dt:
-                _, gains, posterior = _step(p, dt, transition, r)
+                _, gains, posterior = _step(p, dt, transition, self._r_at(dt))
                 k_c, k_v, k_s = gains
                 previous, p = p, posterior
                 if previous == p:
