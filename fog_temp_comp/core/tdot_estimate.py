@@ -20,7 +20,7 @@ from fog_temp_comp.core.tdot_wiener import wiener_gains
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ['EstimateSeries', 'TdotEstimate', 'TdotEstimator']
+__all__ = ['EstimateSeries', 'PerSampleEstimator', 'TdotEstimate', 'TdotEstimator']
 
 
 @dataclass(frozen=True)
@@ -87,6 +87,38 @@ def _add_each(
             assert estimate is not None
             out.append(estimate)
     return out
+
+
+class PerSampleEstimator:
+    """What the estimators updated at every sample share: blocks, the estimate, ``ready``.
+
+    A subclass defines ``add`` and ``reset`` and keeps ``_estimate`` and ``_ready``.
+    """
+
+    _estimate: TdotEstimate | None
+    _ready: bool
+
+    def add(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Feed one sample; True if the estimate changed."""
+        raise NotImplementedError
+
+    def reset(self) -> None:
+        """Forget all samples."""
+        raise NotImplementedError
+
+    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
+        """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
+        return _add_each(self, stamps_s, temperature_degC)
+
+    @property
+    def estimate(self) -> TdotEstimate | None:
+        """Filtered temperature and Tdot at the latest sample."""
+        return self._estimate
+
+    @property
+    def ready(self) -> bool:
+        """True once the Tdot variance has converged (changes < 0.1 % per sample)."""
+        return self._ready
 
 
 @dataclass(frozen=True)

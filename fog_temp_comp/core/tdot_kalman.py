@@ -11,13 +11,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
-from fog_temp_comp.core.tdot_estimate import EstimateSeries, TdotEstimate, _add_each
+from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.units import S_PER_MIN
 
 __all__ = ['KalmanTdotEstimator']
 
 
-class KalmanTdotEstimator:
+class KalmanTdotEstimator(PerSampleEstimator):
     """Kalman filter on temperature and its rate (method ``'kalman'``), once per sample.
 
     State ``[T (degC), Tdot (degC/s)]``; process: ``T`` integrates ``Tdot``, and ``Tdot`` is a
@@ -178,20 +178,6 @@ class KalmanTdotEstimator:
             np.sqrt(np.maximum(np.array(out_p), 0.0)) * S_PER_MIN,
             ready=np.array(out_ready, dtype=bool),
         )
-
-    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
-        """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
-        return _add_each(self, stamps_s, temperature_degC)
-
-    @property
-    def estimate(self) -> TdotEstimate | None:
-        """Filtered temperature and Tdot at the latest sample."""
-        return self._estimate
-
-    @property
-    def ready(self) -> bool:
-        """True once the Tdot variance has converged (changes < 0.1 % per sample)."""
-        return self._ready
 
     @property
     def tdot_std_degC_per_min(self) -> float:

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
-from fog_temp_comp.core.tdot_estimate import EstimateSeries, TdotEstimate, _add_each
+from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.units import S_PER_MIN
 
 __all__ = ['SensorLagKalmanTdotEstimator', 'sensor_lag_transition']
@@ -114,7 +114,7 @@ def _step(
     return prior, (k_c, k_v, k_s), posterior
 
 
-class SensorLagKalmanTdotEstimator:
+class SensorLagKalmanTdotEstimator(PerSampleEstimator):
     """Kalman filter on the coil's temperature and rate, read through the sensor's lag.
 
     Method ``'kalman'`` with ``sensor_lag_s > 0``. Process as :class:`KalmanTdotEstimator`
@@ -277,20 +277,6 @@ class SensorLagKalmanTdotEstimator:
             np.sqrt(np.maximum(np.array(columns[3], dtype=np.float64), 0.0)) * S_PER_MIN,
             ready=np.array(columns[4], dtype=bool),
         )
-
-    def add_block(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> list[TdotEstimate]:
-        """Feed samples shape (n,) in order; same estimates as :meth:`add` on each one."""
-        return _add_each(self, stamps_s, temperature_degC)
-
-    @property
-    def estimate(self) -> TdotEstimate | None:
-        """Filtered coil temperature and Tdot at the latest sample."""
-        return self._estimate
-
-    @property
-    def ready(self) -> bool:
-        """True once the Tdot variance has converged (changes < 0.1 % per sample)."""
-        return self._ready
 
     @property
     def tdot_std_degC_per_min(self) -> float:
