@@ -14,7 +14,20 @@ from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.units import S_PER_MIN
 
-__all__ = ['KalmanTdotEstimator']
+__all__ = ['INDEPENDENT_AFTER_S', 'KalmanTdotEstimator', 'ready_tolerance']
+
+#: readings closer than this (s) count as one (their measurement variance grows)
+INDEPENDENT_AFTER_S = 1.0
+
+
+def ready_tolerance(dt_s: float) -> float:
+    """Relative change of the Tdot variance below which a step ``dt_s`` s long counts as settled.
+
+    0.1 % per reading of full weight; a reading closer than :data:`INDEPENDENT_AFTER_S` carries
+    that fraction of one's information, so its step must change the variance that much less
+    (else a 10 Hz sensor would count as warmed up after two readings).
+    """
+    return 1e-3 * min(1.0, dt_s / INDEPENDENT_AFTER_S)
 
 
 class KalmanTdotEstimator(PerSampleEstimator):
@@ -24,8 +37,11 @@ class KalmanTdotEstimator(PerSampleEstimator):
     random walk of intensity ``q = (kalman_rate_walk_degC_per_min_per_sqrt_s / 60)^2``
     (degC^2/s^3), i.e. ``Q = q [[dt^3/3, dt^2/2], [dt^2/2, dt]]``; measurement: one reading of
     variance ``temperature_noise_degC^2 + temperature_quantum_degC^2 / 12`` (white noise plus
-    uniform quantization error, so the filter knows the quantization step). Irregular sample
-    intervals are handled exactly; a sample not after the previous one is ignored.
+    uniform quantization error, so the filter knows the quantization step), times
+    ``max(1, 1 s / dt)`` for readings less than :data:`INDEPENDENT_AFTER_S` apart (a fast
+    quantized sensor repeats one error: at most one reading's information per second).
+    Irregular sample intervals are handled exactly; a sample not after the previous one is
+    ignored.
 
     Parameters
     ----------
@@ -81,7 +97,7 @@ class KalmanTdotEstimator(PerSampleEstimator):
         p01 = self._p01 + dt * self._p11 + q * dt * dt / 2.0
         p11 = self._p11 + q * dt
         # update with z = T + noise
-        s = p00 + self.r
+        s = p00 + self.r * max(1.0, INDEPENDENT_AFTER_S / dt)
         k0, k1 = p00 / s, p01 / s
         innovation = z - t
         self._t = t + k0 * innovation
@@ -89,7 +105,7 @@ class KalmanTdotEstimator(PerSampleEstimator):
         previous = self._p11
         self._p00, self._p01, self._p11 = p00 - k0 * p00, p01 - k0 * p01, p11 - k1 * p01
         self._stamp = stamp_s
-        if not self._ready and abs(self._p11 - previous) <= 1e-3 * self._p11:
+        if not self._ready and abs(self._p11 - previous) <= ready_tolerance(dt) * self._p11:
             self._ready = True
         self._estimate = TdotEstimate(
             stamp_s,
@@ -142,7 +158,7 @@ class KalmanTdotEstimator(PerSampleEstimator):
                 a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
                 a01 = p01 + dt * p11 + q * dt * dt / 2.0
                 a11 = p11 + q * dt
-                sv = a00 + r
+                sv = a00 + r * max(1.0, INDEPENDENT_AFTER_S / dt)
                 k0, k1 = a00 / sv, a01 / sv
                 previous = (p00, p01, p11)
                 p00, p01, p11 = a00 - k0 * a00, a01 - k0 * a01, a11 - k1 * a01
@@ -150,7 +166,7 @@ class KalmanTdotEstimator(PerSampleEstimator):
                     steady_dt = dt
                 else:
                     steady_dt = math.nan
-                    if not ready and abs(p11 - previous[2]) <= 1e-3 * p11:
+                    if not ready and abs(p11 - previous[2]) <= ready_tolerance(dt) * p11:
                         ready = True
             t = tp + k0 * innovation
             v += k1 * innovation

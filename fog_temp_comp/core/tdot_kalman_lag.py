@@ -17,6 +17,7 @@ from numpy.typing import ArrayLike
 
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
+from fog_temp_comp.core.tdot_kalman import INDEPENDENT_AFTER_S, ready_tolerance
 from fog_temp_comp.core.units import S_PER_MIN
 
 __all__ = ['SensorLagKalmanTdotEstimator', 'sensor_lag_transition']
@@ -29,8 +30,6 @@ _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(10)
 #: of float64 epoch seconds jitter in their last bits, and the filter's steady state (and the
 #: cached transitions) need the same interval to repeat exactly
 _DT_DECIMALS = 5
-#: readings closer than this (s) count as one, for the measurement variance (:meth:`_r_at`)
-INDEPENDENT_AFTER_S = 1.0
 #: transitions kept, by interval
 _TRANSITION_CACHE_SIZE = 64
 
@@ -46,7 +45,8 @@ def sensor_lag_transition(
     Transition: ``T_coil += dt Tdot``; ``Tdot`` unchanged; ``T_sensor = a T_sensor + b T_coil
     + c Tdot`` with ``a = exp(-dt/tau)``, ``b = 1 - a``, ``c = dt - tau b`` (the lag's response
     to the ramp over the step). ``Q`` is the integral of the white rate-walk noise of intensity
-    ``q`` (degC^2/s^3) through the states, in closed form (as :data:`Cov`).
+    ``q`` (degC^2/s^3) through the states (as :data:`Cov`): in closed form, or by 10-point
+    Gauss-Legendre quadrature where ``dt < tau / 2`` and the closed form cancels.
     """
     x = dt_s / tau_s
     e1 = -math.expm1(-x)  # 1 - exp(-x), accurate for small x
@@ -202,7 +202,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         previous = self._p[3]
         self._p = posterior
         self._stamp = stamp_s
-        if not self._ready and abs(posterior[3] - previous) <= 1e-3 * posterior[3]:
+        if not self._ready and abs(posterior[3] - previous) <= ready_tolerance(dt) * posterior[3]:
             self._ready = True
         self._estimate = self._make_estimate()
         return True
@@ -256,7 +256,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
                     steady_dt = dt
                 else:
                     steady_dt = math.nan
-                    if not ready and abs(p[3] - previous[3]) <= 1e-3 * p[3]:
+                    if not ready and abs(p[3] - previous[3]) <= ready_tolerance(dt) * p[3]:
                         ready = True
                 ready = ready or steady_dt == dt
             pc, ps = tc + dt * v, a * ts + b * tc + c * v
