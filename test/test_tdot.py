@@ -330,6 +330,34 @@ def test_coil_lag_is_exact_first_order_hold() -> None:
     assert_allclose(coil_lag(t, x, 50.0), y, rtol=0, atol=1e-12)  # non-uniform: same recursion
 
 
+def test_coil_lag_offline_with_jittered_stamps_equals_online() -> None:
+    """Receive-time jitter, a repeated and a backwards stamp, a gap: the vector path is exact."""
+    rng = np.random.default_rng(21)
+    t = T0 + 0.1 * np.arange(20000) + rng.normal(0.0, 1e-3, 20000)
+    t[500] = t[499]  # repeated
+    t[900] = t[899] - 0.05  # backwards
+    t[5000:] += 300.0  # a gap
+    x = 20.0 + rng.normal(0.0, 0.3, 20000).cumsum()
+    online = CoilLag(240.0).update_block(t, x)
+    assert_allclose(coil_lag(t, x, 240.0), online, rtol=0, atol=1e-9 * np.abs(online).max())
+    assert coil_lag(t, x, 240.0)[501] == pytest.approx(online[501])
+
+
+def test_affine_scan_follows_its_definition() -> None:
+    from fog_temp_comp.core.coil import affine_scan
+
+    rng = np.random.default_rng(22)
+    c, u = rng.uniform(0.0, 1.0, 1000), rng.normal(size=1000)
+    y, prev = [], 0.0
+    for ck, uk in zip(c, u, strict=True):
+        prev = ck * prev + uk
+        y.append(prev)
+    assert_allclose(affine_scan(c, u), y, rtol=0, atol=1e-12)
+    assert affine_scan(np.array([]), np.array([])).size == 0
+    with pytest.raises(ValueError, match='equal length'):
+        affine_scan(c[:3], u)
+
+
 def test_coil_lag_offline_lfilter_equals_online() -> None:
     t = T0 + 10.0 * np.arange(500)
     x = np.random.default_rng(9).normal(size=500).cumsum()

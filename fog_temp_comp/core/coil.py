@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ['CoilLag', 'coil_lag', 'foh_lag_coefficients', 'search_time_constant']
+__all__ = ['CoilLag', 'affine_scan', 'coil_lag', 'foh_lag_coefficients', 'search_time_constant']
 
 
 def foh_lag_coefficients(dt_s: float, tau_s: float) -> tuple[float, float]:
@@ -127,6 +127,23 @@ def first_order_recursion(a1: float, u: ArrayLike) -> FloatArray:
     return y
 
 
+def affine_scan(c: FloatArray, u: FloatArray) -> FloatArray:
+    """``y[k] = c[k] * y[k-1] + u[k]`` with ``y[-1] = 0``, each shape (n,), in numpy.
+
+    The time-varying :func:`first_order_recursion`: a doubling scan of ``log2(n)`` vector
+    operations; equals the Python loop to rounding (the sums are taken in another order).
+    """
+    y, c = np.array(u, dtype=np.float64), np.array(c, dtype=np.float64)
+    if not (y.ndim == 1 and c.shape == y.shape):
+        raise ValueError(f'c and u must be 1-D of equal length, got {c.shape}, {y.shape}')
+    shift = 1
+    while shift < y.size:
+        y[shift:] += c[shift:] * y[:-shift]
+        c[shift:] *= c[:-shift]
+        shift *= 2
+    return y
+
+
 def first_order_lfilter(b0: float, b1: float, a1: float, x: FloatArray, z0: float) -> FloatArray:
     """``scipy.signal.lfilter([b0, b1], [1, -a1], x, zi=[z0])[0]`` to rounding, without scipy.
 
@@ -161,7 +178,9 @@ def coil_lag(stamps_s: ArrayLike, values: ArrayLike, time_constant_s: float) -> 
     (the jitter of epoch stamps in float64 at several Hz is about 1e-6) and the online
     recursion otherwise.
     On exactly uniform stamps the two agree to rounding (about 1e-12 relative); with the jitter
-    allowed, to about the jitter times the step over the time constant.
+    allowed, to about the jitter times the step over the time constant. Other stamps (a
+    driver's receive-time jitter, gaps) take each interval's exact step, in the vector
+    operations of :func:`affine_scan` (the online recursion to rounding).
 
     Parameters
     ----------
@@ -196,7 +215,27 @@ def coil_lag(stamps_s: ArrayLike, values: ArrayLike, time_constant_s: float) -> 
         a, b = foh_lag_coefficients(step, tau)
         # y[k] = a y[k-1] + b x[k] + (1 - a - b) x[k-1], y[0] = x[0]
         return first_order_lfilter(b, 1.0 - a - b, a, x, (1.0 - b) * float(x[0]))
-    return CoilLag(tau).update_block(t, x)
+    CoilLag(tau)  # validates tau
+    return _irregular_lag(dt, x, tau)
+
+
+def _irregular_lag(dt: FloatArray, x: FloatArray, tau: float) -> FloatArray:
+    """:class:`CoilLag` over intervals ``dt`` shape (n-1,) and values ``x`` shape (n,).
+
+    Each step is ``y[k] = a[k] y[k-1] + (1 - a[k]) x[k-1] + b[k] (x[k] - x[k-1])``
+    (:func:`foh_lag_coefficients`); an interval <= 0 keeps the output (``a = 1``, ``u = 0``).
+    """
+    step = dt > 0.0
+    ratio = np.where(step, dt, 1.0) / tau
+    a = np.where(step, np.exp(-ratio), 1.0)
+    b = np.where(step, 1.0 + np.expm1(-ratio) / ratio, 0.0)
+    u = np.empty_like(x)
+    u[0] = x[0]
+    u[1:] = np.where(step, (1.0 - a) * x[:-1] + b * (x[1:] - x[:-1]), 0.0)
+    c = np.empty_like(x)
+    c[0] = 0.0
+    c[1:] = a
+    return affine_scan(c, u)
 
 
 def search_time_constant(

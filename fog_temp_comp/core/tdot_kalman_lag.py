@@ -30,8 +30,9 @@ _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(10)
 #: of float64 epoch seconds jitter in their last bits, and the filter's steady state (and the
 #: cached transitions) need the same interval to repeat exactly
 _DT_DECIMALS = 5
-#: transitions kept, by interval
-_TRANSITION_CACHE_SIZE = 64
+#: transitions kept, by interval: enough for every interval of a sensor whose stamps jitter by
+#: up to +-20 ms (a driver stamping on receipt), about 2 MB at most
+_TRANSITION_CACHE_SIZE = 4096
 
 #: covariance ``(cc, cv, cs, vv, vs, ss)`` of (coil T, coil Tdot, sensor T), upper triangle
 Cov = tuple[float, float, float, float, float, float]

@@ -26,6 +26,8 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fog_temp_comp.core.coil import affine_scan
+
 FloatArray = NDArray[np.float64]
 
 __all__ = ['WienerGain', 'wiener_gains']
@@ -77,17 +79,6 @@ class WienerGain:
         return max(0.0, 1.0 - std_degC_per_min * std_degC_per_min / self._m2)
 
 
-def _affine_scan(c: FloatArray, u: FloatArray) -> FloatArray:
-    """``y[k] = c[k] * y[k-1] + u[k]`` with ``y[-1] = 0``, by a doubling scan (log2(n) steps)."""
-    y, c = u.copy(), c.copy()
-    shift = 1
-    while shift < y.size:
-        y[shift:] += c[shift:] * y[:-shift]
-        c[shift:] *= c[:-shift]
-        shift *= 2
-    return y
-
-
 def wiener_gains(
     stamps_s: ArrayLike, tdot_degC_per_min: ArrayLike, std_degC_per_min: ArrayLike, window_s: float
 ) -> FloatArray:
@@ -127,7 +118,7 @@ def wiener_gains(
     a[1:] = -np.expm1(-np.diff(np.maximum.accumulate(tk)) / window)
     u = a * x2
     u[0] = x2[0]
-    m2 = _affine_scan(1.0 - a, u)
+    m2 = affine_scan(1.0 - a, u)
     with np.errstate(divide='ignore', invalid='ignore'):
         gain = np.where(m2 > 0.0, np.maximum(0.0, 1.0 - s2 / m2), 0.0)
     gains[known] = gain
