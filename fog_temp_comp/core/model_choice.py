@@ -122,6 +122,11 @@ def choose(scores: Sequence[StructureScore], tolerance: float = TOLERANCE) -> St
     return min(within, key=lambda s: (s.structure.complexity, s.criterion))
 
 
+#: cross-validations of the time constant's refinement, each one filter run over every record
+#: for a sensor lag (most of ``calibrate``'s time with a fast temperature sensor)
+REFINE_EVALUATIONS = 5
+
+
 def refine_time_constant(
     chosen: StructureScore,
     records: Sequence[ChamberRecord],
@@ -131,8 +136,8 @@ def refine_time_constant(
     """The chosen structure with its time constant (lead-lag, coil or sensor lag) refined.
 
     A bounded Brent search on log(tau) between the grid's neighbours of the chosen value
-    (:data:`TDOT_LAGS_S`), on the same cross-validated score; the grid value is kept unless the
-    search beats it.
+    (:data:`TDOT_LAGS_S`), on the same cross-validated score, to 5 % of tau or
+    :data:`REFINE_EVALUATIONS` scores; the grid value is kept unless the search beats it.
     """
     structure = chosen.structure
     field_name = (
@@ -169,7 +174,7 @@ def refine_time_constant(
         objective,
         bounds=(math.log(low), math.log(high)),
         method='bounded',
-        options={'xatol': 0.02, 'maxiter': 12},
+        options={'xatol': 0.05, 'maxiter': REFINE_EVALUATIONS},
     )
     return best
 

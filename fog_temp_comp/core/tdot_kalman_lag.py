@@ -26,10 +26,17 @@ __all__ = ['SensorLagKalmanTdotEstimator', 'sensor_lag_transition']
 _QUADRATURE_BELOW = 0.5
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(10)
 
-#: sample intervals are rounded to this many decimals of a second (10 us) before use: stamps
+#: sample intervals are rounded to 1 / this of a second (10 us) before use: stamps
 #: of float64 epoch seconds jitter in their last bits, and the filter's steady state (and the
 #: cached transitions) need the same interval to repeat exactly
-_DT_DECIMALS = 5
+_DT_SCALE = 1e5
+
+
+def _round_dt(dt_s: float) -> float:
+    """``dt_s`` rounded to 10 us, as ``numpy.rint(dt * 1e5) / 1e5`` does it (bit for bit)."""
+    return round(dt_s * _DT_SCALE) / _DT_SCALE
+
+
 #: transitions kept, by interval: enough for every interval of a sensor whose stamps jitter by
 #: up to +-20 ms (a driver stamping on receipt), about 2 MB at most
 _TRANSITION_CACHE_SIZE = 4096
@@ -190,7 +197,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         if self._estimate is None:
             self._start(stamp_s, temperature_degC)
             return True
-        dt = round(stamp_s - self._stamp, _DT_DECIMALS)
+        dt = _round_dt(stamp_s - self._stamp)
         if not dt > 0.0:
             return False
         transition = self._transition_for(dt)
@@ -237,16 +244,23 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         stamp, (tc, v, ts), p, ready = self._stamp, self._x, self._p, self._ready
         steady_dt = math.nan
         gains = (0.0, 0.0, 0.0)
-        raw_dt = dt = math.nan
+        last_dt = math.nan
         a = b = c = k_c = k_v = k_s = 0.0
         transition = self._transitions.get(1.0) or sensor_lag_transition(1.0, self.tau, self.q)
-        for stamp_next, z in zip(t_in[k:], z_in[k:], strict=True):
-            if stamp_next - stamp != raw_dt:  # else: the same interval as the last sample's
-                raw_dt = stamp_next - stamp
-                dt = round(raw_dt, _DT_DECIMALS)
-                if not dt > 0.0:
-                    raw_dt = math.nan
-                    continue
+        # the intervals, rounded in one vector operation; after a skipped sample, from the last
+        # sample used
+        t_used = np.asarray(t_in[k:], dtype=np.float64)
+        steps = (np.rint(np.diff(np.r_[stamp, t_used]) * _DT_SCALE) / _DT_SCALE).tolist()
+        skipped = False
+        for stamp_next, z, dt in zip(t_in[k:], z_in[k:], steps, strict=True):
+            if skipped:
+                dt = _round_dt(stamp_next - stamp)
+            if not dt > 0.0:
+                skipped = True
+                continue
+            skipped = False
+            if dt != last_dt:  # else: the same interval as the last sample's
+                last_dt = dt
                 transition = self._transition_for(dt)
                 (a, b, c), _ = transition
             if dt != steady_dt:
