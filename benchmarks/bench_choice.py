@@ -11,7 +11,7 @@ bag. Side by side, in fresh processes, each round times:
 - ``rosbags read``: ``AnyReader.messages()`` + ``deserialize`` of every message (the floor a
   user's own script would pay);
 - ``calibrate``: ``fog-temp-comp calibrate BAG -o C.yaml --quiet`` as a user runs it (start-up,
-  reading, the sensor measurement, 624 candidates cross-validated, the refinement, the fit).
+  reading, the sensor measurement, 752 candidates cross-validated, the refinement, the fit).
 
 The fastest round of each is shown. ``--jitter-s`` adds Gaussian jitter to every stamp (a
 driver that stamps on receipt: the filters then see a different interval at every sample).
