@@ -231,7 +231,8 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         covariance stops changing at a repeated ``dt`` (steady state, to the last bit) its
         gains are reused rather than recomputed.
         """
-        t_in = np.asarray(stamps_s, dtype=np.float64).ravel().tolist()
+        t_array = np.asarray(stamps_s, dtype=np.float64).ravel()
+        t_in = t_array.tolist()
         z_in = np.asarray(temperature_degC, dtype=np.float64).ravel().tolist()
         if len(t_in) != len(z_in):
             raise ValueError('stamps and temperatures must have equal length')
@@ -249,8 +250,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         transition = self._transitions.get(1.0) or sensor_lag_transition(1.0, self.tau, self.q)
         # the intervals, rounded in one vector operation; after a skipped sample, from the last
         # sample used
-        t_used = np.asarray(t_in[k:], dtype=np.float64)
-        steps = (np.rint(np.diff(np.r_[stamp, t_used]) * _DT_SCALE) / _DT_SCALE).tolist()
+        steps = (np.rint(np.diff(np.r_[stamp, t_array[k:]]) * _DT_SCALE) / _DT_SCALE).tolist()
         skipped = False
         for stamp_next, z, dt in zip(t_in[k:], z_in[k:], steps, strict=True):
             if skipped:
