@@ -109,7 +109,8 @@ def test_matches_naive_matrix_filter_on_irregular_stamps() -> None:
     assert_allclose(ours[:, 1:], ref[:, 1:], rtol=1e-8, atol=1e-9)
 
 
-def test_add_series_is_add_bit_for_bit() -> None:
+@pytest.mark.parametrize('kind', [SensorLagKalmanTdotEstimator, KalmanTdotEstimator])
+def test_add_series_is_add_bit_for_bit(kind: type) -> None:
     """The calibration's array loop (steady-state gains reused) equals the node's per sample."""
     rng = np.random.default_rng(5)
     n = 5000
@@ -119,16 +120,17 @@ def test_add_series_is_add_bit_for_bit() -> None:
     gap[3000:] += 600.0
     repeated = uniform.copy()
     repeated[[100, 2500, 4000]] = repeated[[99, 2499, 3990]]
+    fast = T0 + np.arange(n) * 0.1 + rng.normal(0.0, 1e-3, n)  # 10 Hz: averaged readings
     temps = np.round((20.0 + 0.003 * np.arange(n) + rng.normal(0, 0.02, n)) * 16.0) / 16.0
-    for stamps in (uniform, jittered, gap, repeated):
-        online = SensorLagKalmanTdotEstimator(SETTINGS)
+    for stamps in (uniform, jittered, gap, repeated, fast):
+        online = kind(SETTINGS)
         rows = []
         for ts, z in zip(stamps.tolist(), temps.tolist(), strict=True):
             if online.add(ts, z):
                 e = online.estimate
                 assert e is not None
                 rows.append((e.stamp_s, e.temperature_degC, e.tdot_degC_per_min, e.ready))
-        series = SensorLagKalmanTdotEstimator(SETTINGS)
+        series = kind(SETTINGS)
         parts = [series.add_series(stamps[:1234], temps[:1234])]
         parts.append(series.add_series(stamps[1234:], temps[1234:]))
         got = np.column_stack(
@@ -214,6 +216,6 @@ def test_warm_up_takes_about_as_long_at_10_hz_as_at_1_hz() -> None:
             est = SensorLagKalmanTdotEstimator(settings) if lag else KalmanTdotEstimator(settings)
             series = est.add_series(T0 + t, 20.0 + 0.005 * t)
             assert series.ready is not None and series.ready.any()
-            ready_after[lag, hz] = t[int(np.argmax(series.ready))]
+            ready_after[lag, hz] = series.stamp_s[int(np.argmax(series.ready))] - T0
         assert ready_after[lag, 1.0] > 10.0
         assert 0.5 < ready_after[lag, 10.0] / ready_after[lag, 1.0] < 2.0, ready_after

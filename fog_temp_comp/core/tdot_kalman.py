@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.reading_average import ReadingAverager, average_readings
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.units import S_PER_MIN
 
@@ -74,9 +75,19 @@ class KalmanTdotEstimator(PerSampleEstimator):
         self._p00 = self._p01 = self._p11 = 0.0
         self._ready = False
         self._estimate: TdotEstimate | None = None
+        self._averager = ReadingAverager()
 
     def add(self, stamp_s: float, temperature_degC: float) -> bool:
-        """Predict to ``stamp_s`` and update with the reading; return True (estimate changed)."""
+        """Feed one reading; True if the estimate changed (readings are averaged first).
+
+        See :mod:`~fog_temp_comp.core.reading_average`: a reading 2 Hz or slower is used as it
+        is, a faster sensor's readings are fed as means twice a second.
+        """
+        fed = self._averager.add(stamp_s, temperature_degC)
+        return fed is not None and self._update(*fed)
+
+    def _update(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Predict to ``stamp_s`` and update with the (averaged) reading."""
         z = temperature_degC
         if self._estimate is None:
             self._stamp = stamp_s
@@ -120,12 +131,14 @@ class KalmanTdotEstimator(PerSampleEstimator):
         """Feed samples shape (n,) in order; the estimates as arrays (one per used sample).
 
         The same arithmetic as :meth:`add`, bit for bit, without an object per sample (what
-        calibration runs over a whole record).
+        calibration runs over a whole record); one estimate per averaged reading fed.
         """
-        t_in = np.asarray(stamps_s, dtype=np.float64).ravel().tolist()
-        z_in = np.asarray(temperature_degC, dtype=np.float64).ravel().tolist()
-        if len(t_in) != len(z_in):
+        t_all = np.asarray(stamps_s, dtype=np.float64).ravel()
+        z_all = np.asarray(temperature_degC, dtype=np.float64).ravel()
+        if t_all.size != z_all.size:
             raise ValueError('stamps and temperatures must have equal length')
+        t_fed, z_fed = average_readings(self._averager, t_all, z_all)
+        t_in, z_in = t_fed.tolist(), z_fed.tolist()
         out_t: list[float] = []
         out_x: list[float] = []
         out_v: list[float] = []
@@ -133,7 +146,7 @@ class KalmanTdotEstimator(PerSampleEstimator):
         out_ready: list[bool] = []
         k = 0
         if self._estimate is None and t_in:
-            self.add(t_in[0], z_in[0])
+            self._update(t_in[0], z_in[0])
             out_t.append(t_in[0])
             out_x.append(z_in[0])
             out_v.append(0.0)

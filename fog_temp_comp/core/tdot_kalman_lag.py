@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.reading_average import ReadingAverager, average_readings
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.tdot_kalman import INDEPENDENT_AFTER_S, ready_tolerance
 from fog_temp_comp.core.units import S_PER_MIN
@@ -164,6 +165,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         self._ready = False
         self._estimate: TdotEstimate | None = None
         self._transitions: dict[float, tuple[tuple[float, float, float], Cov]] = {}
+        self._averager = ReadingAverager()
 
     def _start(self, stamp_s: float, z: float) -> None:
         v0 = (self.PRIOR_TDOT_DEGC_PER_MIN / S_PER_MIN) ** 2
@@ -193,7 +195,16 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         return transition
 
     def add(self, stamp_s: float, temperature_degC: float) -> bool:
-        """Predict to ``stamp_s`` and update with the reading; return True (estimate changed)."""
+        """Feed one reading; True if the estimate changed (readings are averaged first).
+
+        See :mod:`~fog_temp_comp.core.reading_average`: a reading 2 Hz or slower is used as it
+        is, a faster sensor's readings are fed as means twice a second.
+        """
+        fed = self._averager.add(stamp_s, temperature_degC)
+        return fed is not None and self._update(*fed)
+
+    def _update(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Predict to ``stamp_s`` and update with the (averaged) reading."""
         if self._estimate is None:
             self._start(stamp_s, temperature_degC)
             return True
@@ -229,13 +240,14 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
 
         The same arithmetic as :meth:`add`, bit for bit, without an object per sample; once the
         covariance stops changing at a repeated ``dt`` (steady state, to the last bit) its
-        gains are reused rather than recomputed.
+        gains are reused rather than recomputed. One estimate per averaged reading fed.
         """
-        t_array = np.asarray(stamps_s, dtype=np.float64).ravel()
-        t_in = t_array.tolist()
-        z_in = np.asarray(temperature_degC, dtype=np.float64).ravel().tolist()
-        if len(t_in) != len(z_in):
+        t_all = np.asarray(stamps_s, dtype=np.float64).ravel()
+        z_all = np.asarray(temperature_degC, dtype=np.float64).ravel()
+        if t_all.size != z_all.size:
             raise ValueError('stamps and temperatures must have equal length')
+        t_array, z_array = average_readings(self._averager, t_all, z_all)
+        t_in, z_in = t_array.tolist(), z_array.tolist()
         out: list[tuple[float, float, float, float, bool]] = []
         k = 0
         if self._estimate is None and t_in:
