@@ -265,8 +265,11 @@ def test_a_marked_hole_restarts_the_tdot_estimate_however_short(model: DriftMode
 Event = tuple[str, float, tuple[float, ...]]
 
 
-def _awkward_stream(seed: int) -> list[Event]:
+def _awkward_stream(seed: int, temp_hz: int = 1) -> list[Event]:
     """A 50 Hz gyro and a 1 Hz temperature over ~40 min with everything a bag can hold.
+
+    ``temp_hz`` > 1 adds readings between the seconds (jittered by 1 ms) where the stream is
+    regular.
 
     Gyro before the first temperature, a steady ramp and a fast one (Tdot clamped or
     extrapolated), temperatures beyond the calibrated range (clamped), a temperature gap (stale,
@@ -293,6 +296,9 @@ def _awkward_stream(seed: int) -> list[Event]:
             events.append(('T', stamp + 15.0, (temp,)))  # ahead of the gyro
         elif k > 5:
             events.append(('T', stamp, (temp + rng.normal(0, 0.02),)))
+            for i in range(1, temp_hz):
+                fast = stamp + i / temp_hz + rng.normal(0, 1e-3)
+                events.append(('T', fast, (temp + rng.normal(0, 0.02),)))
         for j in range(50):
             s = stamp + j / 50 + rng.normal(0, 1e-4)
             xyz = tuple(rng.normal(0, 1e-4, 3).tolist())
@@ -415,6 +421,27 @@ def test_correct_block_equals_correct_xyz_bit_for_bit(
     assert counters.imu_held or counters.imu_uncorrected > 300
     assert counters.imu_temperature_clamped or not one.guard.clamp_temperature
     assert counters.imu_tdot_clamped + counters.imu_tdot_extrapolated
+
+
+def test_correct_block_equals_correct_xyz_with_a_10_hz_sensor() -> None:
+    """Readings averaged before the sensor-lag filter: blocks and messages still agree."""
+    from fog_temp_comp.core.compensator import GuardSettings
+
+    model = DriftModel(
+        (*PAPER_TERMS, 'T2'),
+        np.array([[10.0, -5.0, 2.0], [0.01, 0.02, -0.01], [1.0, -0.5, 0.3], [1e-4, 0, -1e-4]]),
+        Range(15.0, 25.0),
+        Range(-0.5, 0.5),
+    )
+    settings = DenoiseSettings(method='kalman', sensor_lag_s=200.0)
+    events = _awkward_stream(seed=7, temp_hz=10)
+    one = Compensator(model, settings, GuardSettings())
+    blocks = Compensator(model, settings, GuardSettings())
+    expected = _drive(one, events, 'each')
+    assert_array_equal(_drive(blocks, events, 'block', seed=3), expected)
+    _assert_same_state(one, blocks)
+    assert one.status.counters.temperature_accepted > 10000
+    assert one.status.estimator_ready
 
 
 def test_correct_block_with_rest_learning_equals_correct_xyz() -> None:
