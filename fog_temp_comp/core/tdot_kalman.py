@@ -42,7 +42,8 @@ class KalmanTdotEstimator(PerSampleEstimator):
     ``max(1, 1 s / dt)`` for readings less than :data:`INDEPENDENT_AFTER_S` apart (a fast
     quantized sensor repeats one error: at most one reading's information per second).
     Irregular sample intervals are handled exactly; a sample not after the previous one is
-    ignored.
+    ignored. A sensor faster than 2 Hz is fed as means over 0.5 s cells
+    (:mod:`~fog_temp_comp.core.reading_average`), twice a second.
 
     Parameters
     ----------

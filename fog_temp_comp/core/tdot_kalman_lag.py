@@ -135,7 +135,8 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
     shared quantization error of a fast sensor for information). The estimate is
     the coil's temperature and Tdot, with Tdot's posterior standard deviation. Irregular sample
     intervals are handled exactly (to 10 us); a sample not at least 10 us after the previous one
-    is ignored.
+    is ignored. A sensor faster than 2 Hz is fed as means over 0.5 s cells
+    (:mod:`~fog_temp_comp.core.reading_average`), twice a second.
 
     Notes
     -----
