@@ -65,8 +65,11 @@ def test_transition_is_van_loans(dt: float, tau: float) -> None:
     assert np.all(np.linalg.eigvalsh(full(cov)) > -1e-12 * np.abs(qd).max())
 
 
-def ref_filter(stamps, temps, settings: DenoiseSettings) -> np.ndarray:
-    """Naive matrix Kalman filter on [T_coil, Tdot_coil (degC/s), T_sensor] (Van Loan's F, Q)."""
+def ref_filter(stamps, temps, settings: DenoiseSettings, factors=None) -> np.ndarray:
+    """Naive matrix Kalman filter on [T_coil, Tdot_coil (degC/s), T_sensor] (Van Loan's F, Q).
+
+    ``factors``: each reading's variance is R times its factor (default 1).
+    """
     q = (settings.kalman_rate_walk_degC_per_min_per_sqrt_s / 60.0) ** 2
     r, tau = settings.measurement_variance_degC2, settings.sensor_lag_s
     v0 = (1.0 / 60.0) ** 2
@@ -78,7 +81,7 @@ def ref_filter(stamps, temps, settings: DenoiseSettings) -> np.ndarray:
         f, qd = van_loan(round(stamps[k] - stamps[k - 1], 5), tau, q)  # intervals to 10 us
         x = f @ x
         p = f @ p @ f.T + qd
-        gain = p @ h.T / (h @ p @ h.T + r)
+        gain = p @ h.T / (h @ p @ h.T + r * (1.0 if factors is None else factors[k]))
         x = x + (gain * (temps[k] - x[2])).ravel()
         p = (np.eye(3) - gain @ h) @ p
         out.append((stamps[k], x[0], x[1] * 60.0))
@@ -109,9 +112,15 @@ def test_matches_naive_matrix_filter_on_irregular_stamps() -> None:
     assert_allclose(ours[:, 1:], ref[:, 1:], rtol=1e-8, atol=1e-9)
 
 
+@pytest.mark.parametrize('repeat_scale_s', [0.0, 1.0])
 @pytest.mark.parametrize('kind', [SensorLagKalmanTdotEstimator, KalmanTdotEstimator])
-def test_add_series_is_add_bit_for_bit(kind: type) -> None:
-    """The calibration's array loop (steady-state gains reused) equals the node's per sample."""
+def test_add_series_is_add_bit_for_bit(kind: type, repeat_scale_s: float) -> None:
+    """The calibration's array loop (steady-state gains reused) equals the node's per sample.
+
+    With repeated readings weighed less, on a sensor quiet enough to repeat its steps.
+    """
+    settings = dataclasses.replace(SETTINGS, kalman_repeat_scale_s=repeat_scale_s)
+    noise = 0.02 if repeat_scale_s == 0 else 0.003
     rng = np.random.default_rng(5)
     n = 5000
     uniform = T0 + np.arange(n) * 1.0
@@ -121,16 +130,16 @@ def test_add_series_is_add_bit_for_bit(kind: type) -> None:
     repeated = uniform.copy()
     repeated[[100, 2500, 4000]] = repeated[[99, 2499, 3990]]
     fast = T0 + np.arange(n) * 0.1 + rng.normal(0.0, 1e-3, n)  # 10 Hz: averaged readings
-    temps = np.round((20.0 + 0.003 * np.arange(n) + rng.normal(0, 0.02, n)) * 16.0) / 16.0
+    temps = np.round((20.0 + 0.003 * np.arange(n) + rng.normal(0, noise, n)) * 16.0) / 16.0
     for stamps in (uniform, jittered, gap, repeated, fast):
-        online = kind(SETTINGS)
+        online = kind(settings)
         rows = []
         for ts, z in zip(stamps.tolist(), temps.tolist(), strict=True):
             if online.add(ts, z):
                 e = online.estimate
                 assert e is not None
                 rows.append((e.stamp_s, e.temperature_degC, e.tdot_degC_per_min, e.ready))
-        series = kind(SETTINGS)
+        series = kind(settings)
         parts = [series.add_series(stamps[:1234], temps[:1234])]
         parts.append(series.add_series(stamps[1234:], temps[1234:]))
         got = np.column_stack(
@@ -142,6 +151,32 @@ def test_add_series_is_add_bit_for_bit(kind: type) -> None:
         assert_array_equal(got, np.array(rows, dtype=float))
         assert series.estimate == online.estimate
         assert online.ready
+
+
+def test_matches_naive_matrix_filter_with_repeated_readings_weighed_less() -> None:
+    """Each reading's variance is R times the factor the docstring's rule gives it."""
+    rng = np.random.default_rng(8)
+    stamps = T0 + np.cumsum(rng.uniform(1.0, 3.0, 2000))
+    t = stamps - T0
+    sensor = 20.0 + 0.2 / 60.0 * np.clip(t - 1500.0, 0.0, None) + 0.05 * np.sin(t / 300.0)
+    temps = np.round((sensor + rng.normal(0.0, 0.003, t.size)) * 16.0) / 16.0
+    settings = dataclasses.replace(SETTINGS, kalman_repeat_scale_s=1.0)
+    factors, start, level = [], 0.0, np.nan
+    for ts, z in zip(stamps, temps, strict=True):
+        if not abs(z - level) < 1 / 32:
+            start, level = ts, z
+        factors.append(max(1.0, (ts - start) / 1.0) ** 0.5)
+    assert max(factors) > 5.0  # the quiet sensor does repeat its steps
+    ours = np.array(
+        [
+            (e.stamp_s, e.temperature_degC, e.tdot_degC_per_min)
+            for e in SensorLagKalmanTdotEstimator(settings).add_block(stamps, temps)
+        ]
+    )
+    ref = ref_filter(stamps, temps, settings, factors)
+    assert_allclose(ours[:, 1:], ref[:, 1:], rtol=1e-8, atol=1e-9)
+    plain = ref_filter(stamps, temps, settings)
+    assert np.max(np.abs(plain[:, 2] - ref[:, 2])) > 1e-3  # and the factors do matter
 
 
 def test_estimates_the_coil_not_the_sensor() -> None:

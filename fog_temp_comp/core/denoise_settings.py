@@ -101,6 +101,12 @@ class DenoiseSettings:
         deviation (:mod:`fog_temp_comp.core.tdot_wiener`; method ``'kalman'`` only; 0: off).
         Near 1 on ramps, near 0 on a soak whose wobble the sensor does not resolve; applied to
         the estimator's output, before the coil lag and the shrinkage.
+    kalman_repeat_scale_s : float
+        Method ``'kalman'``: a reading still on the quantization step its run of readings
+        started on, ``tau`` s after the run's first reading, weighs as one of variance
+        ``R * sqrt(tau / this)`` once ``tau`` exceeds this many s (repeated readings of a
+        quantized sensor share one error; :mod:`fog_temp_comp.core.reading_repeat`); 0: off,
+        every reading weighs ``R``. Needs ``temperature_quantum_degC > 0``.
 
     """
 
@@ -125,6 +131,7 @@ class DenoiseSettings:
     tdot_lag_s: float = 0.0
     tdot_shrink_sigmas: float = 0.0
     tdot_wiener_window_s: float = 0.0
+    kalman_repeat_scale_s: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field; raise ValueError naming the offending field."""
@@ -181,6 +188,7 @@ class DenoiseSettings:
             'tdot_lag_s',
             'tdot_shrink_sigmas',
             'tdot_wiener_window_s',
+            'kalman_repeat_scale_s',
         ):
             value = _check_float(name, getattr(self, name))
             if value < 0.0:
@@ -235,5 +243,6 @@ class DenoiseSettings:
 #: flags (:mod:`fog_temp_comp.core.model_choice`) measures the sensor's noise and quantization,
 #: chooses the rate walk and the lead-lag, and turns on the Tdot shrinkage; these are the
 #: settings of a fit with given ``--terms`` (the shrinkage off, so the coefficients keep their
-#: physical meaning)
-RECOMMENDED_SETTINGS = DenoiseSettings(method='kalman')
+#: physical meaning). Repeated readings on one quantization step weigh less after 1 s
+#: (:mod:`fog_temp_comp.core.reading_repeat`), the span over which readings already count as one.
+RECOMMENDED_SETTINGS = DenoiseSettings(method='kalman', kalman_repeat_scale_s=1.0)

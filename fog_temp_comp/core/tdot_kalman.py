@@ -12,6 +12,7 @@ from numpy.typing import ArrayLike
 
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.reading_average import ReadingAverager, average_readings
+from fog_temp_comp.core.reading_repeat import RepeatedReadings, repeat_factors
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.units import S_PER_MIN
 
@@ -31,6 +32,27 @@ def ready_tolerance(dt_s: float) -> float:
     return 1e-3 * min(1.0, dt_s / INDEPENDENT_AFTER_S)
 
 
+#: covariance ``(p00, p01, p11)`` of (T degC, Tdot degC/s)
+Cov2 = tuple[float, float, float]
+
+
+def _covariance_step(p: Cov2, dt: float, q: float, r: float) -> Cov2:
+    """The covariance predicted over ``dt`` s and updated with a reading of variance ``r``."""
+    p00, p01, p11 = p
+    a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
+    a01 = p01 + dt * p11 + q * dt * dt / 2.0
+    a11 = p11 + q * dt
+    s = a00 + r
+    k0, k1 = a00 / s, a01 / s
+    return a00 - k0 * a00, a01 - k0 * a01, a11 - k1 * a01
+
+
+def _warm_up(p: Cov2, dt: float, q: float, r: float) -> tuple[Cov2, bool]:
+    """One step of the warm-up covariance (every reading of variance ``r``), and if it settled."""
+    posterior = _covariance_step(p, dt, q, r)
+    return posterior, abs(posterior[2] - p[2]) <= ready_tolerance(dt) * posterior[2]
+
+
 class KalmanTdotEstimator(PerSampleEstimator):
     """Kalman filter on temperature and its rate (method ``'kalman'``), once per sample.
 
@@ -43,17 +65,21 @@ class KalmanTdotEstimator(PerSampleEstimator):
     quantized sensor repeats one error: at most one reading's information per second).
     Irregular sample intervals are handled exactly; a sample not after the previous one is
     ignored. A sensor faster than 2 Hz is fed as means over 0.5 s cells
-    (:mod:`~fog_temp_comp.core.reading_average`), twice a second.
+    (:mod:`~fog_temp_comp.core.reading_average`), twice a second. With
+    ``kalman_repeat_scale_s`` a reading that repeats its step weighs less
+    (:mod:`~fog_temp_comp.core.reading_repeat`).
 
     Parameters
     ----------
     settings : DenoiseSettings
-        ``kalman_rate_walk_degC_per_min_per_sqrt_s``, ``temperature_noise_degC`` and
-        ``temperature_quantum_degC``.
+        ``kalman_rate_walk_degC_per_min_per_sqrt_s``, ``temperature_noise_degC``,
+        ``temperature_quantum_degC`` and ``kalman_repeat_scale_s``.
 
     Notes
     -----
     The first sample sets ``T``, with ``Tdot = 0`` and a prior standard deviation of 1 degC/min.
+    Ready once the Tdot variance changes by < 0.1 % per reading, as it would if every reading
+    weighed ``R`` (repeated readings make the variance rise and fall, not converge).
     In steady state the filter is an alpha-beta filter; its Tdot bandwidth is about
     ``(q / R)^(1/4)`` rad/s, i.e. it averages over roughly ``(R / q)^(1/4)`` seconds.
 
@@ -74,9 +100,13 @@ class KalmanTdotEstimator(PerSampleEstimator):
         self._t = 0.0
         self._v = 0.0  # degC/s
         self._p00 = self._p01 = self._p11 = 0.0
+        self._warm: Cov2 = (0.0, 0.0, 0.0)  # the covariance were no reading repeated
         self._ready = False
         self._estimate: TdotEstimate | None = None
         self._averager = ReadingAverager()
+        self._repeated = RepeatedReadings(
+            self.settings.temperature_quantum_degC, self.settings.kalman_repeat_scale_s
+        )
 
     def add(self, stamp_s: float, temperature_degC: float) -> bool:
         """Feed one reading; True if the estimate changed (readings are averaged first).
@@ -90,11 +120,13 @@ class KalmanTdotEstimator(PerSampleEstimator):
     def _update(self, stamp_s: float, temperature_degC: float) -> bool:
         """Predict to ``stamp_s`` and update with the (averaged) reading."""
         z = temperature_degC
+        repeat = self._repeated.factor(stamp_s, z)
         if self._estimate is None:
             self._stamp = stamp_s
             self._t, self._v = z, 0.0
             self._p00, self._p01 = self.r, 0.0
             self._p11 = (self.PRIOR_TDOT_DEGC_PER_MIN / S_PER_MIN) ** 2
+            self._warm = (self._p00, self._p01, self._p11)
             self._estimate = TdotEstimate(
                 stamp_s, z, 0.0, tdot_std_degC_per_min=self.PRIOR_TDOT_DEGC_PER_MIN, ready=False
             )
@@ -109,16 +141,16 @@ class KalmanTdotEstimator(PerSampleEstimator):
         p01 = self._p01 + dt * self._p11 + q * dt * dt / 2.0
         p11 = self._p11 + q * dt
         # update with z = T + noise
-        s = p00 + self.r * max(1.0, INDEPENDENT_AFTER_S / dt)
+        s = p00 + self.r * max(1.0, INDEPENDENT_AFTER_S / dt) * repeat
         k0, k1 = p00 / s, p01 / s
         innovation = z - t
         self._t = t + k0 * innovation
         self._v += k1 * innovation
-        previous = self._p11
         self._p00, self._p01, self._p11 = p00 - k0 * p00, p01 - k0 * p01, p11 - k1 * p01
         self._stamp = stamp_s
-        if not self._ready and abs(self._p11 - previous) <= ready_tolerance(dt) * self._p11:
-            self._ready = True
+        if not self._ready:
+            r_dt = self.r * max(1.0, INDEPENDENT_AFTER_S / dt)
+            self._warm, self._ready = _warm_up(self._warm, dt, q, r_dt)
         self._estimate = TdotEstimate(
             stamp_s,
             self._t,
@@ -154,45 +186,45 @@ class KalmanTdotEstimator(PerSampleEstimator):
             out_p.append(self._p11)
             out_ready.append(False)
             k = 1
+        repeats = repeat_factors(self._repeated, t_fed[k:], z_fed[k:]).tolist()
         q, r = self.q, self.r
         stamp, t, v = self._stamp, self._t, self._v
-        p00, p01, p11, ready = self._p00, self._p01, self._p11, self._ready
+        p00, p01, p11, ready, warm = self._p00, self._p01, self._p11, self._ready, self._warm
         # The covariance is a function of itself and dt only: once a step with some dt leaves
         # it unchanged (the filter's steady state, to the last bit), further steps with that dt
-        # leave it unchanged too, and their gains are the last ones; they are not recomputed.
+        # leave it unchanged too, and their gains are the last ones; they are not recomputed. A
+        # repeated reading (factor > 1) weighs differently: its step is always computed.
         steady_dt = math.nan
         k0 = k1 = 0.0
-        for ts, z in zip(t_in[k:], z_in[k:], strict=True):
+        for ts, z, repeat in zip(t_in[k:], z_in[k:], repeats, strict=True):
             dt = ts - stamp
             if not dt > 0.0:
                 continue
             tp = t + dt * v
             innovation = z - tp
+            if repeat != 1.0:
+                steady_dt = math.nan
             if dt != steady_dt:
                 a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
                 a01 = p01 + dt * p11 + q * dt * dt / 2.0
                 a11 = p11 + q * dt
-                sv = a00 + r * max(1.0, INDEPENDENT_AFTER_S / dt)
+                sv = a00 + r * max(1.0, INDEPENDENT_AFTER_S / dt) * repeat
                 k0, k1 = a00 / sv, a01 / sv
                 previous = (p00, p01, p11)
                 p00, p01, p11 = a00 - k0 * a00, a01 - k0 * a01, a11 - k1 * a01
-                if previous == (p00, p01, p11):
-                    steady_dt = dt
-                else:
-                    steady_dt = math.nan
-                    if not ready and abs(p11 - previous[2]) <= ready_tolerance(dt) * p11:
-                        ready = True
+                steady_dt = dt if previous == (p00, p01, p11) and repeat == 1.0 else math.nan
+            if not ready:
+                warm, ready = _warm_up(warm, dt, q, r * max(1.0, INDEPENDENT_AFTER_S / dt))
             t = tp + k0 * innovation
             v += k1 * innovation
             stamp = ts
-            ready = ready or steady_dt == dt
             out_t.append(ts)
             out_x.append(t)
             out_v.append(v)
             out_p.append(p11)
             out_ready.append(ready)
         self._stamp, self._t, self._v = stamp, t, v
-        self._p00, self._p01, self._p11, self._ready = p00, p01, p11, ready
+        self._p00, self._p01, self._p11, self._ready, self._warm = p00, p01, p11, ready, warm
         if out_t:
             self._estimate = TdotEstimate(
                 out_t[-1],

@@ -17,6 +17,7 @@ from numpy.typing import ArrayLike
 
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.reading_average import ReadingAverager, average_readings
+from fog_temp_comp.core.reading_repeat import RepeatedReadings, repeat_factors
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.tdot_kalman import INDEPENDENT_AFTER_S, ready_tolerance
 from fog_temp_comp.core.units import S_PER_MIN
@@ -123,6 +124,14 @@ def _step(
     return prior, (k_c, k_v, k_s), posterior
 
 
+def _warm_up(
+    p: Cov, dt: float, transition: tuple[tuple[float, float, float], Cov], r: float
+) -> tuple[Cov, bool]:
+    """One step of the warm-up covariance (every reading of variance ``r``), and if it settled."""
+    posterior = _step(p, dt, transition, r)[2]
+    return posterior, abs(posterior[3] - p[3]) <= ready_tolerance(dt) * posterior[3]
+
+
 class SensorLagKalmanTdotEstimator(PerSampleEstimator):
     """Kalman filter on the coil's temperature and rate, read through the sensor's lag.
 
@@ -136,13 +145,16 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
     the coil's temperature and Tdot, with Tdot's posterior standard deviation. Irregular sample
     intervals are handled exactly (to 10 us); a sample not at least 10 us after the previous one
     is ignored. A sensor faster than 2 Hz is fed as means over 0.5 s cells
-    (:mod:`~fog_temp_comp.core.reading_average`), twice a second.
+    (:mod:`~fog_temp_comp.core.reading_average`), twice a second. With
+    ``kalman_repeat_scale_s`` a reading that repeats its step weighs less
+    (:mod:`~fog_temp_comp.core.reading_repeat`).
 
     Notes
     -----
     The first sample sets both temperatures; Tdot starts at 0 with a prior standard deviation
     of 1 degC/min, and the coil may lead the sensor by that rate times the lag (the prior
-    correlates them so). Ready once the Tdot variance changes by < 0.1 % per sample.
+    correlates them so). Ready once the Tdot variance changes by < 0.1 % per sample, as it
+    would if every reading weighed ``R`` (repeated readings make it rise and fall).
 
     """
 
@@ -163,10 +175,14 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         self._stamp = math.nan
         self._x = (0.0, 0.0, 0.0)  # coil degC, coil degC/s, sensor degC
         self._p: Cov = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        self._warm: Cov = self._p  # the covariance were no reading repeated
         self._ready = False
         self._estimate: TdotEstimate | None = None
         self._transitions: dict[float, tuple[tuple[float, float, float], Cov]] = {}
         self._averager = ReadingAverager()
+        self._repeated = RepeatedReadings(
+            self.settings.temperature_quantum_degC, self.settings.kalman_repeat_scale_s
+        )
 
     def _start(self, stamp_s: float, z: float) -> None:
         v0 = (self.PRIOR_TDOT_DEGC_PER_MIN / S_PER_MIN) ** 2
@@ -174,6 +190,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         self._stamp = stamp_s
         self._x = (z, 0.0, z)
         self._p = (r + tau * tau * v0, tau * v0, r, v0, 0.0, r)
+        self._warm = self._p
         self._estimate = TdotEstimate(
             stamp_s, z, 0.0, tdot_std_degC_per_min=self.PRIOR_TDOT_DEGC_PER_MIN, ready=False
         )
@@ -206,6 +223,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
 
     def _update(self, stamp_s: float, temperature_degC: float) -> bool:
         """Predict to ``stamp_s`` and update with the (averaged) reading."""
+        repeat = self._repeated.factor(stamp_s, temperature_degC)
         if self._estimate is None:
             self._start(stamp_s, temperature_degC)
             return True
@@ -213,17 +231,17 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         if not dt > 0.0:
             return False
         transition = self._transition_for(dt)
-        _, (k_c, k_v, k_s), posterior = _step(self._p, dt, transition, self._r_at(dt))
+        r = self._r_at(dt) * repeat
+        _, (k_c, k_v, k_s), posterior = _step(self._p, dt, transition, r)
         (a, b, c), _ = transition
         tc, v, ts = self._x
         pc, ps = tc + dt * v, a * ts + b * tc + c * v
         innovation = temperature_degC - ps
         self._x = (pc + k_c * innovation, v + k_v * innovation, ps + k_s * innovation)
-        previous = self._p[3]
         self._p = posterior
         self._stamp = stamp_s
-        if not self._ready and abs(posterior[3] - previous) <= ready_tolerance(dt) * posterior[3]:
-            self._ready = True
+        if not self._ready:
+            self._warm, self._ready = _warm_up(self._warm, dt, transition, self._r_at(dt))
         self._estimate = self._make_estimate()
         return True
 
@@ -252,10 +270,13 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         out: list[tuple[float, float, float, float, bool]] = []
         k = 0
         if self._estimate is None and t_in:
+            self._repeated.factor(t_in[0], z_in[0])
             self._start(t_in[0], z_in[0])
             out.append((t_in[0], z_in[0], 0.0, self._p[3], False))
             k = 1
+        repeats = repeat_factors(self._repeated, t_array[k:], z_array[k:]).tolist()
         stamp, (tc, v, ts), p, ready = self._stamp, self._x, self._p, self._ready
+        warm = self._warm
         steady_dt = math.nan
         gains = (0.0, 0.0, 0.0)
         last_dt = math.nan
@@ -265,34 +286,33 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         # sample used
         steps = (np.rint(np.diff(np.r_[stamp, t_array[k:]]) * _DT_SCALE) / _DT_SCALE).tolist()
         skipped = False
-        for stamp_next, z, dt in zip(t_in[k:], z_in[k:], steps, strict=True):
+        for stamp_next, z, dt, repeat in zip(t_in[k:], z_in[k:], steps, repeats, strict=True):
             if skipped:
                 dt = _round_dt(stamp_next - stamp)
             if not dt > 0.0:
                 skipped = True
                 continue
             skipped = False
+            if repeat != 1.0:  # a repeated reading weighs differently: its step is computed
+                steady_dt = math.nan
             if dt != last_dt:  # else: the same interval as the last sample's
                 last_dt = dt
                 transition = self._transition_for(dt)
                 (a, b, c), _ = transition
             if dt != steady_dt:
-                _, gains, posterior = _step(p, dt, transition, self._r_at(dt))
+                _, gains, posterior = _step(p, dt, transition, self._r_at(dt) * repeat)
                 k_c, k_v, k_s = gains
                 previous, p = p, posterior
-                if previous == p:
-                    steady_dt = dt
-                else:
-                    steady_dt = math.nan
-                    if not ready and abs(p[3] - previous[3]) <= ready_tolerance(dt) * p[3]:
-                        ready = True
-                ready = ready or steady_dt == dt
+                steady_dt = dt if previous == p and repeat == 1.0 else math.nan
+            if not ready:
+                warm, ready = _warm_up(warm, dt, transition, self._r_at(dt))
             pc, ps = tc + dt * v, a * ts + b * tc + c * v
             innovation = z - ps
             tc, v, ts = pc + k_c * innovation, v + k_v * innovation, ps + k_s * innovation
             stamp = stamp_next
             out.append((stamp, tc, v, p[3], ready))
         self._stamp, self._x, self._p, self._ready = stamp, (tc, v, ts), p, ready
+        self._warm = warm
         if out:
             self._estimate = self._make_estimate()
         columns: list[tuple[Any, ...]] = (

@@ -109,6 +109,12 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
         'window (s) of the Tdot Wiener gain: Tdot times the share of its recent power that is '
         'not estimator noise (quiet soaks), kalman; 0 = off',
     ),
+    'kalman_repeat_scale_s': (
+        'kalman_repeat_scale_s',
+        _T.DOUBLE,
+        'a reading still on the step its run started on weighs less after this many s '
+        '(variance R * sqrt(run / this): repeats share one quantization error), kalman; 0 = off',
+    ),
 }
 _GUARD_DEFAULTS = GuardSettings()
 #: input guards: name -> (default, text)
