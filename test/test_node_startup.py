@@ -20,6 +20,7 @@ from fog_temp_comp.core.model_choice import choose_and_calibrate
 from fog_temp_comp.core.tdot_kalman import KalmanTdotEstimator
 from fog_temp_comp.core.units import DEG_H_PER_RAD_S
 from fog_temp_comp.ros.node import CompensatorNode
+from fog_temp_comp.tools.plants import draw_plant
 from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig, simulate_run
 
 #: a sensor (1/16 degC, 0.02 degC noise) behind the coil, a wobbling chamber; gyro 0.5 Hz,
@@ -102,6 +103,13 @@ def tdot_from_the_first_sample(coefficients: Coefficients, run: SimulatedRun) ->
         series.temperature_degC[latest], tdot[latest], tdot_lag[latest]
     )
     return run.rates_rad_s - drift / DEG_H_PER_RAD_S
+
+
+def worst_range_ratio(run: SimulatedRun, rates_rad_s: np.ndarray) -> float:
+    """Worst over the axes of the 10 s range of ``rates_rad_s`` over the raw rate's."""
+    means = window_means(run.imu_stamps_s, rates_rad_s * DEG_H_PER_RAD_S, 10.0)
+    raw = window_means(run.imu_stamps_s, run.rates_rad_s * DEG_H_PER_RAD_S, 10.0)
+    return float(np.max(np.ptp(means, axis=0) / np.ptp(raw, axis=0)))
 
 
 def noise_10s_deg_h(run: SimulatedRun) -> np.ndarray:
@@ -219,13 +227,9 @@ def test_unresolved_soak_is_within_the_oracles_range_on_the_node(
     save(coefficients, path)
     corrected = through_node(ros_context, path, soak)
 
-    def worst_range_ratio(rates_rad_s: np.ndarray) -> float:
-        means = window_means(soak.imu_stamps_s, rates_rad_s * DEG_H_PER_RAD_S, 10.0)
-        raw = window_means(soak.imu_stamps_s, soak.rates_rad_s * DEG_H_PER_RAD_S, 10.0)
-        return float(np.max(np.ptp(means, axis=0) / np.ptp(raw, axis=0)))
-
-    oracle = worst_range_ratio(soak.rates_rad_s - soak.true_drift_deg_h / DEG_H_PER_RAD_S)
-    assert worst_range_ratio(corrected) <= oracle + 0.03, (worst_range_ratio(corrected), oracle)
+    oracle = worst_range_ratio(soak, soak.rates_rad_s - soak.true_drift_deg_h / DEG_H_PER_RAD_S)
+    after = worst_range_ratio(soak, corrected)
+    assert after <= oracle + 0.03, (after, oracle)
 
     without = dataclasses.replace(coefficients.denoise, tdot_wiener_window_s=0.0)
     noisy = replay(
@@ -235,7 +239,42 @@ def test_unresolved_soak_is_within_the_oracles_range_on_the_node(
         soak.temp_stamps_s,
         soak.temperature_degC,
     )
-    assert worst_range_ratio(noisy) > oracle + 0.03
+    assert worst_range_ratio(soak, noisy) > oracle + 0.03
+
+
+def test_stepping_soak_is_within_the_oracles_range_on_the_node(
+    ros_context: object, tmp_path: Path
+) -> None:
+    """A quiet sensor far behind the coil, whose chamber wobble crosses a few steps.
+
+    Plant 102 of the study (sensor 545 s behind the coil, 1/16 degC steps, 0.002 degC noise,
+    6.4 Hz; here gyro 0.5 Hz, 1 h soak): the soak's worst range on the node path is within the
+    oracle's + 0.03, and with the repeated readings weighed as fresh ones (the same
+    coefficients, ``kalman_repeat_scale_s`` 0) the line fails: the filter grew sure of the
+    temperature between steps and read each step as a burst of Tdot.
+    """
+    plant = dataclasses.replace(draw_plant(102), imu_hz=0.5, soak_duration_s=3600.0)
+    train = simulate_run('cycle', 0.2, plant, seed=21).as_record()
+    coefficients = choose_and_calibrate([train], RECOMMENDED_SETTINGS)[0].coefficients
+    assert coefficients.denoise.kalman_repeat_scale_s == 1.0
+    assert coefficients.denoise.sensor_lag_s > 0
+    soak = simulate_run('soak', 10.0, plant, seed=22)
+    path = tmp_path / 'coeffs.yaml'
+    save(coefficients, path)
+    corrected = through_node(ros_context, path, soak)
+    oracle = worst_range_ratio(soak, soak.rates_rad_s - soak.true_drift_deg_h / DEG_H_PER_RAD_S)
+    after = worst_range_ratio(soak, corrected)
+    assert after <= oracle + 0.03, (after, oracle)
+
+    fresh = dataclasses.replace(coefficients.denoise, kalman_repeat_scale_s=0.0)
+    stepping = replay(
+        Compensator(coefficients.model, fresh),
+        soak.imu_stamps_s,
+        soak.rates_rad_s,
+        soak.temp_stamps_s,
+        soak.temperature_degC,
+    )
+    assert worst_range_ratio(soak, stepping) > oracle + 0.03
 
 
 def test_sensor_lag_filter_on_the_node_is_the_offline_one_and_starts_quietly(
