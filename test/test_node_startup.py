@@ -247,16 +247,16 @@ def test_stepping_soak_is_within_the_oracles_range_on_the_node(
 ) -> None:
     """A quiet sensor far behind the coil, whose chamber wobble crosses a few steps.
 
-    Plant 102 of the study (sensor 545 s behind the coil, 1/16 degC steps, 0.002 degC noise,
-    6.4 Hz; here gyro 0.5 Hz, 1 h soak): the soak's worst range on the node path is within the
+    Plant 102 of the study (sensor 545 s behind the coil, 1/16 degC steps, 0.002 degC noise;
+    here gyro 0.5 Hz, temperature 2 Hz): the soak's worst range on the node path is within the
     oracle's + 0.03, and with the repeated readings weighed as fresh ones (the same
-    coefficients, ``kalman_repeat_scale_s`` 0) the line fails: the filter grew sure of the
-    temperature between steps and read each step as a burst of Tdot.
+    coefficients, ``kalman_repeat_rate_degC_per_min`` 0) the line fails: the filter grew sure
+    of the temperature between steps and read each step as a burst of Tdot.
     """
-    plant = dataclasses.replace(draw_plant(102), imu_hz=0.5, soak_duration_s=3600.0)
+    plant = dataclasses.replace(draw_plant(102), imu_hz=0.5, temp_hz=2.0)
     train = simulate_run('cycle', 0.2, plant, seed=21).as_record()
     coefficients = choose_and_calibrate([train], RECOMMENDED_SETTINGS)[0].coefficients
-    assert coefficients.denoise.kalman_repeat_scale_s == 1.0
+    assert coefficients.denoise.kalman_repeat_rate_degC_per_min == 0.1
     assert coefficients.denoise.sensor_lag_s > 0
     soak = simulate_run('soak', 10.0, plant, seed=22)
     path = tmp_path / 'coeffs.yaml'
@@ -266,7 +266,7 @@ def test_stepping_soak_is_within_the_oracles_range_on_the_node(
     after = worst_range_ratio(soak, corrected)
     assert after <= oracle + 0.03, (after, oracle)
 
-    fresh = dataclasses.replace(coefficients.denoise, kalman_repeat_scale_s=0.0)
+    fresh = dataclasses.replace(coefficients.denoise, kalman_repeat_rate_degC_per_min=0.0)
     stepping = replay(
         Compensator(coefficients.model, fresh),
         soak.imu_stamps_s,

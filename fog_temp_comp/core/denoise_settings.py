@@ -101,12 +101,13 @@ class DenoiseSettings:
         deviation (:mod:`fog_temp_comp.core.tdot_wiener`; method ``'kalman'`` only; 0: off).
         Near 1 on ramps, near 0 on a soak whose wobble the sensor does not resolve; applied to
         the estimator's output, before the coil lag and the shrinkage.
-    kalman_repeat_scale_s : float
-        Method ``'kalman'``: a reading still on the quantization step its run of readings
-        started on, ``tau`` s after the run's first reading, weighs as one of variance
-        ``R * sqrt(tau / this)`` once ``tau`` exceeds this many s (repeated readings of a
-        quantized sensor share one error; :mod:`fog_temp_comp.core.reading_repeat`); 0: off,
-        every reading weighs ``R``. Needs ``temperature_quantum_degC > 0``.
+    kalman_repeat_rate_degC_per_min : float
+        Method ``'kalman'``: the slowest rate that counts as a ramp, degC/min. A reading still
+        on the quantization step its run of readings started on, ``tau`` s after the run's
+        first reading, weighs as one of variance ``R * tau / L`` once ``tau`` exceeds
+        ``L = 60 * temperature_quantum_degC / this`` (the time such a ramp takes to cross a
+        step): repeated readings on a hold share one quantization error
+        (:mod:`fog_temp_comp.core.reading_repeat`). 0: off, every reading weighs ``R``.
 
     """
 
@@ -131,7 +132,7 @@ class DenoiseSettings:
     tdot_lag_s: float = 0.0
     tdot_shrink_sigmas: float = 0.0
     tdot_wiener_window_s: float = 0.0
-    kalman_repeat_scale_s: float = 0.0
+    kalman_repeat_rate_degC_per_min: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field; raise ValueError naming the offending field."""
@@ -188,7 +189,7 @@ class DenoiseSettings:
             'tdot_lag_s',
             'tdot_shrink_sigmas',
             'tdot_wiener_window_s',
-            'kalman_repeat_scale_s',
+            'kalman_repeat_rate_degC_per_min',
         ):
             value = _check_float(name, getattr(self, name))
             if value < 0.0:
@@ -243,6 +244,7 @@ class DenoiseSettings:
 #: flags (:mod:`fog_temp_comp.core.model_choice`) measures the sensor's noise and quantization,
 #: chooses the rate walk and the lead-lag, and turns on the Tdot shrinkage; these are the
 #: settings of a fit with given ``--terms`` (the shrinkage off, so the coefficients keep their
-#: physical meaning). Repeated readings on one quantization step weigh less after 1 s
-#: (:mod:`fog_temp_comp.core.reading_repeat`), the span over which readings already count as one.
-RECOMMENDED_SETTINGS = DenoiseSettings(method='kalman', kalman_repeat_scale_s=1.0)
+#: physical meaning). Readings that stay on one quantization step longer than a 0.1 degC/min
+#: ramp (half the paper's calibration rate) would weigh less
+#: (:mod:`fog_temp_comp.core.reading_repeat`).
+RECOMMENDED_SETTINGS = DenoiseSettings(method='kalman', kalman_repeat_rate_degC_per_min=0.1)

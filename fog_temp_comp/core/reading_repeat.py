@@ -1,22 +1,25 @@
 """Repeated readings of a quantized sensor: how much less each one weighs, online and vectorised.
 
-A temperature that changes slowly stays on one quantization step for minutes, and every
-reading on that step carries the same quantization error: they are not independent. A Kalman
-filter that took each for a reading of variance ``R = noise^2 + quantum^2 / 12`` would grow
-certain of a temperature it only knows to half a step, and read the next step change as a
-sudden rate: on a soak its Tdot is mostly those steps. So a reading that is still on the step
-its run of readings started on, ``tau`` s after that run's first reading, weighs as one of
-variance::
+A temperature that holds stays on one quantization step for minutes, and every reading on that
+step carries the same quantization error: they are not independent. A Kalman filter that took
+each for a reading of variance ``R = noise^2 + quantum^2 / 12`` grew certain of a temperature
+it only knows to half a step, and read the next step change as a sudden rate: on a soak its
+Tdot was mostly those steps (and a filter that deconvolves a sensor lag amplifies them).
 
-    R * sqrt(max(1, tau / scale_s))
+A ramp of ``rate`` degC/min crosses a step every ``run_limit_s = 60 * quantum / rate`` s. So a
+reading still on the step its run of readings started on, ``tau`` s after that run's first
+reading, weighs as one of variance::
 
-(1 on the run's first reading and within ``scale_s`` of it). A reading is on a new step once it
-differs from the run's first reading by half a quantum or more; a sensor whose noise moves it
-across steps all the time (or a fast one whose 0.5 s means dither,
-:mod:`~fog_temp_comp.core.reading_average`) never builds a run, and is weighed as before. A
-ramp starts a new run at every step, so it keeps its information; a soak below one step
-weighs its readings less and less (the square root: a run of ``n`` readings weighs about
-``2 sqrt(n)`` of them rather than ``n``).
+    R * max(1, tau / run_limit_s)
+
+with ``rate`` the slowest ramp the filter should treat as a ramp (``calibrate``: 0.1 degC/min,
+half the paper's calibration ramp). On any faster ramp every run is shorter than the limit, so
+every reading weighs ``R`` and the filter's dynamics do not depend on the ramp's rate (a
+calibration on a 0.2 degC/min cycle carries over to 1 degC/min); on a hold, a run's readings
+past the limit weigh less and less, and a run of ``n`` limits counts as about ``1 + ln n`` of
+them. A reading is on a new step once it differs from the run's first reading by half a
+quantum or more, so a sensor whose noise moves it across steps all the time (or a fast one
+whose 0.5 s means dither, :mod:`~fog_temp_comp.core.reading_average`) never builds a long run.
 
 :class:`RepeatedReadings` runs online, one reading at a time; :func:`repeat_factors` gives the
 same factors over a whole series, bit for bit, continuing the same state. Stamps in s,
@@ -30,6 +33,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from fog_temp_comp.core.units import S_PER_MIN
+
 FloatArray = NDArray[np.float64]
 
 __all__ = ['RepeatedReadings', 'repeat_factors']
@@ -42,15 +47,17 @@ class RepeatedReadings:
     ----------
     quantum_degC : float
         Quantization step of the sensor, degC (0: no steps, every factor 1).
-    scale_s : float
-        Time on one step after which its readings weigh less, s (0: off, every factor 1).
+    ramp_rate_degC_per_min : float
+        Slowest rate that counts as a ramp, degC/min (0: off, every factor 1).
 
     """
 
-    def __init__(self, quantum_degC: float, scale_s: float) -> None:
+    def __init__(self, quantum_degC: float, ramp_rate_degC_per_min: float) -> None:
         self.half_step_degC = 0.5 * quantum_degC
-        self.scale_s = scale_s
-        self.enabled = quantum_degC > 0.0 and scale_s > 0.0
+        self.enabled = quantum_degC > 0.0 and ramp_rate_degC_per_min > 0.0
+        self.run_limit_s = (
+            S_PER_MIN * quantum_degC / ramp_rate_degC_per_min if self.enabled else math.inf
+        )
         self.reset()
 
     def reset(self) -> None:
@@ -66,7 +73,7 @@ class RepeatedReadings:
             self.run_degC, self.run_start_s = temperature_degC, stamp_s
             return 1.0
         tau = stamp_s - self.run_start_s
-        return math.sqrt(tau / self.scale_s) if tau > self.scale_s else 1.0
+        return tau / self.run_limit_s if tau > self.run_limit_s else 1.0
 
 
 def repeat_factors(
@@ -75,7 +82,7 @@ def repeat_factors(
     """:meth:`RepeatedReadings.factor` of every reading, shape (n,), updating ``repeated``."""
     if not repeated.enabled:
         return np.ones(len(stamps_s))
-    half, scale = repeated.half_step_degC, repeated.scale_s
+    half, limit = repeated.half_step_degC, repeated.run_limit_s
     level, start = repeated.run_degC, repeated.run_start_s
     out: list[float] = []
     append = out.append
@@ -85,6 +92,6 @@ def repeat_factors(
             append(1.0)
             continue
         tau = stamp - start
-        append(math.sqrt(tau / scale) if tau > scale else 1.0)
+        append(tau / limit if tau > limit else 1.0)
     repeated.run_degC, repeated.run_start_s = level, start
     return np.array(out, dtype=np.float64)

@@ -66,14 +66,14 @@ class KalmanTdotEstimator(PerSampleEstimator):
     Irregular sample intervals are handled exactly; a sample not after the previous one is
     ignored. A sensor faster than 2 Hz is fed as means over 0.5 s cells
     (:mod:`~fog_temp_comp.core.reading_average`), twice a second. With
-    ``kalman_repeat_scale_s`` a reading that repeats its step weighs less
+    ``kalman_repeat_rate_degC_per_min`` a reading that holds its step weighs less
     (:mod:`~fog_temp_comp.core.reading_repeat`).
 
     Parameters
     ----------
     settings : DenoiseSettings
         ``kalman_rate_walk_degC_per_min_per_sqrt_s``, ``temperature_noise_degC``,
-        ``temperature_quantum_degC`` and ``kalman_repeat_scale_s``.
+        ``temperature_quantum_degC`` and ``kalman_repeat_rate_degC_per_min``.
 
     Notes
     -----
@@ -105,7 +105,8 @@ class KalmanTdotEstimator(PerSampleEstimator):
         self._estimate: TdotEstimate | None = None
         self._averager = ReadingAverager()
         self._repeated = RepeatedReadings(
-            self.settings.temperature_quantum_degC, self.settings.kalman_repeat_scale_s
+            self.settings.temperature_quantum_degC,
+            self.settings.kalman_repeat_rate_degC_per_min,
         )
 
     def add(self, stamp_s: float, temperature_degC: float) -> bool:

@@ -146,7 +146,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
     intervals are handled exactly (to 10 us); a sample not at least 10 us after the previous one
     is ignored. A sensor faster than 2 Hz is fed as means over 0.5 s cells
     (:mod:`~fog_temp_comp.core.reading_average`), twice a second. With
-    ``kalman_repeat_scale_s`` a reading that repeats its step weighs less
+    ``kalman_repeat_rate_degC_per_min`` a reading that holds its step weighs less
     (:mod:`~fog_temp_comp.core.reading_repeat`).
 
     Notes
@@ -181,7 +181,8 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         self._transitions: dict[float, tuple[tuple[float, float, float], Cov]] = {}
         self._averager = ReadingAverager()
         self._repeated = RepeatedReadings(
-            self.settings.temperature_quantum_degC, self.settings.kalman_repeat_scale_s
+            self.settings.temperature_quantum_degC,
+            self.settings.kalman_repeat_rate_degC_per_min,
         )
 
     def _start(self, stamp_s: float, z: float) -> None:

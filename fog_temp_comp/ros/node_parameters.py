@@ -109,11 +109,11 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
         'window (s) of the Tdot Wiener gain: Tdot times the share of its recent power that is '
         'not estimator noise (quiet soaks), kalman; 0 = off',
     ),
-    'kalman_repeat_scale_s': (
-        'kalman_repeat_scale_s',
+    'kalman_repeat_rate_degC_per_min': (
+        'kalman_repeat_rate_degC_per_min',
         _T.DOUBLE,
-        'a reading still on the step its run started on weighs less after this many s '
-        '(variance R * sqrt(run / this): repeats share one quantization error), kalman; 0 = off',
+        'slowest ramp (degC/min): a reading on one step for longer than such a ramp takes to '
+        'cross it weighs less (repeats share one quantization error), kalman; 0 = off',
     ),
 }
 _GUARD_DEFAULTS = GuardSettings()
