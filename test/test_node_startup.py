@@ -186,6 +186,7 @@ def test_soak_gets_no_estimator_noise_on_the_node(
         kalman_rate_walk_degC_per_min_per_sqrt_s=0.01,
         tdot_shrink_sigmas=0.0,
         tdot_wiener_window_s=0.0,
+        kalman_repeat_rate_degC_per_min=0.0,
     )
     noisy = replay(
         Compensator(default_coefficients.model, previous),
