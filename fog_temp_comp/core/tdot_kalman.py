@@ -36,20 +36,23 @@ def ready_tolerance(dt_s: float) -> float:
 Cov2 = tuple[float, float, float]
 
 
-def _covariance_step(p: Cov2, dt: float, q: float, r: float) -> Cov2:
-    """The covariance predicted over ``dt`` s and updated with a reading of variance ``r``."""
+def _covariance_step(p: Cov2, dt: float, q: float, r: float) -> tuple[Cov2, float, float]:
+    """Predict ``p`` over ``dt`` s and update with a reading of variance ``r``.
+
+    Returns the posterior and the gains ``(k0, k1)`` on T and Tdot (degC/s per degC).
+    """
     p00, p01, p11 = p
     a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
     a01 = p01 + dt * p11 + q * dt * dt / 2.0
     a11 = p11 + q * dt
     s = a00 + r
     k0, k1 = a00 / s, a01 / s
-    return a00 - k0 * a00, a01 - k0 * a01, a11 - k1 * a01
+    return (a00 - k0 * a00, a01 - k0 * a01, a11 - k1 * a01), k0, k1
 
 
 def _warm_up(p: Cov2, dt: float, q: float, r: float) -> tuple[Cov2, bool]:
     """One step of the warm-up covariance (every reading of variance ``r``), and if it settled."""
-    posterior = _covariance_step(p, dt, q, r)
+    posterior = _covariance_step(p, dt, q, r)[0]
     return posterior, abs(posterior[2] - p[2]) <= ready_tolerance(dt) * posterior[2]
 
 
@@ -136,21 +139,17 @@ class KalmanTdotEstimator(PerSampleEstimator):
         if not dt > 0.0:
             return False
         q = self.q
-        # predict: x = F x, P = F P F' + Q
+        r_dt = self.r * max(1.0, INDEPENDENT_AFTER_S / dt)
+        # predict x = F x, P = F P F' + Q; update with z = T + noise
+        covariance = (self._p00, self._p01, self._p11)
+        posterior, k0, k1 = _covariance_step(covariance, dt, q, r_dt * repeat)
         t = self._t + dt * self._v
-        p00 = self._p00 + 2.0 * dt * self._p01 + dt * dt * self._p11 + q * dt**3 / 3.0
-        p01 = self._p01 + dt * self._p11 + q * dt * dt / 2.0
-        p11 = self._p11 + q * dt
-        # update with z = T + noise
-        s = p00 + self.r * max(1.0, INDEPENDENT_AFTER_S / dt) * repeat
-        k0, k1 = p00 / s, p01 / s
         innovation = z - t
         self._t = t + k0 * innovation
         self._v += k1 * innovation
-        self._p00, self._p01, self._p11 = p00 - k0 * p00, p01 - k0 * p01, p11 - k1 * p01
+        self._p00, self._p01, self._p11 = posterior
         self._stamp = stamp_s
         if not self._ready:
-            r_dt = self.r * max(1.0, INDEPENDENT_AFTER_S / dt)
             self._warm, self._ready = _warm_up(self._warm, dt, q, r_dt)
         self._estimate = TdotEstimate(
             stamp_s,
@@ -206,15 +205,11 @@ class KalmanTdotEstimator(PerSampleEstimator):
             if repeat != 1.0:
                 steady_dt = math.nan
             if dt != steady_dt:
-                a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
-                a01 = p01 + dt * p11 + q * dt * dt / 2.0
-                a11 = p11 + q * dt
-                sv = a00 + r * max(1.0, INDEPENDENT_AFTER_S / dt) * repeat
-                k0, k1 = a00 / sv, a01 / sv
                 previous = (p00, p01, p11)
-                p00, p01, p11 = a00 - k0 * a00, a01 - k0 * a01, a11 - k1 * a01
+                r_dt = r * max(1.0, INDEPENDENT_AFTER_S / dt)
+                (p00, p01, p11), k0, k1 = _covariance_step(previous, dt, q, r_dt * repeat)
                 steady_dt = dt if previous == (p00, p01, p11) and repeat == 1.0 else math.nan
-            if not ready:
+            if not ready:  # the warm-up only: once ready, no second step
                 warm, ready = _warm_up(warm, dt, q, r * max(1.0, INDEPENDENT_AFTER_S / dt))
             t = tp + k0 * innovation
             v += k1 * innovation

@@ -232,8 +232,8 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         if not dt > 0.0:
             return False
         transition = self._transition_for(dt)
-        r = self._r_at(dt) * repeat
-        _, (k_c, k_v, k_s), posterior = _step(self._p, dt, transition, r)
+        r_dt = self._r_at(dt)
+        _, (k_c, k_v, k_s), posterior = _step(self._p, dt, transition, r_dt * repeat)
         (a, b, c), _ = transition
         tc, v, ts = self._x
         pc, ps = tc + dt * v, a * ts + b * tc + c * v
@@ -242,7 +242,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         self._p = posterior
         self._stamp = stamp_s
         if not self._ready:
-            self._warm, self._ready = _warm_up(self._warm, dt, transition, self._r_at(dt))
+            self._warm, self._ready = _warm_up(self._warm, dt, transition, r_dt)
         self._estimate = self._make_estimate()
         return True
 
@@ -305,7 +305,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
                 k_c, k_v, k_s = gains
                 previous, p = p, posterior
                 steady_dt = dt if previous == p and repeat == 1.0 else math.nan
-            if not ready:
+            if not ready:  # the warm-up only: once ready, no second step
                 warm, ready = _warm_up(warm, dt, transition, self._r_at(dt))
             pc, ps = tc + dt * v, a * ts + b * tc + c * v
             innovation = z - ps
