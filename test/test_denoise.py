@@ -474,12 +474,25 @@ def test_sliding_rejects_nonfinite_without_state_change():
         ('temperature_quantum_degC', float('nan')),
         ('coil_lag_s', -5.0),
         ('coil_lag_s', 'slow'),
+        ('kalman_repeat_rate_degC_per_min', -0.1),
+        ('kalman_repeat_rate_degC_per_min', float('nan')),
+        ('kalman_repeat_rate_degC_per_min', 'fast'),
     ],
 )
 def test_settings_bad_field_named(field, value):
     """Each invalid field raises ValueError naming the field."""
     with pytest.raises(ValueError, match=field):
         DenoiseSettings(**{field: value})
+
+
+def test_repeat_rate_absent_is_off_and_zero_is_valid():
+    """A YAML written before the setting loads with it off; 0 (off) and any rate > 0 are valid."""
+    assert DenoiseSettings.from_dict({'method': 'kalman'}).kalman_repeat_rate_degC_per_min == 0.0
+    for rate in (0, 0.1, 5):
+        settings = DenoiseSettings.from_dict(
+            {'method': 'kalman', 'kalman_repeat_rate_degC_per_min': rate}
+        )
+        assert settings.kalman_repeat_rate_degC_per_min == float(rate)
 
 
 def test_settings_window_minimum():
