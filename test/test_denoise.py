@@ -477,6 +477,10 @@ def test_sliding_rejects_nonfinite_without_state_change():
         ('kalman_repeat_rate_degC_per_min', -0.1),
         ('kalman_repeat_rate_degC_per_min', float('nan')),
         ('kalman_repeat_rate_degC_per_min', 'fast'),
+        ('kalman_hysteresis_quanta', -0.5),
+        ('kalman_hysteresis_quanta', 1.5),
+        ('kalman_hysteresis_quanta', float('nan')),
+        ('kalman_hysteresis_quanta', 'wide'),
     ],
 )
 def test_settings_bad_field_named(field, value):
@@ -493,6 +497,16 @@ def test_repeat_rate_absent_is_off_and_zero_is_valid():
             {'method': 'kalman', 'kalman_repeat_rate_degC_per_min': rate}
         )
         assert settings.kalman_repeat_rate_degC_per_min == float(rate)
+
+
+def test_hysteresis_absent_is_off_and_zero_to_one_quantum_is_valid():
+    """A YAML written before the setting loads with it off; 0 to 1 quantum is valid."""
+    assert DenoiseSettings.from_dict({'method': 'kalman'}).kalman_hysteresis_quanta == 0.0
+    for width in (0, 0.5, 1):
+        settings = DenoiseSettings.from_dict(
+            {'method': 'kalman', 'kalman_hysteresis_quanta': width}
+        )
+        assert settings.kalman_hysteresis_quanta == float(width)
 
 
 def test_settings_window_minimum():

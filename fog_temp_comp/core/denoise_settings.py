@@ -108,6 +108,12 @@ class DenoiseSettings:
         ``L = 60 * temperature_quantum_degC / this`` (the time such a ramp takes to cross a
         step): repeated readings on a hold share one quantization error
         (:mod:`fog_temp_comp.core.reading_repeat`). 0: off, every reading weighs ``R``.
+    kalman_hysteresis_quanta : float
+        Method ``'kalman'``: width of the hysteresis on the readings before the filter, in
+        ``temperature_quantum_degC``, 0 to 1. Each reading moves the value the filter sees only
+        as far as it must to be within half that width of the reading, so a sensor toggling
+        between two steps reads as the boundary between them rather than a sweep across a step
+        (:mod:`fog_temp_comp.core.reading_hysteresis`). 0: off, readings are used as they are.
 
     """
 
@@ -133,6 +139,7 @@ class DenoiseSettings:
     tdot_shrink_sigmas: float = 0.0
     tdot_wiener_window_s: float = 0.0
     kalman_repeat_rate_degC_per_min: float = 0.0
+    kalman_hysteresis_quanta: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field; raise ValueError naming the offending field."""
@@ -195,6 +202,13 @@ class DenoiseSettings:
             if value < 0.0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)!r}')
             object.__setattr__(self, name, value)
+        width = _check_float('kalman_hysteresis_quanta', self.kalman_hysteresis_quanta)
+        if not 0.0 <= width <= 1.0:
+            raise ValueError(
+                f'kalman_hysteresis_quanta must be within 0..1 (quanta), got '
+                f'{self.kalman_hysteresis_quanta!r}'
+            )
+        object.__setattr__(self, 'kalman_hysteresis_quanta', width)
         if self.method == 'kalman' and self.measurement_variance_degC2 <= 0.0:
             raise ValueError(
                 "method 'kalman' needs temperature_noise_degC > 0 or temperature_quantum_degC > 0"
@@ -246,5 +260,7 @@ class DenoiseSettings:
 #: settings of a fit with given ``--terms`` (the shrinkage off, so the coefficients keep their
 #: physical meaning). Readings that stay on one quantization step longer than a 0.1 degC/min
 #: ramp (half the paper's calibration rate) would weigh less
-#: (:mod:`fog_temp_comp.core.reading_repeat`).
+#: (:mod:`fog_temp_comp.core.reading_repeat`). The hysteresis on the readings
+#: (:mod:`fog_temp_comp.core.reading_hysteresis`) stays off: it quiets the soaks of a quiet
+#: sensor but costs every ramp that follows a hold (README, "Readings that toggle").
 RECOMMENDED_SETTINGS = DenoiseSettings(method='kalman', kalman_repeat_rate_degC_per_min=0.1)

@@ -12,6 +12,7 @@ from numpy.typing import ArrayLike
 
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.reading_average import ReadingAverager, average_readings
+from fog_temp_comp.core.reading_hysteresis import ReadingHysteresis, hysteresis_series
 from fog_temp_comp.core.reading_repeat import RepeatedReadings, repeat_factors
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.units import S_PER_MIN
@@ -70,13 +71,15 @@ class KalmanTdotEstimator(PerSampleEstimator):
     ignored. A sensor faster than 2 Hz is fed as means over 0.5 s cells
     (:mod:`~fog_temp_comp.core.reading_average`), twice a second. With
     ``kalman_repeat_rate_degC_per_min`` a reading that holds its step weighs less
-    (:mod:`~fog_temp_comp.core.reading_repeat`).
+    (:mod:`~fog_temp_comp.core.reading_repeat`); with ``kalman_hysteresis_quanta`` the
+    readings pass through a hysteresis first (:mod:`~fog_temp_comp.core.reading_hysteresis`).
 
     Parameters
     ----------
     settings : DenoiseSettings
         ``kalman_rate_walk_degC_per_min_per_sqrt_s``, ``temperature_noise_degC``,
-        ``temperature_quantum_degC`` and ``kalman_repeat_rate_degC_per_min``.
+        ``temperature_quantum_degC``, ``kalman_repeat_rate_degC_per_min`` and
+        ``kalman_hysteresis_quanta``.
 
     Notes
     -----
@@ -107,6 +110,9 @@ class KalmanTdotEstimator(PerSampleEstimator):
         self._ready = False
         self._estimate: TdotEstimate | None = None
         self._averager = ReadingAverager()
+        self._hysteresis = ReadingHysteresis(
+            self.settings.temperature_quantum_degC, self.settings.kalman_hysteresis_quanta
+        )
         self._repeated = RepeatedReadings(
             self.settings.temperature_quantum_degC,
             self.settings.kalman_repeat_rate_degC_per_min,
@@ -118,7 +124,7 @@ class KalmanTdotEstimator(PerSampleEstimator):
         See :mod:`~fog_temp_comp.core.reading_average`: a reading 2 Hz or slower is used as it
         is, a faster sensor's readings are fed as means twice a second.
         """
-        fed = self._averager.add(stamp_s, temperature_degC)
+        fed = self._averager.add(stamp_s, self._hysteresis.apply(temperature_degC))
         return fed is not None and self._update(*fed)
 
     def _update(self, stamp_s: float, temperature_degC: float) -> bool:
@@ -170,6 +176,7 @@ class KalmanTdotEstimator(PerSampleEstimator):
         z_all = np.asarray(temperature_degC, dtype=np.float64).ravel()
         if t_all.size != z_all.size:
             raise ValueError('stamps and temperatures must have equal length')
+        z_all = hysteresis_series(self._hysteresis, z_all)
         t_fed, z_fed = average_readings(self._averager, t_all, z_all)
         t_in, z_in = t_fed.tolist(), z_fed.tolist()
         out_t: list[float] = []

@@ -17,6 +17,7 @@ from numpy.typing import ArrayLike
 
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.reading_average import ReadingAverager, average_readings
+from fog_temp_comp.core.reading_hysteresis import ReadingHysteresis, hysteresis_series
 from fog_temp_comp.core.reading_repeat import RepeatedReadings, repeat_factors
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.tdot_kalman import INDEPENDENT_AFTER_S, ready_tolerance
@@ -147,7 +148,8 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
     is ignored. A sensor faster than 2 Hz is fed as means over 0.5 s cells
     (:mod:`~fog_temp_comp.core.reading_average`), twice a second. With
     ``kalman_repeat_rate_degC_per_min`` a reading that holds its step weighs less
-    (:mod:`~fog_temp_comp.core.reading_repeat`).
+    (:mod:`~fog_temp_comp.core.reading_repeat`); with ``kalman_hysteresis_quanta`` the
+    readings pass through a hysteresis first (:mod:`~fog_temp_comp.core.reading_hysteresis`).
 
     Notes
     -----
@@ -180,6 +182,9 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         self._estimate: TdotEstimate | None = None
         self._transitions: dict[float, tuple[tuple[float, float, float], Cov]] = {}
         self._averager = ReadingAverager()
+        self._hysteresis = ReadingHysteresis(
+            self.settings.temperature_quantum_degC, self.settings.kalman_hysteresis_quanta
+        )
         self._repeated = RepeatedReadings(
             self.settings.temperature_quantum_degC,
             self.settings.kalman_repeat_rate_degC_per_min,
@@ -219,7 +224,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         See :mod:`~fog_temp_comp.core.reading_average`: a reading 2 Hz or slower is used as it
         is, a faster sensor's readings are fed as means twice a second.
         """
-        fed = self._averager.add(stamp_s, temperature_degC)
+        fed = self._averager.add(stamp_s, self._hysteresis.apply(temperature_degC))
         return fed is not None and self._update(*fed)
 
     def _update(self, stamp_s: float, temperature_degC: float) -> bool:
@@ -266,6 +271,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         z_all = np.asarray(temperature_degC, dtype=np.float64).ravel()
         if t_all.size != z_all.size:
             raise ValueError('stamps and temperatures must have equal length')
+        z_all = hysteresis_series(self._hysteresis, z_all)
         t_array, z_array = average_readings(self._averager, t_all, z_all)
         t_in, z_in = t_array.tolist(), z_array.tolist()
         out: list[tuple[float, float, float, float, bool]] = []

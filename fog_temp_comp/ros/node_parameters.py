@@ -115,6 +115,12 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
         'slowest ramp (degC/min): a reading on one step for longer than such a ramp takes to '
         'cross it weighs less (repeats share one quantization error), kalman; 0 = off',
     ),
+    'kalman_hysteresis_quanta': (
+        'kalman_hysteresis_quanta',
+        _T.DOUBLE,
+        'hysteresis on the readings, in quantization steps (0..1): a sensor toggling between '
+        'two steps reads as the boundary between them, kalman; 0 = off',
+    ),
 }
 _GUARD_DEFAULTS = GuardSettings()
 #: input guards: name -> (default, text)
