@@ -489,24 +489,16 @@ def test_settings_bad_field_named(field, value):
         DenoiseSettings(**{field: value})
 
 
-def test_repeat_rate_absent_is_off_and_zero_is_valid():
-    """A YAML written before the setting loads with it off; 0 (off) and any rate > 0 are valid."""
-    assert DenoiseSettings.from_dict({'method': 'kalman'}).kalman_repeat_rate_degC_per_min == 0.0
-    for rate in (0, 0.1, 5):
-        settings = DenoiseSettings.from_dict(
-            {'method': 'kalman', 'kalman_repeat_rate_degC_per_min': rate}
-        )
-        assert settings.kalman_repeat_rate_degC_per_min == float(rate)
-
-
-def test_hysteresis_absent_is_off_and_zero_to_one_quantum_is_valid():
-    """A YAML written before the setting loads with it off; 0 to 1 quantum is valid."""
-    assert DenoiseSettings.from_dict({'method': 'kalman'}).kalman_hysteresis_quanta == 0.0
-    for width in (0, 0.5, 1):
-        settings = DenoiseSettings.from_dict(
-            {'method': 'kalman', 'kalman_hysteresis_quanta': width}
-        )
-        assert settings.kalman_hysteresis_quanta == float(width)
+@pytest.mark.parametrize(
+    ('field', 'valid'),
+    [('kalman_repeat_rate_degC_per_min', (0, 0.1, 5)), ('kalman_hysteresis_quanta', (0, 0.5, 1))],
+)
+def test_kalman_options_absent_are_off_and_valid_values_load(field, valid):
+    """A YAML written before the option loads with it off (0); 0 and the valid values load."""
+    assert getattr(DenoiseSettings.from_dict({'method': 'kalman'}), field) == 0.0
+    for value in valid:
+        settings = DenoiseSettings.from_dict({'method': 'kalman', field: value})
+        assert getattr(settings, field) == float(value)
 
 
 def test_settings_window_minimum():
