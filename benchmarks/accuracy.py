@@ -40,6 +40,7 @@ were not, and are reported separately.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import multiprocessing
 import time
 from collections.abc import Sequence
@@ -111,9 +112,12 @@ def ideal_fit(
     }
 
 
-def study_one(job: tuple[int, int]) -> dict[str, object]:
-    """All pipelines on one plant and simulation seed."""
-    plant, seed = job
+def study_one(job: tuple[int, int, float]) -> dict[str, object]:
+    """All pipelines on one plant and simulation seed (and the default's hysteresis width)."""
+    plant, seed, hysteresis_quanta = job
+    settings = dataclasses.replace(
+        RECOMMENDED_SETTINGS, kalman_hysteresis_quanta=hysteresis_quanta
+    )
     t0 = time.perf_counter()
     cfg = draw_plant(plant)
     runs = simulate_plan(cfg, seed=seed)
@@ -126,7 +130,7 @@ def study_one(job: tuple[int, int]) -> dict[str, object]:
     rows['ideal fit'] = metrics(runs, ideal_fit(runs, cfg.terms))
     rows['ideal GLS'] = metrics(runs, ideal_fit(runs, cfg.terms, gls=True))
     t_cal = time.perf_counter()
-    result, _, chosen = choose_and_calibrate(train, RECOMMENDED_SETTINGS)
+    result, _, chosen = choose_and_calibrate(train, settings)
     cal_s = time.perf_counter() - t_cal
     coeffs = result.coefficients
     rows['default'] = metrics(
@@ -256,6 +260,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--plants', type=int, nargs='+', help='plant seeds (overrides --set)')
     parser.add_argument('--seeds', type=int, nargs='+', default=[0, 1])
     parser.add_argument('--workers', type=int, default=2)
+    parser.add_argument(
+        '--hysteresis-quanta',
+        type=float,
+        default=RECOMMENDED_SETTINGS.kalman_hysteresis_quanta,
+        help='the default pipeline with this kalman_hysteresis_quanta (README: toggling readings)',
+    )
     args = parser.parse_args(argv)
     if args.plants:
         plants = list(args.plants)
@@ -265,7 +275,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             'tuning': list(TUNING_PLANTS),
             'held-back': list(HELDBACK_PLANTS),
         }[args.set]
-    jobs = [(p, s) for p in plants for s in args.seeds]
+    jobs = [(p, s, args.hysteresis_quanta) for p in plants for s in args.seeds]
     t0 = time.perf_counter()
     results = []
     with multiprocessing.get_context('spawn').Pool(args.workers) as pool:

@@ -58,8 +58,14 @@ def variant(name: str, cfg: SimulationConfig) -> SimulationConfig:
     return dataclasses.replace(cfg, **changes)  # type: ignore[arg-type]
 
 
-def study(plant: int, name: str, seed: int = 0) -> dict[str, object]:
-    """Oracle, default and the paper's terms on one variant of one plant."""
+def study(
+    plant: int, name: str, seed: int = 0, hysteresis_quanta: float = 0.0
+) -> dict[str, object]:
+    """Oracle, default and the paper's terms on one variant of one plant.
+
+    ``hysteresis_quanta``: the default pipeline's ``kalman_hysteresis_quanta`` (README,
+    "Readings that toggle between two steps").
+    """
     cfg = variant(name, draw_plant(plant))
     runs = simulate_plan(cfg, seed=seed)
     held = {n: r for n, r in runs.items() if n != TRAINING_RUN}
@@ -71,7 +77,10 @@ def study(plant: int, name: str, seed: int = 0) -> dict[str, object]:
         )
     }
     t0 = time.perf_counter()
-    result, _, chosen = choose_and_calibrate(train, RECOMMENDED_SETTINGS)
+    settings = dataclasses.replace(
+        RECOMMENDED_SETTINGS, kalman_hysteresis_quanta=hysteresis_quanta
+    )
+    result, _, chosen = choose_and_calibrate(train, settings)
     seconds = time.perf_counter() - t0
     coeffs = result.coefficients
     rows['default'] = metrics(
@@ -89,6 +98,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--plants', type=int, nargs='+', default=[100, 900])
     parser.add_argument('--variants', nargs='+', choices=VARIANTS, default=list(VARIANTS))
+    parser.add_argument(
+        '--hysteresis-quanta',
+        type=float,
+        default=RECOMMENDED_SETTINGS.kalman_hysteresis_quanta,
+        help='the default pipeline with this kalman_hysteresis_quanta',
+    )
     args = parser.parse_args(argv)
     head = (
         '| plant | variant | chosen | pipeline | 10 s ratio - oracle | 100 s / oracle '
@@ -98,7 +113,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print('|' + '---|' * 8)
     for plant in args.plants:
         for name in args.variants:
-            res = study(plant, name)
+            res = study(plant, name, hysteresis_quanta=args.hysteresis_quanta)
             rows = res['rows']
             assert isinstance(rows, dict)
             o = rows['oracle']
