@@ -9,6 +9,7 @@ reading). A side study only: the package does not use it.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -16,24 +17,29 @@ import accuracy
 import numpy as np
 from quantized_likelihood import QuantizedKalman, fit_sigma
 
-from fog_temp_comp.core import tdot_kalman, tdot_kalman_lag
+from fog_temp_comp.core import model_choice, tdot_kalman, tdot_kalman_lag
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, TdotEstimate
 
 #: the filter counts as warmed up this long after its first reading, s
 READY_S = 300.0
 #: sigma of the plant under study, degC (set per job); the options of the filters
 SIGMA: dict[str, float] = {}
-OPTIONS: dict[str, float] = {'cap': 0.0, 'thin_s': 0.0}
+OPTIONS: dict[str, float] = {'cap': 0.0, 'thin_s': 0.0, 'hybrid': 0.0}
+#: whether the patched filters run (off: the package's own; ``--quantized-hybrid`` turns them on
+#: for the final fit only, after cross-validation with the package's filters)
+ACTIVE = {'on': True}
 
 
 def _patch(cls: Any, lagged: bool) -> None:
-    reset0 = cls.reset
+    reset0, add0, series0 = cls.reset, cls.add, cls.add_series
 
     def reset(self: Any) -> None:
         reset0(self)
         self._quantized = None
 
     def add(self: Any, stamp_s: float, temperature_degC: float) -> bool:
+        if not ACTIVE['on']:
+            return add0(self, stamp_s, temperature_degC)
         if not math.isfinite(temperature_degC):
             return False
         s = self.settings
@@ -67,6 +73,8 @@ def _patch(cls: Any, lagged: bool) -> None:
         return True
 
     def add_series(self: Any, stamps_s: Any, temperature_degC: Any) -> EstimateSeries:
+        if not ACTIVE['on']:
+            return series0(self, stamps_s, temperature_degC)
         t = np.asarray(stamps_s, dtype=np.float64).ravel().tolist()
         z = np.asarray(temperature_degC, dtype=np.float64).ravel().tolist()
         out = [self._estimate for a, b in zip(t, z, strict=True) if add(self, a, b)]
@@ -85,15 +93,26 @@ def _patch(cls: Any, lagged: bool) -> None:
 
 _patch(tdot_kalman.KalmanTdotEstimator, False)
 _patch(tdot_kalman_lag.SensorLagKalmanTdotEstimator, True)
+_final_fit = model_choice.calibrate_detailed
+
+
+def _final_fit_quantized(*args: Any, **kwargs: Any) -> Any:
+    """The final fit (and everything after it: the node's replay) with these filters."""
+    ACTIVE['on'] = True
+    return _final_fit(*args, **kwargs)
+
+
+model_choice.calibrate_detailed = _final_fit_quantized
 _study_one = accuracy.study_one
 
 
-def study_one_fitted(job: tuple[int, int, float, float, float]) -> dict[str, object]:
+def study_one_fitted(job: tuple[int, int, float, float, float, float]) -> dict[str, object]:
     """``accuracy.study_one`` with sigma fitted on the plant's training run first.
 
-    ``job``: plant, seed, hysteresis width, and this module's ``cap`` and ``thin_s``.
+    ``job``: plant, seed, hysteresis width, and this module's ``cap``, ``thin_s`` and ``hybrid``.
     """
-    OPTIONS['cap'], OPTIONS['thin_s'] = job[3], job[4]
+    OPTIONS['cap'], OPTIONS['thin_s'], OPTIONS['hybrid'] = job[3], job[4], job[5]
+    ACTIVE['on'] = not OPTIONS['hybrid']
     from fog_temp_comp.core.sensor_noise import sensor_noise
     from fog_temp_comp.tools.plants import draw_plant
     from fog_temp_comp.tools.simulate import simulate_run
@@ -101,10 +120,11 @@ def study_one_fitted(job: tuple[int, int, float, float, float]) -> dict[str, obj
     cfg = draw_plant(job[0])
     train = simulate_run('cycle', 0.2, cfg, seed=job[1] * 1000)
     quantum = sensor_noise([train.as_record()]).quantum_degC
+    t0 = time.perf_counter()
     SIGMA['value'] = fit_sigma(train.temp_stamps_s, train.temperature_degC, quantum)
     print(
         f'    plant {job[0]} seed {job[1]}: sigma {SIGMA["value"]:.4f} degC fitted '
-        f'(true {cfg.temp_noise_degC:.4f})',
+        f'(true {cfg.temp_noise_degC:.4f}) in {time.perf_counter() - t0:.1f} s',
         flush=True,
     )
     return _study_one(job[:3])
@@ -118,11 +138,14 @@ def accuracy_main(argv: Sequence[str]) -> int:
     parser = argparse.ArgumentParser(add_help=False)
     parser.add_argument('--quantized-cap', action='store_true')
     parser.add_argument('--quantized-thin-s', type=float, default=0.0)
+    parser.add_argument('--quantized-hybrid', action='store_true')
     ours, rest = parser.parse_known_args(argv)
-    options = (float(ours.quantized_cap), ours.quantized_thin_s)
+    options = (float(ours.quantized_cap), ours.quantized_thin_s, float(ours.quantized_hybrid))
     accuracy.study_one = functools.partial(_with_options, options=options)
     return accuracy.main(rest)
 
 
-def _with_options(job: tuple[int, int, float], options: tuple[float, float]) -> dict[str, object]:
+def _with_options(
+    job: tuple[int, int, float], options: tuple[float, float, float]
+) -> dict[str, object]:
     return study_one_fitted((*job, *options))
