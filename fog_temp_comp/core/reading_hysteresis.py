@@ -18,8 +18,10 @@ with ``w = width_quanta * quantum``. While the sensor toggles between two steps,
 on the boundary between them; when the temperature crosses a step, ``x`` moves by the step, at
 the moment of the crossing (where a ramp's readings are a sample of the boundary's value). It
 is never more than ``w / 2`` from the newest reading, within the reading's own step for
-``width_quanta <= 1``, so a sensor whose noise spans several steps (a dithered sensor) is passed
-on with a small dead band only.
+``width_quanta <= 1``. Its costs (why ``kalman_hysteresis_quanta`` is 0 by default; README,
+"Readings that toggle between two steps"): after a hold, a ramp the other way moves ``x`` only
+once the temperature has crossed a whole step (the backlash); and for a sensor whose noise
+spans several steps (a dithered one) ``x`` follows the noise's extremes rather than its mean.
 
 :class:`ReadingHysteresis` runs online, one reading at a time; :func:`hysteresis_series` gives
 the same values over a whole series, bit for bit, continuing the same state (each step is a
