@@ -105,18 +105,19 @@ def hysteresis_series(state: ReadingHysteresis, temperature_degC: FloatArray) ->
     Returns
     -------
     ndarray, shape (n,)
-        The values to use in their place, degC.
+        The values to use in their place, degC (the readings themselves, not a copy, where
+        nothing changes: off, or no finite reading).
 
     """
     z = np.asarray(temperature_degC, dtype=np.float64).ravel()
     if not state.enabled or z.size == 0:
-        return z.copy()
+        return z  # the default (off): no work on calibration's path
     finite = np.isfinite(z)
     start = state.value_degC
     if math.isnan(start):
         first = np.flatnonzero(finite)
         if first.size == 0:
-            return z.copy()
+            return z
         start = float(z[first[0]])
     # a reading equal to the one before it is the same clamp again, which changes nothing:
     # compose one clamp per run of equal readings
