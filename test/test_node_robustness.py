@@ -438,6 +438,17 @@ def test_runtime_change_of_denoise_method(harness: Harness) -> None:
     assert node.config.settings.method == 'wavelet'
 
 
+def test_runtime_hysteresis_width_applies_and_an_out_of_range_one_is_refused(
+    harness: Harness,
+) -> None:
+    node = harness.node
+    assert node.set_parameters([Parameter('kalman_hysteresis_quanta', value=1.0)])[0].successful
+    assert node.config.settings.kalman_hysteresis_quanta == 1.0
+    refused = node.set_parameters([Parameter('kalman_hysteresis_quanta', value=1.5)])[0]
+    assert not refused.successful and 'kalman_hysteresis_quanta' in refused.reason
+    assert node.config.settings.kalman_hysteresis_quanta == 1.0  # the running value stays
+
+
 def test_runtime_reload_of_coefficients(
     harness: Harness, tmp_path: Path, coefficients: Coefficients
 ) -> None:
