@@ -114,6 +114,13 @@ class DenoiseSettings:
         as far as it must to be within half that width of the reading, so a sensor toggling
         between two steps reads as the boundary between them rather than a sweep across a step
         (:mod:`fog_temp_comp.core.reading_hysteresis`). 0: off, readings are used as they are.
+    kalman_quantized_noise_degC : float
+        Method ``'kalman'``: standard deviation of the sensor's white noise *before* its
+        quantization, degC (0: off). With it and ``temperature_quantum_degC`` > 0, the filter
+        uses the exact likelihood of a quantized reading on every raw reading
+        (:mod:`fog_temp_comp.core.tdot_kalman_quantized`): a reading says the temperature plus
+        that noise lies within its step. ``calibrate`` fits it by that likelihood
+        (:mod:`fog_temp_comp.core.quantized_noise_fit`). Excludes the hysteresis.
 
     """
 
@@ -140,6 +147,7 @@ class DenoiseSettings:
     tdot_wiener_window_s: float = 0.0
     kalman_repeat_rate_degC_per_min: float = 0.0
     kalman_hysteresis_quanta: float = 0.0
+    kalman_quantized_noise_degC: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field; raise ValueError naming the offending field."""
@@ -197,6 +205,7 @@ class DenoiseSettings:
             'tdot_shrink_sigmas',
             'tdot_wiener_window_s',
             'kalman_repeat_rate_degC_per_min',
+            'kalman_quantized_noise_degC',
         ):
             value = _check_float(name, getattr(self, name))
             if value < 0.0:
@@ -209,6 +218,11 @@ class DenoiseSettings:
                 f'{self.kalman_hysteresis_quanta!r}'
             )
         object.__setattr__(self, 'kalman_hysteresis_quanta', width)
+        if width > 0.0 and self.kalman_quantized_noise_degC > 0.0:
+            raise ValueError(
+                'kalman_hysteresis_quanta and kalman_quantized_noise_degC exclude each other '
+                '(the quantized likelihood reads a toggling sensor itself): set one of them to 0'
+            )
         if self.method == 'kalman' and self.measurement_variance_degC2 <= 0.0:
             raise ValueError(
                 "method 'kalman' needs temperature_noise_degC > 0 or temperature_quantum_degC > 0"

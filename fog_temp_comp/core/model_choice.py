@@ -76,6 +76,7 @@ from fog_temp_comp.core.model_candidates import (
     default_structures,
 )
 from fog_temp_comp.core.model_choice_record import _selection, format_scores
+from fog_temp_comp.core.quantized_noise_fit import fit_quantized_noise
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.sensor_noise import SensorNoise, sensor_noise
 
@@ -97,6 +98,7 @@ __all__ = [
     'fold_mode',
     'format_scores',
     'ols_coefficients',
+    'quantized_choice',
     'sensor_noise',
 ]
 
@@ -202,6 +204,38 @@ def choose_fit(
     return chosen
 
 
+def quantized_choice(
+    chosen: StructureScore,
+    records: Sequence[ChamberRecord],
+    base: DenoiseSettings,
+    heldout: Sequence[ChamberRecord],
+    tolerance: float = TOLERANCE,
+) -> tuple[DenoiseSettings, dict[str, Any]]:
+    """The chosen structure's settings with the quantized likelihood if it holds up, and why.
+
+    Fits the sensor's noise before quantization by likelihood
+    (:func:`~fog_temp_comp.core.quantized_noise_fit.fit_quantized_noise`), then scores the
+    chosen structure with the quantized-likelihood filter by the same cross-validation. That
+    filter takes every raw reading at full weight, which is right for white noise; a sensor
+    whose noise is not white (or whose steps are not even) would make it overconfident, and
+    its score shows it. It is kept unless its score is worse by more than ``tolerance``.
+    Returns the settings and the record for ``provenance.selection.quantized_likelihood``.
+    """
+    fit = fit_quantized_noise(records, base.temperature_quantum_degC)
+    with_noise = dataclasses.replace(base, kalman_quantized_noise_degC=fit.noise_degC)
+    (score,) = cross_validate(records, with_noise, [chosen.structure], heldout)
+    used = math.isfinite(score.criterion) and score.criterion <= chosen.criterion * (
+        1.0 + tolerance
+    )
+    record = {
+        **fit.to_dict(),
+        'criterion': score.criterion if math.isfinite(score.criterion) else None,
+        'criterion_gaussian': chosen.criterion,
+        'used': bool(used),
+    }
+    return chosen.structure.settings(with_noise if used else base), record
+
+
 def choose_and_calibrate(
     records: Sequence[ChamberRecord],
     base: DenoiseSettings,
@@ -211,6 +245,7 @@ def choose_and_calibrate(
     tolerance: float = TOLERANCE,
     hac_lag: int | None = None,
     provenance: dict[str, Any] | None = None,
+    quantized_likelihood: bool = True,
 ) -> tuple[CalibrationResult, list[StructureScore], StructureScore]:
     """Measure the sensor, cross-validate the candidates, fit the chosen one on all records.
 
@@ -230,6 +265,10 @@ def choose_and_calibrate(
         Newey-West lag of the final fit's standard errors.
     provenance : dict, optional
         Extra provenance entries.
+    quantized_likelihood : bool
+        For a quantized sensor, fit its noise by likelihood and run the final fit (and the
+        node) with the quantized-likelihood filter, unless that scores worse than the chosen
+        structure's by more than ``tolerance`` (:func:`quantized_choice`).
 
     Returns
     -------
@@ -246,7 +285,14 @@ def choose_and_calibrate(
     token = _SERIES_CACHE.set({})
     try:
         return _choose_and_calibrate(
-            records, base, heldout, structures, tolerance, hac_lag, provenance
+            records,
+            base,
+            heldout,
+            structures,
+            tolerance,
+            hac_lag,
+            provenance,
+            quantized_likelihood,
         )
     finally:
         _SERIES_CACHE.reset(token)
@@ -260,6 +306,7 @@ def _choose_and_calibrate(
     tolerance: float,
     hac_lag: int | None,
     provenance: dict[str, Any] | None,
+    quantized_likelihood: bool,
 ) -> tuple[CalibrationResult, list[StructureScore], StructureScore]:
     """:func:`choose_and_calibrate` with the series cache set."""
     noise = sensor_noise(records)
@@ -298,9 +345,14 @@ def _choose_and_calibrate(
         ],
     )
     selection = _selection(scores, chosen, mode, tolerance, noise)
+    final = chosen.structure.settings(base)
+    if quantized_likelihood and noise.quantum_degC > 0.0:
+        final, selection['quantized_likelihood'] = quantized_choice(
+            chosen, records, base, heldout, tolerance
+        )
     result = calibrate_detailed(
         records,
-        chosen.structure.settings(base),
+        final,
         terms=chosen.structure.terms,
         fit=chosen.structure.fit,
         hac_lag=hac_lag,

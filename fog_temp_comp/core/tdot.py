@@ -39,6 +39,8 @@ re-exports the rest from where it lives:
 * :mod:`fog_temp_comp.core.tdot_grid` -- the per-bin estimators (grid denoising, ``'llr'``);
 * :mod:`fog_temp_comp.core.tdot_kalman` -- the Kalman filter;
   :mod:`fog_temp_comp.core.tdot_kalman_lag` -- the one that knows the sensor's lag;
+  :mod:`fog_temp_comp.core.tdot_kalman_quantized` -- either one with the exact likelihood of a
+  quantized reading;
 * :mod:`fog_temp_comp.core.tdot_following` -- the Wiener gain, the coil lag, the Tdot shrinkage and
   ``Tdot_lag``; :mod:`fog_temp_comp.core.tdot_wiener` -- the Wiener gain itself.
 """
@@ -63,6 +65,7 @@ from fog_temp_comp.core.tdot_following import (
 from fog_temp_comp.core.tdot_grid import GridTdotEstimator, LocalLinearTdotEstimator
 from fog_temp_comp.core.tdot_kalman import KalmanTdotEstimator
 from fog_temp_comp.core.tdot_kalman_lag import SensorLagKalmanTdotEstimator
+from fog_temp_comp.core.tdot_kalman_quantized import QuantizedKalmanTdotEstimator
 
 __all__ = [
     'CoilLagEstimator',
@@ -110,8 +113,14 @@ def _lagged_estimator(settings: DenoiseSettings) -> TdotEstimator:
 
 def kalman_estimator(
     settings: DenoiseSettings,
-) -> KalmanTdotEstimator | SensorLagKalmanTdotEstimator:
-    """Method ``'kalman'``'s filter: on the coil through ``sensor_lag_s`` if > 0, else plain."""
+) -> KalmanTdotEstimator | SensorLagKalmanTdotEstimator | QuantizedKalmanTdotEstimator:
+    """Method ``'kalman'``'s filter: on the coil through ``sensor_lag_s`` if > 0, else plain.
+
+    With ``kalman_quantized_noise_degC`` and ``temperature_quantum_degC`` both > 0, the one
+    with the exact likelihood of a quantized reading (either model).
+    """
+    if settings.kalman_quantized_noise_degC > 0 and settings.temperature_quantum_degC > 0:
+        return QuantizedKalmanTdotEstimator(settings)
     if settings.sensor_lag_s > 0:
         return SensorLagKalmanTdotEstimator(settings)
     return KalmanTdotEstimator(settings)

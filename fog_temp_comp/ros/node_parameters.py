@@ -121,6 +121,12 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
         'hysteresis on the readings, in quantization steps (0..1): a sensor toggling between '
         'two steps reads as the boundary between them, kalman; 0 = off',
     ),
+    'kalman_quantized_noise_degC': (
+        'kalman_quantized_noise_degC',
+        _T.DOUBLE,
+        'white noise (degC) of the temperature sensor before its quantization: the filter uses '
+        'the exact likelihood of each quantized reading, kalman; 0 = off (calibrate fits it)',
+    ),
 }
 _GUARD_DEFAULTS = GuardSettings()
 #: input guards: name -> (default, text)

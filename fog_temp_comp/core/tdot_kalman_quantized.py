@@ -1,0 +1,244 @@
+"""Kalman filters with the exact likelihood of a quantized reading.
+
+The same process models as :class:`~fog_temp_comp.core.tdot_kalman.KalmanTdotEstimator`
+(``sensor_lag_s == 0``: states T degC, Tdot degC/s) and
+:class:`~fog_temp_comp.core.tdot_kalman_lag.SensorLagKalmanTdotEstimator` (``sensor_lag_s > 0``:
+coil T, coil Tdot, sensor T), but each raw reading updates the filter through
+:func:`~fog_temp_comp.core.quantized_likelihood.quantized_update`: the reading says the
+temperature plus white noise of ``kalman_quantized_noise_degC`` lies within its step. So a quiet
+sensor toggling between two steps is read as a temperature near their boundary, and every raw
+reading counts (no 0.5 s averaging, no hysteresis). A reading still on the step its run started
+on is damped by the repeat factor (:mod:`~fog_temp_comp.core.reading_repeat`): the gain and the
+variance reduction are divided by it. Stamps in s, temperatures in degC, Tdot in degC/min.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.quantized_likelihood import quantized_update
+from fog_temp_comp.core.reading_repeat import RepeatedReadings
+from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
+from fog_temp_comp.core.tdot_kalman import INDEPENDENT_AFTER_S
+from fog_temp_comp.core.tdot_kalman import _warm_up as _warm_up_plain
+from fog_temp_comp.core.tdot_kalman_lag import _round_dt, sensor_lag_transition
+from fog_temp_comp.core.tdot_kalman_lag import _warm_up as _warm_up_lag
+from fog_temp_comp.core.units import S_PER_MIN
+
+__all__ = ['QuantizedKalmanTdotEstimator']
+
+#: the log probability below which a reading counts as an outlier in :attr:`log_likelihood`:
+#: a glitch, or a reading just after a sudden change of rate that a slow filter cannot
+#: predict, would otherwise score sigma by the Gaussian tail alone (one reading 10 steps off
+#: counts -5000 at a sigma of 0.1 step), not by the bulk of the readings
+LOG_LIKELIHOOD_FLOOR = math.log(1e-8)
+
+#: transitions kept by interval, as the sensor-lag filter keeps them
+_TRANSITION_CACHE_SIZE = 4096
+
+
+class QuantizedKalmanTdotEstimator(PerSampleEstimator):
+    """Kalman filter whose update is the exact likelihood of a quantized reading.
+
+    Parameters
+    ----------
+    settings : DenoiseSettings
+        ``temperature_quantum_degC`` (> 0), ``kalman_quantized_noise_degC`` (> 0, the sensor's
+        white noise before quantization), ``kalman_rate_walk_degC_per_min_per_sqrt_s``,
+        ``sensor_lag_s`` (0: the plain filter) and ``kalman_repeat_rate_degC_per_min``.
+
+    Notes
+    -----
+    The first reading sets the temperatures, with ``Tdot = 0`` and a prior standard deviation
+    of 1 degC/min, as the Gaussian filters do. Ready when the Gaussian filter on the same
+    readings would be (its covariance, every reading of variance ``sigma^2 + q^2 / 12``, less
+    for readings under 1 s apart, settles), so start-up is as cautious as it is there.
+    Readings that are not finite, or not at least 10 us after the last one, are ignored.
+    :attr:`log_likelihood` sums the log probability of every reading used under the filter's
+    prediction (the score of ``sigma`` in :mod:`~fog_temp_comp.core.quantized_noise_fit`).
+
+    """
+
+    #: prior standard deviation of Tdot at start-up, degC/min
+    PRIOR_TDOT_DEGC_PER_MIN = 1.0
+
+    def __init__(self, settings: DenoiseSettings) -> None:
+        if not (
+            settings.temperature_quantum_degC > 0.0 and settings.kalman_quantized_noise_degC > 0.0
+        ):
+            raise ValueError(
+                'the quantized-likelihood filter needs temperature_quantum_degC > 0 and '
+                f'kalman_quantized_noise_degC > 0, got {settings.temperature_quantum_degC!r} '
+                f'and {settings.kalman_quantized_noise_degC!r}'
+            )
+        self.settings = settings
+        self.tau = settings.sensor_lag_s
+        self.quantum = settings.temperature_quantum_degC
+        self.noise_var = settings.kalman_quantized_noise_degC**2
+        self.r = self.noise_var + self.quantum**2 / 12.0
+        self.q = (settings.kalman_rate_walk_degC_per_min_per_sqrt_s / S_PER_MIN) ** 2
+        self.log_likelihood_floor = LOG_LIKELIHOOD_FLOOR
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all samples."""
+        self._stamp = math.nan
+        self._x: list[float] = []
+        self._p: list[float] = []
+        self._warm: tuple[float, ...] = ()
+        self._ready = False
+        self._estimate: TdotEstimate | None = None
+        self._transitions: dict[float, tuple[tuple[float, float, float], tuple[float, ...]]] = {}
+        self._repeated = RepeatedReadings(
+            self.quantum, self.settings.kalman_repeat_rate_degC_per_min
+        )
+        self.log_likelihood = 0.0
+
+    def _start(self, stamp_s: float, z: float) -> None:
+        v0 = (self.PRIOR_TDOT_DEGC_PER_MIN / S_PER_MIN) ** 2
+        r, tau = self.r, self.tau
+        self._stamp = stamp_s
+        if tau > 0.0:
+            self._x = [z, 0.0, z]
+            self._p = [r + tau * tau * v0, tau * v0, r, v0, 0.0, r]
+        else:
+            self._x, self._p = [z, 0.0], [r, 0.0, v0]
+        self._warm = tuple(self._p)
+
+    def _transition_for(self, dt: float) -> tuple[tuple[float, float, float], tuple[float, ...]]:
+        transition = self._transitions.get(dt)
+        if transition is None:
+            if len(self._transitions) >= _TRANSITION_CACHE_SIZE:
+                self._transitions.clear()
+            transition = self._transitions[dt] = sensor_lag_transition(dt, self.tau, self.q)
+        return transition
+
+    def add(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Feed one raw reading; True if the estimate changed."""
+        if not self._advance(stamp_s, temperature_degC):
+            return False
+        self._estimate = self._make_estimate()
+        return True
+
+    def _make_estimate(self) -> TdotEstimate:
+        return TdotEstimate(
+            self._stamp,
+            self._x[0],
+            self._x[1] * S_PER_MIN,
+            tdot_std_degC_per_min=self.tdot_std_degC_per_min,
+            ready=self._ready,
+        )
+
+    def _advance(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Predict to ``stamp_s`` and update with the reading; False if it is not used."""
+        if not (math.isfinite(stamp_s) and math.isfinite(temperature_degC)):
+            return False
+        repeat = self._repeated.factor(stamp_s, temperature_degC)
+        if not self._x:
+            self._start(stamp_s, temperature_degC)
+            return True
+        dt = _round_dt(stamp_s - self._stamp)
+        if not dt > 0.0:
+            return False
+        if self.tau > 0.0:
+            self._step_lag(dt, temperature_degC, 1.0 / repeat)
+        else:
+            self._step_plain(dt, temperature_degC, 1.0 / repeat)
+        self._stamp = stamp_s
+        if not self._ready:
+            self._settle(dt)
+        return True
+
+    def _settle(self, dt: float) -> None:
+        """One step of the Gaussian filter's warm-up covariance: ready once it settles."""
+        r_dt = self.r * max(1.0, INDEPENDENT_AFTER_S / dt)
+        if self.tau > 0.0:
+            warm, self._ready = _warm_up_lag(self._warm, dt, self._transition_for(dt), r_dt)
+        else:
+            warm, self._ready = _warm_up_plain(self._warm, dt, self.q, r_dt)
+        self._warm = tuple(warm)
+
+    def _step_plain(self, dt: float, y: float, damp: float) -> None:
+        """Predict (T, Tdot) over ``dt`` s and update with reading ``y``, damped by ``damp``."""
+        p00, p01, p11 = self._p
+        q = self.q
+        p00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
+        p01, p11 = p01 + dt * p11 + q * dt * dt / 2.0, p11 + q * dt
+        x0 = self._x[0] + dt * self._x[1]
+        ez, vz, log_mass = quantized_update(x0, p00, y, self.quantum, self.noise_var)
+        self.log_likelihood += max(log_mass, self.log_likelihood_floor)
+        g, h = damp * (ez - x0) / p00, damp * (p00 - vz) / (p00 * p00)
+        self._x = [x0 + p00 * g, self._x[1] + p01 * g]
+        self._p = [p00 - p00 * p00 * h, p01 - p00 * p01 * h, p11 - p01 * p01 * h]
+
+    def _step_lag(self, dt: float, y: float, damp: float) -> None:
+        """Predict (coil T, coil Tdot, sensor T) over ``dt`` s and update with reading ``y``."""
+        (a, b, c), (q_cc, q_cv, q_cs, q_vv, q_vs, q_ss) = self._transition_for(dt)
+        cc, cv, cs, vv, vs, ss = self._p
+        tc, v, ts = self._x
+        f_c, f_v, f_s = (
+            b * cc + c * cv + a * cs,
+            b * cv + c * vv + a * vs,
+            b * cs + c * vs + a * ss,
+        )
+        cc, cv = cc + 2.0 * dt * cv + dt * dt * vv + q_cc, cv + dt * vv + q_cv
+        cs, vv, vs = f_c + dt * f_v + q_cs, vv + q_vv, f_v + q_vs
+        ss = b * f_c + c * f_v + a * f_s + q_ss
+        tc, ts = tc + dt * v, a * ts + b * tc + c * v
+        ez, vz, log_mass = quantized_update(ts, ss, y, self.quantum, self.noise_var)
+        self.log_likelihood += max(log_mass, self.log_likelihood_floor)
+        g, h = damp * (ez - ts) / ss, damp * (ss - vz) / (ss * ss)
+        self._x = [tc + cs * g, v + vs * g, ts + ss * g]
+        self._p = [
+            cc - cs * cs * h,
+            cv - cs * vs * h,
+            cs - cs * ss * h,
+            vv - vs * vs * h,
+            vs - vs * ss * h,
+            ss - ss * ss * h,
+        ]
+
+    def add_series(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> EstimateSeries:
+        """Feed samples shape (n,) in order; the estimates as arrays (one per reading used).
+
+        :meth:`add` on each reading, so the same arithmetic bit for bit, without keeping an
+        object per reading.
+        """
+        t_all = np.asarray(stamps_s, dtype=np.float64).ravel()
+        z_all = np.asarray(temperature_degC, dtype=np.float64).ravel()
+        if t_all.size != z_all.size:
+            raise ValueError('stamps and temperatures must have equal length')
+        out_t: list[float] = []
+        out_x: list[float] = []
+        out_v: list[float] = []
+        out_s: list[float] = []
+        out_ready: list[bool] = []
+        advance, k = self._advance, 3 if self.tau > 0.0 else 2
+        for stamp, z in zip(t_all.tolist(), z_all.tolist(), strict=True):
+            if advance(stamp, z):
+                out_t.append(stamp)
+                out_x.append(self._x[0])
+                out_v.append(self._x[1])
+                out_s.append(self._p[k])
+                out_ready.append(self._ready)
+        if out_t:
+            self._estimate = self._make_estimate()
+        std = np.sqrt(np.maximum(np.array(out_s, dtype=np.float64), 0.0)) * S_PER_MIN
+        return EstimateSeries(
+            np.array(out_t, dtype=np.float64),
+            np.array(out_x, dtype=np.float64),
+            np.array(out_v, dtype=np.float64) * S_PER_MIN,
+            std,
+            ready=np.array(out_ready, dtype=bool),
+        )
+
+    @property
+    def tdot_std_degC_per_min(self) -> float:
+        """Current posterior standard deviation of Tdot, degC/min (NaN before any reading)."""
+        if not self._p:
+            return math.nan
+        return math.sqrt(max(self._p[3] if self.tau > 0.0 else self._p[2], 0.0)) * S_PER_MIN
