@@ -112,9 +112,13 @@ def ideal_fit(
     }
 
 
-def study_one(job: tuple[int, int, float]) -> dict[str, object]:
-    """All pipelines on one plant and simulation seed (and the default's hysteresis width)."""
-    plant, seed, hysteresis_quanta = job
+def study_one(job: tuple[int, int, float, bool]) -> dict[str, object]:
+    """All pipelines on one plant and simulation seed.
+
+    ``job``: plant, seed, the default's hysteresis width and whether it may use the quantized
+    likelihood (``calibrate --gaussian-readings`` if not).
+    """
+    plant, seed, hysteresis_quanta, quantized = job
     settings = dataclasses.replace(
         RECOMMENDED_SETTINGS, kalman_hysteresis_quanta=hysteresis_quanta
     )
@@ -130,7 +134,7 @@ def study_one(job: tuple[int, int, float]) -> dict[str, object]:
     rows['ideal fit'] = metrics(runs, ideal_fit(runs, cfg.terms))
     rows['ideal GLS'] = metrics(runs, ideal_fit(runs, cfg.terms, gls=True))
     t_cal = time.perf_counter()
-    result, _, chosen = choose_and_calibrate(train, settings)
+    result, _, chosen = choose_and_calibrate(train, settings, quantized_likelihood=quantized)
     cal_s = time.perf_counter() - t_cal
     coeffs = result.coefficients
     rows['default'] = metrics(
@@ -266,6 +270,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=RECOMMENDED_SETTINGS.kalman_hysteresis_quanta,
         help='the default pipeline with this kalman_hysteresis_quanta (README: toggling readings)',
     )
+    parser.add_argument(
+        '--gaussian-readings',
+        action='store_true',
+        help='the default pipeline as calibrate --gaussian-readings (no quantized likelihood)',
+    )
     args = parser.parse_args(argv)
     if args.plants:
         plants = list(args.plants)
@@ -275,7 +284,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             'tuning': list(TUNING_PLANTS),
             'held-back': list(HELDBACK_PLANTS),
         }[args.set]
-    jobs = [(p, s, args.hysteresis_quanta) for p in plants for s in args.seeds]
+    jobs = [
+        (p, s, args.hysteresis_quanta, not args.gaussian_readings)
+        for p in plants
+        for s in args.seeds
+    ]
     t0 = time.perf_counter()
     results = []
     with multiprocessing.get_context('spawn').Pool(args.workers) as pool:

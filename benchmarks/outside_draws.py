@@ -59,12 +59,17 @@ def variant(name: str, cfg: SimulationConfig) -> SimulationConfig:
 
 
 def study(
-    plant: int, name: str, seed: int = 0, hysteresis_quanta: float = 0.0
+    plant: int,
+    name: str,
+    seed: int = 0,
+    hysteresis_quanta: float = 0.0,
+    quantized: bool = True,
 ) -> dict[str, object]:
     """Oracle, default and the paper's terms on one variant of one plant.
 
     ``hysteresis_quanta``: the default pipeline's ``kalman_hysteresis_quanta`` (README,
-    "Readings that toggle between two steps").
+    "Readings that toggle between two steps"); ``quantized``: False is ``calibrate
+    --gaussian-readings``.
     """
     cfg = variant(name, draw_plant(plant))
     runs = simulate_plan(cfg, seed=seed)
@@ -80,7 +85,7 @@ def study(
     settings = dataclasses.replace(
         RECOMMENDED_SETTINGS, kalman_hysteresis_quanta=hysteresis_quanta
     )
-    result, _, chosen = choose_and_calibrate(train, settings)
+    result, _, chosen = choose_and_calibrate(train, settings, quantized_likelihood=quantized)
     seconds = time.perf_counter() - t0
     coeffs = result.coefficients
     rows['default'] = metrics(
@@ -104,6 +109,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=RECOMMENDED_SETTINGS.kalman_hysteresis_quanta,
         help='the default pipeline with this kalman_hysteresis_quanta',
     )
+    parser.add_argument(
+        '--gaussian-readings',
+        action='store_true',
+        help='the default pipeline as calibrate --gaussian-readings (no quantized likelihood)',
+    )
     args = parser.parse_args(argv)
     head = (
         '| plant | variant | chosen | pipeline | 10 s ratio - oracle | 100 s / oracle '
@@ -113,7 +123,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     print('|' + '---|' * 8)
     for plant in args.plants:
         for name in args.variants:
-            res = study(plant, name, hysteresis_quanta=args.hysteresis_quanta)
+            res = study(
+                plant,
+                name,
+                hysteresis_quanta=args.hysteresis_quanta,
+                quantized=not args.gaussian_readings,
+            )
             rows = res['rows']
             assert isinstance(rows, dict)
             o = rows['oracle']

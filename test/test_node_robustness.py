@@ -449,6 +449,21 @@ def test_runtime_hysteresis_width_applies_and_an_out_of_range_one_is_refused(
     assert node.config.settings.kalman_hysteresis_quanta == 1.0  # the running value stays
 
 
+def test_runtime_quantized_noise_applies_and_excludes_the_hysteresis(harness: Harness) -> None:
+    node = harness.node
+    assert node.config.settings.kalman_hysteresis_quanta == 0.0
+    assert node.set_parameters([Parameter('kalman_quantized_noise_degC', value=0.003)])[
+        0
+    ].successful
+    assert node.config.settings.kalman_quantized_noise_degC == 0.003
+    refused = node.set_parameters([Parameter('kalman_hysteresis_quanta', value=1.0)])[0]
+    assert not refused.successful and 'exclude each other' in refused.reason
+    assert node.config.settings.kalman_hysteresis_quanta == 0.0  # the running value stays
+    negative = node.set_parameters([Parameter('kalman_quantized_noise_degC', value=-0.1)])[0]
+    assert not negative.successful and 'kalman_quantized_noise_degC' in negative.reason
+    assert node.config.settings.kalman_quantized_noise_degC == 0.003
+
+
 def test_runtime_reload_of_coefficients(
     harness: Harness, tmp_path: Path, coefficients: Coefficients
 ) -> None:

@@ -96,6 +96,7 @@ __all__ = [
     'cross_validate',
     'default_structures',
     'fold_mode',
+    'format_quantized',
     'format_scores',
     'ols_coefficients',
     'quantized_choice',
@@ -236,6 +237,18 @@ def quantized_choice(
     return chosen.structure.settings(with_noise if used else base), record
 
 
+def format_quantized(record: dict[str, Any]) -> str:
+    """One line on the quantized-likelihood choice of :func:`quantized_choice`'s record."""
+    gaussian, quantized = record['criterion_gaussian'], record['criterion']
+    score = f'{quantized:.4f}' if quantized is not None else 'none'
+    return (
+        f'temperature noise before quantization {record["noise_degC"]:.5f} degC (likelihood fit '
+        f'on {record["readings"]} readings); quantized-likelihood filter '
+        + ('used' if record['used'] else 'not used')
+        + f': score {score} against {gaussian:.4f} with Gaussian readings'
+    )
+
+
 def choose_and_calibrate(
     records: Sequence[ChamberRecord],
     base: DenoiseSettings,
@@ -268,7 +281,8 @@ def choose_and_calibrate(
     quantized_likelihood : bool
         For a quantized sensor, fit its noise by likelihood and run the final fit (and the
         node) with the quantized-likelihood filter, unless that scores worse than the chosen
-        structure's by more than ``tolerance`` (:func:`quantized_choice`).
+        structure's by more than ``tolerance`` (:func:`quantized_choice`). Not with a
+        hysteresis in ``base`` (``kalman_hysteresis_quanta``: the other cure, asked for).
 
     Returns
     -------
@@ -346,7 +360,7 @@ def _choose_and_calibrate(
     )
     selection = _selection(scores, chosen, mode, tolerance, noise)
     final = chosen.structure.settings(base)
-    if quantized_likelihood and noise.quantum_degC > 0.0:
+    if quantized_likelihood and noise.quantum_degC > 0.0 and base.kalman_hysteresis_quanta == 0:
         final, selection['quantized_likelihood'] = quantized_choice(
             chosen, records, base, heldout, tolerance
         )

@@ -15,6 +15,7 @@ variance reduction are divided by it. Stamps in s, temperatures in degC, Tdot in
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -89,10 +90,10 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         self._stamp = math.nan
         self._x: list[float] = []
         self._p: list[float] = []
-        self._warm: tuple[float, ...] = ()
+        self._warm: Any = ()  # the Gaussian filter's covariance: 3 or 6 floats
         self._ready = False
         self._estimate: TdotEstimate | None = None
-        self._transitions: dict[float, tuple[tuple[float, float, float], tuple[float, ...]]] = {}
+        self._transitions: dict[float, Any] = {}
         self._repeated = RepeatedReadings(
             self.quantum, self.settings.kalman_repeat_rate_degC_per_min
         )
@@ -109,7 +110,7 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
             self._x, self._p = [z, 0.0], [r, 0.0, v0]
         self._warm = tuple(self._p)
 
-    def _transition_for(self, dt: float) -> tuple[tuple[float, float, float], tuple[float, ...]]:
+    def _transition_for(self, dt: float) -> Any:
         transition = self._transitions.get(dt)
         if transition is None:
             if len(self._transitions) >= _TRANSITION_CACHE_SIZE:
@@ -157,10 +158,9 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         """One step of the Gaussian filter's warm-up covariance: ready once it settles."""
         r_dt = self.r * max(1.0, INDEPENDENT_AFTER_S / dt)
         if self.tau > 0.0:
-            warm, self._ready = _warm_up_lag(self._warm, dt, self._transition_for(dt), r_dt)
+            self._warm, self._ready = _warm_up_lag(self._warm, dt, self._transition_for(dt), r_dt)
         else:
-            warm, self._ready = _warm_up_plain(self._warm, dt, self.q, r_dt)
-        self._warm = tuple(warm)
+            self._warm, self._ready = _warm_up_plain(self._warm, dt, self.q, r_dt)
 
     def _step_plain(self, dt: float, y: float, damp: float) -> None:
         """Predict (T, Tdot) over ``dt`` s and update with reading ``y``, damped by ``damp``."""

@@ -53,6 +53,9 @@ class CalibrateOptions:
     leave_one_run_out: bool = False
     #: keep the simplest candidate within this fraction of the best score
     tolerance: float = 0.02
+    #: for a quantized sensor, fit its noise and use the exact likelihood of each reading
+    #: (:func:`fog_temp_comp.core.model_choice.quantized_choice`); False: the Gaussian model
+    quantized_likelihood: bool = True
     validate: tuple[Path, ...] = ()
     report_dir: Path | None = None
     clamp_tdot: bool = False
@@ -188,8 +191,14 @@ def _fit(
             tolerance=opt.tolerance,
             hac_lag=opt.hac_lag,
             provenance=provenance,
+            quantized_likelihood=opt.quantized_likelihood,
         )
         print(model_choice.format_scores(cv_scores, cv_chosen), file=stdout)
+        quantized = (result.coefficients.provenance.get('selection') or {}).get(
+            'quantized_likelihood'
+        )
+        if quantized:
+            print(model_choice.format_quantized(quantized), file=stdout)
         return result
     if opt.heldout or opt.leave_one_run_out:
         candidates = default_candidates(opt.settings)

@@ -84,6 +84,7 @@ def calibrate_options(args: argparse.Namespace) -> CalibrateOptions:
         heldout=tuple(args.heldout),
         leave_one_run_out=args.leave_one_run_out,
         tolerance=args.tolerance,
+        quantized_likelihood=not args.gaussian_readings,
         validate=tuple(args.validate),
         report_dir=args.report,
         clamp_tdot=_guard(args).clamp_tdot,

@@ -369,6 +369,13 @@ def _add_calibrate_selection(g: argparse._ArgumentGroup) -> None:
         help='keep the simplest candidate within this fraction of the best score (0.02)',
     )
     g.add_argument(
+        '--gaussian-readings',
+        action='store_true',
+        help='keep the Gaussian reading model for a quantized temperature sensor (default: fit '
+        'its noise and use the exact likelihood of each quantized reading where '
+        'cross-validation does not score it worse)',
+    )
+    g.add_argument(
         '--validate',
         type=Path,
         nargs='+',

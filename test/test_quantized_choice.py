@@ -1,0 +1,138 @@
+"""calibrate's quantized-likelihood step: the noise fit, the guard, the YAML and the CLI."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+import yaml
+
+from fog_temp_comp.bag.bagio import write_chamber_bag
+from fog_temp_comp.core.coefficients import load
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.model_choice import (
+    Structure,
+    choose_and_calibrate,
+    cross_validate,
+    quantized_choice,
+    sensor_noise,
+)
+from fog_temp_comp.core.tdot import kalman_estimator
+from fog_temp_comp.core.tdot_kalman_quantized import QuantizedKalmanTdotEstimator
+from fog_temp_comp.tools import cli
+from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
+
+#: a 0.2 degC/min cycle over 10..30 degC with 20 min holds, a quiet sensor (0.08 step of noise)
+QUIET = SimulationConfig(
+    imu_hz=0.5,
+    temp_hz=2.0,
+    low_degC=10.0,
+    high_degC=30.0,
+    start_degC=20.0,
+    cycle_soak_s=1200.0,
+    lag_s=300.0,
+    temp_quantum_degC=0.05,
+    temp_noise_degC=0.004,
+)
+
+
+@pytest.fixture(scope='module')
+def quiet_record():
+    return simulate_run('cycle', 0.2, QUIET, seed=2).as_record()
+
+
+@pytest.fixture(scope='module')
+def quiet_fit(quiet_record):
+    return choose_and_calibrate([quiet_record], RECOMMENDED_SETTINGS)
+
+
+def test_a_quiet_quantized_sensor_gets_its_noise_fitted_and_the_exact_likelihood(quiet_fit):
+    result, _, chosen = quiet_fit
+    record = result.coefficients.provenance['selection']['quantized_likelihood']
+    denoise = result.coefficients.denoise
+    # the moment estimate cannot see noise this far under the step; the likelihood can
+    assert denoise.temperature_noise_degC < 0.002
+    assert record['noise_degC'] == pytest.approx(QUIET.temp_noise_degC, rel=0.3)
+    assert record['used'] is True
+    assert record['criterion'] <= record['criterion_gaussian'] * 1.02
+    assert denoise.kalman_quantized_noise_degC == record['noise_degC']
+    assert len(record['grid_degC']) == len(record['log_likelihood'])
+    assert isinstance(kalman_estimator(denoise), QuantizedKalmanTdotEstimator)
+    # the final fit ran with that filter: its settings are the chosen structure's plus sigma
+    assert dataclasses.replace(denoise, kalman_quantized_noise_degC=0.0) == (
+        chosen.structure.settings(sensor_noise_settings(result))
+    )
+
+
+def sensor_noise_settings(result):
+    """The base settings calibrate measured (method kalman, the sensor's step and noise)."""
+    sensor = result.coefficients.provenance['selection']['sensor']
+    return dataclasses.replace(
+        RECOMMENDED_SETTINGS,
+        temperature_quantum_degC=sensor['temperature_quantum_degC'],
+        temperature_noise_degC=sensor['temperature_noise_degC'],
+    )
+
+
+def test_the_guard_keeps_gaussian_readings_when_they_score_better(quiet_record, quiet_fit):
+    """A tolerance below -100 % makes any score too much worse: the Gaussian settings stay."""
+    _, _, chosen = quiet_fit
+    base = sensor_noise([quiet_record]).apply(RECOMMENDED_SETTINGS)
+    settings, record = quantized_choice(chosen, [quiet_record], base, [], tolerance=-1.01)
+    assert record['used'] is False
+    assert settings.kalman_quantized_noise_degC == 0.0
+    assert settings == chosen.structure.settings(base)
+
+
+def test_turned_off_or_unquantized_the_selection_has_no_quantized_step(quiet_record):
+    result, _, _ = choose_and_calibrate(
+        [quiet_record], RECOMMENDED_SETTINGS, quantized_likelihood=False
+    )
+    assert 'quantized_likelihood' not in result.coefficients.provenance['selection']
+    assert result.coefficients.denoise.kalman_quantized_noise_degC == 0.0
+    smooth = dataclasses.replace(QUIET, temp_quantum_degC=0.0, temp_noise_degC=0.01)
+    record = simulate_run('cycle', 0.2, smooth, seed=2).as_record()
+    structures = [Structure(PAPER_TERMS, 0.003, 0.5)]
+    result, _, _ = choose_and_calibrate([record], RECOMMENDED_SETTINGS, structures=structures)
+    assert 'quantized_likelihood' not in result.coefficients.provenance['selection']
+    assert result.coefficients.denoise.kalman_quantized_noise_degC == 0.0
+
+
+def test_the_quantized_score_is_a_cross_validation_of_the_chosen_structure(
+    quiet_record, quiet_fit
+):
+    result, _, chosen = quiet_fit
+    record = result.coefficients.provenance['selection']['quantized_likelihood']
+    base = sensor_noise([quiet_record]).apply(RECOMMENDED_SETTINGS)
+    with_noise = dataclasses.replace(base, kalman_quantized_noise_degC=record['noise_degC'])
+    (again,) = cross_validate([quiet_record], with_noise, [chosen.structure])
+    assert again.criterion == pytest.approx(record['criterion'], rel=1e-12)
+
+
+def test_the_cli_prints_the_step_writes_the_yaml_and_takes_gaussian_readings(
+    tmp_path: Path, quiet_record, capsys: pytest.CaptureFixture[str]
+):
+    bag = tmp_path / 'train'
+    write_chamber_bag(
+        bag,
+        'mcap',
+        imu_stamps_s=quiet_record.imu_stamps_s,
+        rates_rad_s=quiet_record.rates_rad_s,
+        temp_stamps_s=quiet_record.temp_stamps_s,
+        temperature_degC=quiet_record.temperature_degC,
+    )
+    out = tmp_path / 'c.yaml'
+    assert cli.main(['calibrate', str(bag), '-o', str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert 'quantized-likelihood filter used' in printed
+    raw = yaml.safe_load(out.read_text())
+    assert raw['denoise']['kalman_quantized_noise_degC'] > 0.0
+    assert load(out).denoise.kalman_quantized_noise_degC == pytest.approx(
+        raw['denoise']['kalman_quantized_noise_degC']
+    )
+    gaussian = tmp_path / 'g.yaml'
+    assert cli.main(['calibrate', str(bag), '-o', str(gaussian), '--gaussian-readings']) == 0
+    assert 'quantized-likelihood' not in capsys.readouterr().out
+    assert load(gaussian).denoise.kalman_quantized_noise_degC == 0.0
