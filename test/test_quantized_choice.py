@@ -16,6 +16,7 @@ from fog_temp_comp.core.model_choice import (
     Structure,
     choose_and_calibrate,
     cross_validate,
+    format_quantized,
     quantized_choice,
     sensor_noise,
 )
@@ -56,6 +57,7 @@ def test_a_quiet_quantized_sensor_gets_its_noise_fitted_and_the_exact_likelihood
     assert denoise.temperature_noise_degC < 0.002
     assert record['noise_degC'] == pytest.approx(QUIET.temp_noise_degC, rel=0.3)
     assert record['used'] is True
+    assert record['method'] == 'likelihood'
     assert record['criterion'] <= record['criterion_gaussian'] * 1.02
     assert denoise.kalman_quantized_noise_degC == record['noise_degC']
     assert len(record['grid_degC']) == len(record['log_likelihood'])
@@ -98,6 +100,19 @@ def test_turned_off_or_unquantized_the_selection_has_no_quantized_step(quiet_rec
     result, _, _ = choose_and_calibrate([record], RECOMMENDED_SETTINGS, structures=structures)
     assert 'quantized_likelihood' not in result.coefficients.provenance['selection']
     assert result.coefficients.denoise.kalman_quantized_noise_degC == 0.0
+
+
+def test_a_dithering_sensor_keeps_its_moment_estimate_and_says_so():
+    dithering = dataclasses.replace(QUIET, temp_noise_degC=0.02)  # 0.4 of a step
+    record = simulate_run('cycle', 0.2, dithering, seed=2).as_record()
+    structures = [Structure(PAPER_TERMS, 0.003, 0.5)]
+    result, _, _ = choose_and_calibrate([record], RECOMMENDED_SETTINGS, structures=structures)
+    selection = result.coefficients.provenance['selection']
+    step = selection['quantized_likelihood']
+    assert step['method'] == 'moments'
+    assert step['noise_degC'] == selection['sensor']['temperature_noise_degC']
+    assert step['grid_degC'] == [] and step['readings'] == 0
+    assert 'the moment estimate: the sensor dithers' in format_quantized(step)
 
 
 def test_the_quantized_score_is_a_cross_validation_of_the_chosen_structure(

@@ -9,7 +9,12 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from fog_temp_comp.core.denoise import DenoiseSettings
-from fog_temp_comp.core.quantized_noise_fit import fit_quantized_noise
+from fog_temp_comp.core.quantized_noise_fit import (
+    SIGMA_GRID_QUANTA,
+    _log_likelihood,
+    fit_quantized_noise,
+    noise_before_quantization,
+)
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.tdot import kalman_estimator
 from fog_temp_comp.core.tdot_kalman import KalmanTdotEstimator
@@ -89,6 +94,10 @@ def test_add_equals_add_series_bit_for_bit_with_nans_repeats_and_jitter(lag_s):
     assert_array_equal([e.tdot_degC_per_min for e in used], whole.tdot_degC_per_min)
     assert_array_equal([e.tdot_std_degC_per_min for e in used], whole.tdot_std_degC_per_min)
     assert_array_equal([e.ready for e in used], whole.ready)
+    fed = kalman_estimator(s)
+    assert fed.feed(t, temps) == whole.stamp_s.size
+    assert fed.estimate == online.estimate
+    assert fed.log_likelihood == online.log_likelihood
     split = kalman_estimator(s)
     parts = [split.add_series(t[:7777], temps[:7777]), split.add_series(t[7777:], temps[7777:])]
     assert_array_equal(
@@ -178,6 +187,19 @@ def test_the_noise_fit_recovers_a_quiet_and_a_dithering_sensor(noise_quanta, tol
     assert fit.readings == t.size
     assert len(fit.grid_degC) == len(fit.log_likelihood)
     assert fit_quantized_noise([record], QUANTUM, max_readings=5000).readings == 5000
+    # 8 of the 11 grid points decide the maximum: the same as the whole grid's
+    assert len(fit.grid_degC) == 8
+    whole = [_log_likelihood([(t, temps)], QUANTUM, c * QUANTUM) for c in SIGMA_GRID_QUANTA]
+    assert SIGMA_GRID_QUANTA[int(np.argmax(whole))] * QUANTUM in fit.grid_degC
+    assert max(fit.log_likelihood) == max(whole)
+
+
+def test_a_dithering_sensor_keeps_its_moment_estimate():
+    fit = noise_before_quantization([], QUANTUM, 0.4 * QUANTUM)
+    assert (fit.noise_degC, fit.method, fit.readings) == (0.4 * QUANTUM, 'moments', 0)
+    t, truth, _ = soak_then_ramp(2.0, 0)
+    quiet = record_of(t, quantized(truth, 0.1 * QUANTUM, 4))
+    assert noise_before_quantization([quiet], QUANTUM, 0.0).method == 'likelihood'
 
 
 def test_glitches_do_not_move_the_noise_fit():

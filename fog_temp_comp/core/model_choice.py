@@ -76,7 +76,7 @@ from fog_temp_comp.core.model_candidates import (
     default_structures,
 )
 from fog_temp_comp.core.model_choice_record import _selection, format_scores
-from fog_temp_comp.core.quantized_noise_fit import fit_quantized_noise
+from fog_temp_comp.core.quantized_noise_fit import noise_before_quantization
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.sensor_noise import SensorNoise, sensor_noise
 
@@ -214,15 +214,18 @@ def quantized_choice(
 ) -> tuple[DenoiseSettings, dict[str, Any]]:
     """The chosen structure's settings with the quantized likelihood if it holds up, and why.
 
-    Fits the sensor's noise before quantization by likelihood
-    (:func:`~fog_temp_comp.core.quantized_noise_fit.fit_quantized_noise`), then scores the
+    Takes the sensor's noise before quantization (fitted by likelihood unless the sensor
+    dithers: :func:`~fog_temp_comp.core.quantized_noise_fit.noise_before_quantization`), then
+    scores the
     chosen structure with the quantized-likelihood filter by the same cross-validation. That
     filter takes every raw reading at full weight, which is right for white noise; a sensor
     whose noise is not white (or whose steps are not even) would make it overconfident, and
     its score shows it. It is kept unless its score is worse by more than ``tolerance``.
     Returns the settings and the record for ``provenance.selection.quantized_likelihood``.
     """
-    fit = fit_quantized_noise(records, base.temperature_quantum_degC)
+    fit = noise_before_quantization(
+        records, base.temperature_quantum_degC, base.temperature_noise_degC
+    )
     with_noise = dataclasses.replace(base, kalman_quantized_noise_degC=fit.noise_degC)
     (score,) = cross_validate(records, with_noise, [chosen.structure], heldout)
     used = math.isfinite(score.criterion) and score.criterion <= chosen.criterion * (
@@ -241,9 +244,14 @@ def format_quantized(record: dict[str, Any]) -> str:
     """One line on the quantized-likelihood choice of :func:`quantized_choice`'s record."""
     gaussian, quantized = record['criterion_gaussian'], record['criterion']
     score = f'{quantized:.4f}' if quantized is not None else 'none'
+    how = (
+        f'likelihood fit on {record["readings"]} readings'
+        if record['method'] == 'likelihood'
+        else 'the moment estimate: the sensor dithers'
+    )
     return (
-        f'temperature noise before quantization {record["noise_degC"]:.5f} degC (likelihood fit '
-        f'on {record["readings"]} readings); quantized-likelihood filter '
+        f'temperature noise before quantization {record["noise_degC"]:.5f} degC ({how}); '
+        'quantized-likelihood filter '
         + ('used' if record['used'] else 'not used')
         + f': score {score} against {gaussian:.4f} with Gaussian readings'
     )

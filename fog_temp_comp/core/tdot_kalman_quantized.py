@@ -236,6 +236,19 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
             ready=np.array(out_ready, dtype=bool),
         )
 
+    def feed(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> int:
+        """Feed samples shape (n,) in order without keeping the estimates; how many were used.
+
+        What the noise fit needs (:attr:`log_likelihood`): :meth:`add_series` less its output.
+        """
+        advance = self._advance
+        t = np.asarray(stamps_s, dtype=np.float64).ravel().tolist()
+        z = np.asarray(temperature_degC, dtype=np.float64).ravel().tolist()
+        used = sum(1 for a, b in zip(t, z, strict=True) if advance(a, b))
+        if used:
+            self._estimate = self._make_estimate()
+        return used
+
     @property
     def tdot_std_degC_per_min(self) -> float:
         """Current posterior standard deviation of Tdot, degC/min (NaN before any reading)."""
