@@ -53,6 +53,20 @@ def test_prewhiten_matches_the_matrix_reference_per_segment() -> None:
     assert_array_equal(prewhiten(x, 1.0, starts), x)
 
 
+@pytest.mark.parametrize('theta', [0.0, 0.3, 0.7, 0.99, 0.9998])
+def test_prewhiten_is_scipys_lfilter_on_long_segments(theta: float) -> None:
+    """Segments of 9000 rows: at theta 0.3 the blocks are 191 rows (theta^-k < 1e100)."""
+    from scipy import signal
+
+    rng = np.random.default_rng(2)
+    x = np.cumsum(rng.normal(size=(20000, 3)), axis=0) + 50.0
+    starts = np.array([0, 9000, 9001, 11000])
+    out = prewhiten(x, theta, starts)
+    for lo, hi in [(0, 9000), (9000, 9001), (9001, 11000), (11000, 20000)]:
+        ref = signal.lfilter([1.0, -1.0], [1.0, -theta], x[lo:hi], axis=0)
+        assert_allclose(out[lo:hi], ref, rtol=1e-10, atol=1e-10 * np.abs(x).max())
+
+
 def test_walk_noise_recovers_white_and_walk_variances() -> None:
     rng = np.random.default_rng(1)
     e = white_plus_walk(rng, 20000, 0.02, 0.002)[:, 0]
