@@ -23,7 +23,7 @@ from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator,
 from fog_temp_comp.core.tdot_kalman import INDEPENDENT_AFTER_S, ready_tolerance
 from fog_temp_comp.core.units import S_PER_MIN
 
-__all__ = ['SensorLagKalmanTdotEstimator', 'sensor_lag_transition']
+__all__ = ['SensorLagKalmanTdotEstimator', 'cached_transition', 'sensor_lag_transition']
 
 #: below this dt / tau the transition's noise is integrated numerically
 _QUADRATURE_BELOW = 0.5
@@ -84,6 +84,18 @@ def sensor_lag_transition(
     q_cs = q * tau3 * int_yg
     q_ss = q * tau3 * int_gg
     return (a, b, c), (q_cc, q_cv, q_cs, q_vv, q_vs, q_ss)
+
+
+def cached_transition(
+    cache: dict[float, tuple[tuple[float, float, float], Cov]], dt_s: float, tau_s: float, q: float
+) -> tuple[tuple[float, float, float], Cov]:
+    """:func:`sensor_lag_transition` through ``cache`` (by interval), cleared when full."""
+    transition = cache.get(dt_s)
+    if transition is None:
+        if len(cache) >= _TRANSITION_CACHE_SIZE:
+            cache.clear()
+        transition = cache[dt_s] = sensor_lag_transition(dt_s, tau_s, q)
+    return transition
 
 
 def _step(
@@ -211,12 +223,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         return self.r * max(1.0, INDEPENDENT_AFTER_S / dt)
 
     def _transition_for(self, dt: float) -> tuple[tuple[float, float, float], Cov]:
-        transition = self._transitions.get(dt)
-        if transition is None:
-            if len(self._transitions) >= _TRANSITION_CACHE_SIZE:
-                self._transitions.clear()
-            transition = self._transitions[dt] = sensor_lag_transition(dt, self.tau, self.q)
-        return transition
+        return cached_transition(self._transitions, dt, self.tau, self.q)
 
     def add(self, stamp_s: float, temperature_degC: float) -> bool:
         """Feed one reading; True if the estimate changed (readings are averaged first).

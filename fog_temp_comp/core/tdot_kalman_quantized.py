@@ -26,7 +26,7 @@ from fog_temp_comp.core.reading_repeat import RepeatedReadings
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.tdot_kalman import INDEPENDENT_AFTER_S
 from fog_temp_comp.core.tdot_kalman import _warm_up as _warm_up_plain
-from fog_temp_comp.core.tdot_kalman_lag import _round_dt, sensor_lag_transition
+from fog_temp_comp.core.tdot_kalman_lag import _round_dt, cached_transition
 from fog_temp_comp.core.tdot_kalman_lag import _warm_up as _warm_up_lag
 from fog_temp_comp.core.units import S_PER_MIN
 
@@ -37,9 +37,6 @@ __all__ = ['QuantizedKalmanTdotEstimator']
 #: predict, would otherwise score sigma by the Gaussian tail alone (one reading 10 steps off
 #: counts -5000 at a sigma of 0.1 step), not by the bulk of the readings
 LOG_LIKELIHOOD_FLOOR = math.log(1e-8)
-
-#: transitions kept by interval, as the sensor-lag filter keeps them
-_TRANSITION_CACHE_SIZE = 4096
 
 
 class QuantizedKalmanTdotEstimator(PerSampleEstimator):
@@ -111,12 +108,7 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         self._warm = tuple(self._p)
 
     def _transition_for(self, dt: float) -> Any:
-        transition = self._transitions.get(dt)
-        if transition is None:
-            if len(self._transitions) >= _TRANSITION_CACHE_SIZE:
-                self._transitions.clear()
-            transition = self._transitions[dt] = sensor_lag_transition(dt, self.tau, self.q)
-        return transition
+        return cached_transition(self._transitions, dt, self.tau, self.q)
 
     def add(self, stamp_s: float, temperature_degC: float) -> bool:
         """Feed one raw reading; True if the estimate changed."""
