@@ -16,7 +16,9 @@ changes one thing beyond those ranges:
 - ``big_t2``: T^2 of 3e-4 deg/h/degC^2 (5x the study's largest);
 - ``coarse_q``: 0.25 degC quantization;
 - ``imu10``: gyro at 10 Hz;
-- ``noisy_gyro``: 0.1 deg/h 10 s noise (a tactical-grade gyro).
+- ``noisy_gyro``: 0.1 deg/h 10 s noise (a tactical-grade gyro);
+- ``corr_noise``: the temperature sensor's noise correlated over 10 s (an AR(1) of the same
+  std: a sensor that averages internally), where the Kalman filters assume white noise.
 
 The paper's protocol runs on each with default settings (as ``benchmarks/accuracy.py``), and
 with the paper's terms for comparison; figures are against the oracle.
@@ -41,7 +43,16 @@ from fog_temp_comp.core.units import RAD_S_PER_DEG_H
 from fog_temp_comp.tools.plants import draw_plant
 from fog_temp_comp.tools.simulate import SimulationConfig, simulate_plan
 
-VARIANTS = ('base', 't_tdot', 'slow_temp', 'big_t2', 'coarse_q', 'imu10', 'noisy_gyro')
+VARIANTS = (
+    'base',
+    't_tdot',
+    'slow_temp',
+    'big_t2',
+    'coarse_q',
+    'imu10',
+    'noisy_gyro',
+    'corr_noise',
+)
 
 
 def variant(name: str, cfg: SimulationConfig) -> SimulationConfig:
@@ -54,6 +65,7 @@ def variant(name: str, cfg: SimulationConfig) -> SimulationConfig:
         'coarse_q': {'temp_quantum_degC': 0.25},
         'imu10': {'imu_hz': 10.0},
         'noisy_gyro': {'arw_10s_deg_h': 0.1},
+        'corr_noise': {'temp_noise_correlation_s': 10.0},
     }[name]
     return dataclasses.replace(cfg, **changes)  # type: ignore[arg-type]
 

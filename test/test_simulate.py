@@ -15,6 +15,7 @@ from fog_temp_comp.tools.simulate import (
     REALISTIC,
     TRUE_COEFFICIENTS,
     SimulationConfig,
+    _correlated,
     chamber_air,
     chamber_profile,
     first_order_lag,
@@ -154,6 +155,23 @@ def test_sensor_is_quantized_and_noisy() -> None:
     steps = run.temperature_degC / REALISTIC.temp_quantum_degC
     assert_array_equal(steps, np.round(steps))
     assert np.unique(run.temperature_degC).size >= 3
+
+
+def test_correlated_sensor_noise_is_a_stationary_ar1_of_the_same_std() -> None:
+    """``temp_noise_correlation_s``: the same draws through an AR(1) of the same std."""
+    w = np.random.default_rng(0).normal(size=200_000)
+    a = np.exp(-1.0 / 10.0)
+    e = _correlated(w, a)
+    assert e[0] == w[0]  # stationary from the first reading
+    assert e.std() == pytest.approx(1.0, rel=0.03)
+    assert np.corrcoef(e[1:], e[:-1])[0, 1] == pytest.approx(a, abs=0.01)
+    smooth = dataclasses.replace(SHORT_CHAMBER, temp_quantum_degC=0.0, temp_noise_degC=0.05)
+    white = simulate_run('soak', 20.0, smooth, seed=3)
+    red = simulate_run(
+        'soak', 20.0, dataclasses.replace(smooth, temp_noise_correlation_s=10.0), seed=3
+    )
+    assert_array_equal(red.rates_rad_s, white.rates_rad_s)  # only the temperature noise moves
+    assert np.diff(red.temperature_degC).std() < 0.5 * np.diff(white.temperature_degC).std()
 
 
 def test_realistic_plan_runs_and_is_seeded() -> None:

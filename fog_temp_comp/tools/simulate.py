@@ -101,6 +101,10 @@ class SimulationConfig:
         ``motion_fraction`` of the period; period 0 = always at rest (a chamber).
     motion_rate_deg_s : float
         Amplitude of that rotation (deg/s); it is in ``true_rotation_rad_s`` of the run.
+    temp_noise_correlation_s : float
+        Correlation time of the temperature sensor's noise before quantization, s: a first-order
+        (AR(1)) process of std ``temp_noise_degC`` (a sensor that averages internally, or
+        drifts); 0 means white, as the filters assume.
 
     """
 
@@ -134,6 +138,7 @@ class SimulationConfig:
     motion_period_s: float = 0.0
     motion_fraction: float = 0.5
     motion_rate_deg_s: float = 5.0
+    temp_noise_correlation_s: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ('imu_hz', 'temp_hz', 'lag_s', 'soak_duration_s'):
@@ -147,6 +152,7 @@ class SimulationConfig:
             'sensor_lag_s',
             'motion_period_s',
             'motion_rate_deg_s',
+            'temp_noise_correlation_s',
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
@@ -341,6 +347,14 @@ def chamber_air(setpoint_degC: FloatArray, dt_s: float, cfg: SimulationConfig) -
     return np.asarray(air, dtype=np.float64) + start
 
 
+def _correlated(white: FloatArray, a: float) -> FloatArray:
+    """AR(1) of coefficient ``a`` driven by ``white``, with the same std (stationary start)."""
+    from scipy import signal  # here: only correlated sensor noise needs it
+
+    b = np.sqrt(1.0 - a * a)
+    return signal.lfilter([b], [1.0, -a], white, zi=[(1.0 - b) * white[0]])[0]
+
+
 def simulate_run(
     kind: str, setpoint: float, cfg: SimulationConfig | None = None, *, seed: int = 0
 ) -> SimulatedRun:
@@ -381,7 +395,10 @@ def simulate_run(
 
     n_temp = int(np.floor(duration * cfg.temp_hz))
     t_temp = np.arange(n_temp) / cfg.temp_hz
-    temp = np.interp(t_temp, t_grid, sensor_t) + rng.normal(0.0, cfg.temp_noise_degC, n_temp)
+    noise = rng.normal(0.0, cfg.temp_noise_degC, n_temp)
+    if cfg.temp_noise_correlation_s > 0 and n_temp:
+        noise = _correlated(noise, np.exp(-1.0 / (cfg.temp_hz * cfg.temp_noise_correlation_s)))
+    temp = np.interp(t_temp, t_grid, sensor_t) + noise
     if cfg.temp_quantum_degC > 0:
         temp = np.round(temp / cfg.temp_quantum_degC) * cfg.temp_quantum_degC
     return SimulatedRun(
