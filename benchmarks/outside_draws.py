@@ -18,7 +18,10 @@ changes one thing beyond those ranges:
 - ``imu10``: gyro at 10 Hz;
 - ``noisy_gyro``: 0.1 deg/h 10 s noise (a tactical-grade gyro);
 - ``corr_noise``: the temperature sensor's noise correlated over 10 s (an AR(1) of the same
-  std: a sensor that averages internally), where the Kalman filters assume white noise.
+  std: a sensor that averages internally), where the Kalman filters assume white noise;
+- ``uneven_steps``: the sensor's quantizer has a differential nonlinearity of 0.5 step (each
+  boundary displaced by up to a quarter step: codes 0.5-1.5 steps wide), where the
+  quantized likelihood assumes even steps.
 
 The paper's protocol runs on each with default settings (as ``benchmarks/accuracy.py``), and
 with the paper's terms for comparison; figures are against the oracle.
@@ -52,6 +55,7 @@ VARIANTS = (
     'imu10',
     'noisy_gyro',
     'corr_noise',
+    'uneven_steps',
 )
 
 
@@ -66,6 +70,7 @@ def variant(name: str, cfg: SimulationConfig) -> SimulationConfig:
         'imu10': {'imu_hz': 10.0},
         'noisy_gyro': {'arw_10s_deg_h': 0.1},
         'corr_noise': {'temp_noise_correlation_s': 10.0},
+        'uneven_steps': {'temp_step_nonlinearity': 0.5},
     }[name]
     return dataclasses.replace(cfg, **changes)  # type: ignore[arg-type]
 

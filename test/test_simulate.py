@@ -16,6 +16,7 @@ from fog_temp_comp.tools.simulate import (
     TRUE_COEFFICIENTS,
     SimulationConfig,
     _correlated,
+    _quantize,
     chamber_air,
     chamber_profile,
     first_order_lag,
@@ -172,6 +173,21 @@ def test_correlated_sensor_noise_is_a_stationary_ar1_of_the_same_std() -> None:
     )
     assert_array_equal(red.rates_rad_s, white.rates_rad_s)  # only the temperature noise moves
     assert np.diff(red.temperature_degC).std() < 0.5 * np.diff(white.temperature_degC).std()
+
+
+def test_uneven_steps_keep_the_grid_and_move_the_boundaries() -> None:
+    """``temp_step_nonlinearity``: readings stay on the step grid; codes get uneven widths."""
+    x = np.linspace(0.0, 10.0, 200_001)
+    assert_array_equal(_quantize(x, 0.05, 0.0), np.round(x / 0.05) * 0.05)
+    y = _quantize(x, 0.05, 0.6)
+    assert_allclose(y / 0.05, np.round(y / 0.05), atol=1e-9)
+    assert np.all(np.abs(y - x) <= 0.05 * (0.5 + 0.3) + 1e-12)
+    assert np.all(np.diff(y) >= 0)  # monotonic
+    widths = np.array([np.mean(np.isclose(y, k * 0.05)) for k in range(5, 195)]) * 200.0
+    assert widths.min() < 0.6 and widths.max() > 1.4  # 1 +- 0.6 at most
+    assert widths.min() >= 0.4 - 1e-3 and widths.max() <= 1.6 + 1e-3
+    with pytest.raises(ValueError, match='temp_step_nonlinearity'):
+        dataclasses.replace(SHORT_CHAMBER, temp_step_nonlinearity=1.0)
 
 
 def test_realistic_plan_runs_and_is_seeded() -> None:

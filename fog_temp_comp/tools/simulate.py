@@ -105,6 +105,10 @@ class SimulationConfig:
         Correlation time of the temperature sensor's noise before quantization, s: a first-order
         (AR(1)) process of std ``temp_noise_degC`` (a sensor that averages internally, or
         drifts); 0 means white, as the filters assume.
+    temp_step_nonlinearity : float
+        Differential nonlinearity of the temperature sensor's quantizer, in steps (0 to < 1):
+        each boundary between two readings is displaced by a fixed amount, uniform within
+        +-half this, the same on every run (an ADC's uneven codes); 0 means ideal steps.
 
     """
 
@@ -139,6 +143,7 @@ class SimulationConfig:
     motion_fraction: float = 0.5
     motion_rate_deg_s: float = 5.0
     temp_noise_correlation_s: float = 0.0
+    temp_step_nonlinearity: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ('imu_hz', 'temp_hz', 'lag_s', 'soak_duration_s'):
@@ -156,6 +161,11 @@ class SimulationConfig:
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
+        if not 0.0 <= self.temp_step_nonlinearity < 1.0:
+            raise ValueError(
+                'temp_step_nonlinearity must be within 0..1 (steps), got '
+                f'{self.temp_step_nonlinearity}'
+            )
         if not self.chamber_damping > 0:
             raise ValueError(f'chamber_damping must be > 0, got {self.chamber_damping}')
         if not 0.0 <= self.motion_fraction <= 1.0:
@@ -347,6 +357,27 @@ def chamber_air(setpoint_degC: FloatArray, dt_s: float, cfg: SimulationConfig) -
     return np.asarray(air, dtype=np.float64) + start
 
 
+#: the fixed pattern of :func:`_quantize`'s boundary displacements (uniform in -0.5..0.5)
+_DNL_PATTERN = np.random.default_rng(20261125).uniform(-0.5, 0.5, 4096)
+
+
+def _quantize(values: FloatArray, quantum: float, nonlinearity: float) -> FloatArray:
+    """Readings of ``values`` in steps of ``quantum``, boundaries displaced by ``nonlinearity``.
+
+    The boundary above code ``k`` sits at ``(k + 0.5 + nonlinearity * d_k) * quantum``, with
+    ``d_k`` a fixed pattern uniform in -0.5..0.5 (code ``k`` modulo 4096).
+    """
+    code = np.round(values / quantum)
+    if nonlinearity > 0:
+
+        def boundary(k: FloatArray) -> FloatArray:
+            d = _DNL_PATTERN[np.mod(k, _DNL_PATTERN.size).astype(np.intp)]
+            return (k + 0.5 + nonlinearity * d) * quantum
+
+        code = code + (values >= boundary(code)) - (values < boundary(code - 1.0))
+    return code * quantum
+
+
 def _correlated(white: FloatArray, a: float) -> FloatArray:
     """AR(1) of coefficient ``a`` driven by ``white``, with the same std (stationary start)."""
     from scipy import signal  # here: only correlated sensor noise needs it
@@ -400,7 +431,7 @@ def simulate_run(
         noise = _correlated(noise, np.exp(-1.0 / (cfg.temp_hz * cfg.temp_noise_correlation_s)))
     temp = np.interp(t_temp, t_grid, sensor_t) + noise
     if cfg.temp_quantum_degC > 0:
-        temp = np.round(temp / cfg.temp_quantum_degC) * cfg.temp_quantum_degC
+        temp = _quantize(temp, cfg.temp_quantum_degC, cfg.temp_step_nonlinearity)
     return SimulatedRun(
         name=run_name(kind, setpoint),
         kind=kind,
