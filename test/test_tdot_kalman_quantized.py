@@ -105,6 +105,24 @@ def test_add_equals_add_series_bit_for_bit_with_nans_repeats_and_jitter(lag_s):
     )
 
 
+@pytest.mark.parametrize('lag_s', [0.0, 300.0])
+def test_a_sensor_faster_than_11_hz_is_decimated_to_the_readings_0p09_s_apart(lag_s):
+    """A 200 Hz sensor (temperature in every IMU message): every 18th reading is used.
+
+    The estimates are those of the 11.1 Hz sensor those readings make up.
+    """
+    t = T0 + np.arange(0.0, 1800.0, 0.005)
+    truth = 20.025 + 0.2 * np.arange(t.size) * 0.005 / 60.0
+    temps = quantized(truth, 0.1 * QUANTUM, 7)
+    s = settings(sensor_lag_s=lag_s)
+    fast = kalman_estimator(s).add_series(t, temps)
+    slow = kalman_estimator(s).add_series(t[::18], temps[::18])
+    assert fast.stamp_s.size == slow.stamp_s.size == (t.size + 17) // 18
+    assert_array_equal(fast.stamp_s, slow.stamp_s)
+    assert_array_equal(fast.tdot_degC_per_min, slow.tdot_degC_per_min)
+    assert_array_equal(fast.ready, slow.ready)
+
+
 def test_the_factory_picks_it_only_with_a_step_and_a_noise():
     assert isinstance(kalman_estimator(settings()), QuantizedKalmanTdotEstimator)
     off = settings(kalman_quantized_noise_degC=0.0, temperature_noise_degC=0.01)

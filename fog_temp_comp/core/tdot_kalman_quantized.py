@@ -32,6 +32,12 @@ from fog_temp_comp.core.units import S_PER_MIN
 
 __all__ = ['QuantizedKalmanTdotEstimator']
 
+#: readings closer than this to the last one used are skipped, s: at most about 11 readings a
+#: second are used, so a sensor that reports with every IMU sample (100-1000 Hz) costs what a
+#: 10 Hz one does (the study's fastest, whose every reading counts), in the node and in
+#: calibration alike; a skipped reading changes nothing
+MIN_INTERVAL_S = 0.09
+
 #: the log probability below which a reading counts as an outlier in :attr:`log_likelihood`:
 #: a glitch, or a reading just after a sudden change of rate that a slow filter cannot
 #: predict, would otherwise score sigma by the Gaussian tail alone (one reading 10 steps off
@@ -55,7 +61,8 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
     of 1 degC/min, as the Gaussian filters do. Ready when the Gaussian filter on the same
     readings would be (its covariance, every reading of variance ``sigma^2 + q^2 / 12``, less
     for readings under 1 s apart, settles), so start-up is as cautious as it is there.
-    Readings that are not finite, or not at least 10 us after the last one, are ignored.
+    Readings that are not finite, or less than :data:`MIN_INTERVAL_S` after the last one used,
+    are skipped.
     :attr:`log_likelihood` sums the log probability of every reading used under the filter's
     prediction (the score of ``sigma`` in :mod:`~fog_temp_comp.core.quantized_noise_fit`).
 
@@ -130,13 +137,14 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         """Predict to ``stamp_s`` and update with the reading; False if it is not used."""
         if not (math.isfinite(stamp_s) and math.isfinite(temperature_degC)):
             return False
-        repeat = self._repeated.factor(stamp_s, temperature_degC)
         if not self._x:
+            self._repeated.factor(stamp_s, temperature_degC)
             self._start(stamp_s, temperature_degC)
             return True
         dt = _round_dt(stamp_s - self._stamp)
-        if not dt > 0.0:
+        if not dt >= MIN_INTERVAL_S:  # also a stamp not after the last one used
             return False
+        repeat = self._repeated.factor(stamp_s, temperature_degC)
         if self.tau > 0.0:
             self._step_lag(dt, temperature_degC, 1.0 / repeat)
         else:
