@@ -633,6 +633,18 @@ def test_compensate_refuses_an_existing_output(
     assert (out / 'keep.txt').read_text() == 'precious\n'
 
 
+def test_calibrate_refuses_an_existing_output_before_reading_any_bag(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The refusal comes first: the bag named here does not even exist."""
+    out = tmp_path / 'c.yaml'
+    out.write_text('mine\n')
+    assert cli.main(['calibrate', str(tmp_path / 'no_such_bag'), '-o', str(out)]) == 1
+    line = error_line(capsys)
+    assert str(out) in line and 'exists already' in line and 'no_such_bag' not in line
+    assert out.read_text() == 'mine\n'
+
+
 @pytest.mark.parametrize('topic', ['/imu/data_raw', 'imu/temperature'])
 def test_compensate_refuses_an_existing_output_topic(
     tmp_path: Path,

@@ -86,6 +86,8 @@ def calibrate_command(
     stdout = stdout or sys.stdout
     if not output.parent.is_dir():
         raise ValueError(f'-o {output}: directory {output.parent} does not exist')
+    if output.exists() or output.is_symlink():  # before the fit, not after it (checked again)
+        raise FileExistsError(f'{output}: exists already, not overwriting')
     report = options.report_dir if options else None
     with AtomicOutputs(output, report) as outputs:  # -o, --report: complete, or not at all
         return _calibrate(bags, output, outputs, options, settings, gyro_topic, temp_topic, stdout)
