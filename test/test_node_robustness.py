@@ -100,6 +100,7 @@ def test_diagnostics_report_state_values_and_provenance(harness: Harness) -> Non
     assert values['coefficients_created_utc'] == '2026-01-01T00:00:00Z'
     assert values['coefficients_bags'] == 'chamber_run'
     assert values['denoise'] == 'iir'
+    assert values['temperature_reading_model'] == '-'  # not the Kalman filter
     assert values['imu_corrected'] == '1'
     assert status.hardware_id == 'imu_link'
 
@@ -458,6 +459,14 @@ def test_runtime_quantized_noise_applies_and_excludes_the_hysteresis(harness: Ha
     assert node.config.settings.kalman_quantized_noise_degC == 0.003
     refused = node.set_parameters([Parameter('kalman_hysteresis_quanta', value=1.0)])[0]
     assert not refused.successful and 'exclude each other' in refused.reason
+    assert node.set_parameters([Parameter('denoise', value='kalman')])[0].successful
+    model = diag_values(harness.diagnose())['temperature_reading_model']
+    assert model.startswith('quantized likelihood') and 'noise 0.003 degC' in model
+    assert node.set_parameters([Parameter('kalman_quantized_noise_degC', value=0.0)])[0].successful
+    assert diag_values(harness.diagnose())['temperature_reading_model'].startswith('gaussian')
+    assert node.set_parameters([Parameter('kalman_quantized_noise_degC', value=0.003)])[
+        0
+    ].successful
     assert node.config.settings.kalman_hysteresis_quanta == 0.0  # the running value stays
     negative = node.set_parameters([Parameter('kalman_quantized_noise_degC', value=-0.1)])[0]
     assert not negative.successful and 'kalman_quantized_noise_degC' in negative.reason

@@ -30,7 +30,7 @@ from fog_temp_comp.core.compensator import Compensator
 from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.bias_learning import BiasLearningMixin
 from fog_temp_comp.ros.console_log import ConsoleLogMixin
-from fog_temp_comp.ros.diagnostics import build_report
+from fog_temp_comp.ros.diagnostics import build_report, reading_model
 from fog_temp_comp.ros.node_parameters import FILTER_PARAMETERS, GUARD_PARAMETERS
 from fog_temp_comp.ros.params import ParameterError, params_files, unknown_warnings
 from fog_temp_comp.ros.spin import EXECUTORS
@@ -254,6 +254,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             coefficients=self.config.coefficients,
             coefficients_file=self.config.coefficients_file,
             method=self.config.settings.method,
+            reading_model=reading_model(self.config.settings),
             imu_rate_hz=(counters.imu_total - previous.imu_total) / elapsed,
             temperature_rate_hz=(counters.temperature_total - previous.temperature_total)
             / elapsed,

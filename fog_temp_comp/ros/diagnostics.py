@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 from fog_temp_comp.core.coefficients import Coefficients
 from fog_temp_comp.core.compensator import CompensatorCounters, CompensatorStatus
+from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.rest import RestStatus
 from fog_temp_comp.core.units import AXES
 
@@ -37,6 +39,18 @@ class Report:
     values: list[tuple[str, str]]
 
 
+def reading_model(settings: DenoiseSettings) -> str:
+    """How the Kalman filter reads the temperature sensor, for the diagnostics (``-``: not one)."""
+    if settings.method != 'kalman':
+        return '-'
+    if settings.kalman_quantized_noise_degC > 0 and settings.temperature_quantum_degC > 0:
+        return (
+            f'quantized likelihood (step {settings.temperature_quantum_degC:g} degC, noise '
+            f'{settings.kalman_quantized_noise_degC:.3g} degC)'
+        )
+    return f'gaussian (noise {math.sqrt(settings.measurement_variance_degC2):.3g} degC)'
+
+
 def build_report(
     status: CompensatorStatus,
     previous: CompensatorCounters,
@@ -44,6 +58,7 @@ def build_report(
     coefficients: Coefficients,
     coefficients_file: str,
     method: str,
+    reading_model: str = '-',
     imu_rate_hz: float,
     temperature_rate_hz: float,
     frame_mismatches: int = 0,
@@ -79,6 +94,7 @@ def build_report(
         ('imu_rate_hz', _num(imu_rate_hz)),
         ('temperature_rate_hz', _num(temperature_rate_hz)),
         ('denoise', method),
+        ('temperature_reading_model', reading_model),
         ('filter_ready', str(status.estimator_ready)),
     ]
     values += _coefficients_values(coefficients, coefficients_file)
