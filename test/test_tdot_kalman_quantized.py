@@ -123,6 +123,30 @@ def test_a_sensor_faster_than_11_hz_is_decimated_to_the_readings_0p09_s_apart(la
     assert_array_equal(fast.ready, slow.ready)
 
 
+@pytest.mark.parametrize('lag_s', [0.0, 300.0])
+def test_glitches_gaps_and_bad_stamps_leave_finite_estimates_that_recover(lag_s):
+    """A 100 degC glitch, NaN, inf, a stamp going back, a day's gap: never NaN.
+
+    And back on the ramp afterwards: the tails of the likelihood are computed, not 0/0.
+    """
+    t = T0 + np.arange(0.0, 7200.0, 1.0)
+    truth = 20.0 + 0.3 * (t - T0) / 60.0
+    temps = quantized(truth, 0.1 * QUANTUM, 9)
+    temps[1000] += 100.0
+    temps[1001], temps[1002] = np.nan, np.inf
+    t = t.copy()
+    t[2000] = t[1500]  # back in time: skipped
+    t[3000:] += 86_400.0  # a day without readings; the ramp resumes where it stopped
+    e = kalman_estimator(settings(sensor_lag_s=lag_s))
+    out = e.add_series(t, temps)
+    assert np.all(np.isfinite(out.tdot_degC_per_min))
+    assert np.all(np.isfinite(out.temperature_degC))
+    assert np.all(np.isfinite(out.tdot_std_degC_per_min))
+    assert out.stamp_s.size == t.size - 3
+    late = out.stamp_s > T0 + 86_400.0 + 5000.0
+    assert abs(np.median(out.tdot_degC_per_min[late]) - 0.3) < 0.05
+
+
 def test_the_factory_picks_it_only_with_a_step_and_a_noise():
     assert isinstance(kalman_estimator(settings()), QuantizedKalmanTdotEstimator)
     off = settings(kalman_quantized_noise_degC=0.0, temperature_noise_degC=0.01)
