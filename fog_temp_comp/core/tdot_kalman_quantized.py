@@ -86,7 +86,7 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         self.noise_var = settings.kalman_quantized_noise_degC**2
         self.r = self.noise_var + self.quantum**2 / 12.0
         self.q = (settings.kalman_rate_walk_degC_per_min_per_sqrt_s / S_PER_MIN) ** 2
-        self.log_likelihood_floor = LOG_LIKELIHOOD_FLOOR
+        self._log_floor = LOG_LIKELIHOOD_FLOOR
         self.reset()
 
     def reset(self) -> None:
@@ -170,7 +170,7 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         p01, p11 = p01 + dt * p11 + q * dt * dt / 2.0, p11 + q * dt
         x0 = self._x[0] + dt * self._x[1]
         ez, vz, log_mass = quantized_update(x0, p00, y, self.quantum, self.noise_var)
-        self.log_likelihood += max(log_mass, self.log_likelihood_floor)
+        self.log_likelihood += max(log_mass, self._log_floor)
         g, h = damp * (ez - x0) / p00, damp * (p00 - vz) / (p00 * p00)
         self._x = [x0 + p00 * g, self._x[1] + p01 * g]
         self._p = [p00 - p00 * p00 * h, p01 - p00 * p01 * h, p11 - p01 * p01 * h]
@@ -190,7 +190,7 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         ss = b * f_c + c * f_v + a * f_s + q_ss
         tc, ts = tc + dt * v, a * ts + b * tc + c * v
         ez, vz, log_mass = quantized_update(ts, ss, y, self.quantum, self.noise_var)
-        self.log_likelihood += max(log_mass, self.log_likelihood_floor)
+        self.log_likelihood += max(log_mass, self._log_floor)
         g, h = damp * (ez - ts) / ss, damp * (ss - vz) / (ss * ss)
         self._x = [tc + cs * g, v + vs * g, ts + ss * g]
         self._p = [
