@@ -49,7 +49,7 @@ import numpy as np
 
 from fog_temp_comp.core.calibration import calibrate
 from fog_temp_comp.core.compensator import GuardSettings
-from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS, DenoiseSettings
 from fog_temp_comp.core.evaluate import compensate_record, score_record
 from fog_temp_comp.core.gls import gls_coefficients
 from fog_temp_comp.core.grid import bin_means
@@ -112,6 +112,26 @@ def ideal_fit(
     }
 
 
+def add_pipeline_options(parser: argparse.ArgumentParser) -> None:
+    """``--hysteresis-quanta`` and ``--gaussian-readings``: variants of the default pipeline."""
+    parser.add_argument(
+        '--hysteresis-quanta',
+        type=float,
+        default=RECOMMENDED_SETTINGS.kalman_hysteresis_quanta,
+        help='the default pipeline with this kalman_hysteresis_quanta (README: toggling readings)',
+    )
+    parser.add_argument(
+        '--gaussian-readings',
+        action='store_true',
+        help='the default pipeline as calibrate --gaussian-readings (no quantized likelihood)',
+    )
+
+
+def pipeline_settings(hysteresis_quanta: float) -> DenoiseSettings:
+    """``calibrate``'s starting settings with that ``kalman_hysteresis_quanta``."""
+    return dataclasses.replace(RECOMMENDED_SETTINGS, kalman_hysteresis_quanta=hysteresis_quanta)
+
+
 def study_one(job: tuple[int, int, float, bool]) -> dict[str, object]:
     """All pipelines on one plant and simulation seed.
 
@@ -119,9 +139,7 @@ def study_one(job: tuple[int, int, float, bool]) -> dict[str, object]:
     likelihood (``calibrate --gaussian-readings`` if not).
     """
     plant, seed, hysteresis_quanta, quantized = job
-    settings = dataclasses.replace(
-        RECOMMENDED_SETTINGS, kalman_hysteresis_quanta=hysteresis_quanta
-    )
+    settings = pipeline_settings(hysteresis_quanta)
     t0 = time.perf_counter()
     cfg = draw_plant(plant)
     runs = simulate_plan(cfg, seed=seed)
@@ -264,17 +282,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--plants', type=int, nargs='+', help='plant seeds (overrides --set)')
     parser.add_argument('--seeds', type=int, nargs='+', default=[0, 1])
     parser.add_argument('--workers', type=int, default=2)
-    parser.add_argument(
-        '--hysteresis-quanta',
-        type=float,
-        default=RECOMMENDED_SETTINGS.kalman_hysteresis_quanta,
-        help='the default pipeline with this kalman_hysteresis_quanta (README: toggling readings)',
-    )
-    parser.add_argument(
-        '--gaussian-readings',
-        action='store_true',
-        help='the default pipeline as calibrate --gaussian-readings (no quantized likelihood)',
-    )
+    add_pipeline_options(parser)
     args = parser.parse_args(argv)
     if args.plants:
         plants = list(args.plants)

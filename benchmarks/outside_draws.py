@@ -35,7 +35,7 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
-from accuracy import TRAINING_RUN, metrics
+from accuracy import TRAINING_RUN, add_pipeline_options, metrics, pipeline_settings
 
 from fog_temp_comp.core.calibration import calibrate
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
@@ -99,9 +99,7 @@ def study(
         )
     }
     t0 = time.perf_counter()
-    settings = dataclasses.replace(
-        RECOMMENDED_SETTINGS, kalman_hysteresis_quanta=hysteresis_quanta
-    )
+    settings = pipeline_settings(hysteresis_quanta)
     result, _, chosen = choose_and_calibrate(train, settings, quantized_likelihood=quantized)
     seconds = time.perf_counter() - t0
     coeffs = result.coefficients
@@ -120,17 +118,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--plants', type=int, nargs='+', default=[100, 900])
     parser.add_argument('--variants', nargs='+', choices=VARIANTS, default=list(VARIANTS))
-    parser.add_argument(
-        '--hysteresis-quanta',
-        type=float,
-        default=RECOMMENDED_SETTINGS.kalman_hysteresis_quanta,
-        help='the default pipeline with this kalman_hysteresis_quanta',
-    )
-    parser.add_argument(
-        '--gaussian-readings',
-        action='store_true',
-        help='the default pipeline as calibrate --gaussian-readings (no quantized likelihood)',
-    )
+    add_pipeline_options(parser)
     args = parser.parse_args(argv)
     head = (
         '| plant | variant | chosen | pipeline | 10 s ratio - oracle | 100 s / oracle '

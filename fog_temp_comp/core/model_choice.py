@@ -216,12 +216,12 @@ def quantized_choice(
 
     Takes the sensor's noise before quantization (fitted by likelihood unless the sensor
     dithers: :func:`~fog_temp_comp.core.quantized_noise_fit.noise_before_quantization`), then
-    scores the
-    chosen structure with the quantized-likelihood filter by the same cross-validation. That
-    filter takes every raw reading at full weight, which is right for white noise; a sensor
-    whose noise is not white (or whose steps are not even) would make it overconfident, and
-    its score shows it. It is kept unless its score is worse by more than ``tolerance``.
-    Returns the settings and the record for ``provenance.selection.quantized_likelihood``.
+    scores the chosen structure with the quantized-likelihood filter by the same
+    cross-validation. That filter takes every raw reading at full weight, which is right for
+    white noise; a sensor whose noise is not white (or whose steps are not even) would make it
+    overconfident, and its score shows it. It is kept unless its score is worse by more than
+    ``tolerance``. Returns the settings and the record for
+    ``provenance.selection.quantized_likelihood``.
     """
     fit = noise_before_quantization(
         records, base.temperature_quantum_degC, base.temperature_noise_degC

@@ -17,7 +17,7 @@ from fog_temp_comp.core.reading_repeat import RepeatedReadings, repeat_factors
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.units import S_PER_MIN
 
-__all__ = ['INDEPENDENT_AFTER_S', 'KalmanTdotEstimator', 'ready_tolerance']
+__all__ = ['INDEPENDENT_AFTER_S', 'KalmanTdotEstimator', 'predict_covariance', 'ready_tolerance']
 
 #: readings closer than this (s) count as one (their measurement variance grows)
 INDEPENDENT_AFTER_S = 1.0
@@ -37,15 +37,22 @@ def ready_tolerance(dt_s: float) -> float:
 Cov2 = tuple[float, float, float]
 
 
+def predict_covariance(p: Cov2, dt: float, q: float) -> Cov2:
+    """``F P F' + Q`` over ``dt`` s for a rate walk of intensity ``q`` (degC^2/s^3)."""
+    p00, p01, p11 = p
+    return (
+        p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0,
+        p01 + dt * p11 + q * dt * dt / 2.0,
+        p11 + q * dt,
+    )
+
+
 def _covariance_step(p: Cov2, dt: float, q: float, r: float) -> tuple[Cov2, float, float]:
     """Predict ``p`` over ``dt`` s and update with a reading of variance ``r``.
 
     Returns the posterior and the gains ``(k0, k1)`` on T and Tdot (degC/s per degC).
     """
-    p00, p01, p11 = p
-    a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
-    a01 = p01 + dt * p11 + q * dt * dt / 2.0
-    a11 = p11 + q * dt
+    a00, a01, a11 = predict_covariance(p, dt, q)
     s = a00 + r
     k0, k1 = a00 / s, a01 / s
     return (a00 - k0 * a00, a01 - k0 * a01, a11 - k1 * a01), k0, k1

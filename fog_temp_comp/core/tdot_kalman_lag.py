@@ -23,7 +23,12 @@ from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator,
 from fog_temp_comp.core.tdot_kalman import INDEPENDENT_AFTER_S, ready_tolerance
 from fog_temp_comp.core.units import S_PER_MIN
 
-__all__ = ['SensorLagKalmanTdotEstimator', 'cached_transition', 'sensor_lag_transition']
+__all__ = [
+    'SensorLagKalmanTdotEstimator',
+    'cached_transition',
+    'predict_covariance',
+    'sensor_lag_transition',
+]
 
 #: below this dt / tau the transition's noise is integrated numerically
 _QUADRATURE_BELOW = 0.5
@@ -98,10 +103,10 @@ def cached_transition(
     return transition
 
 
-def _step(
-    p: Cov, dt: float, transition: tuple[tuple[float, float, float], Cov], r: float
-) -> tuple[Cov, tuple[float, float, float], Cov]:
-    """Predict ``p`` over ``dt`` and update with one reading: (prior, gain, posterior)."""
+def predict_covariance(
+    p: Cov, dt: float, transition: tuple[tuple[float, float, float], Cov]
+) -> Cov:
+    """``F P F' + Q`` over ``dt`` s (``transition`` from :func:`sensor_lag_transition`)."""
     (a, b, c), (q_cc, q_cv, q_cs, q_vv, q_vs, q_ss) = transition
     cc, cv, cs, vv, vs, ss = p
     # F P F' + Q, with rows F = [1 dt 0], [0 1 0], [b c a]
@@ -115,7 +120,7 @@ def _step(
     n_cs = f3_c + dt * f3_v
     n_vs = f3_v
     n_ss = b * f3_c + c * f3_v + a * f3_s
-    prior = (
+    return (
         n_cc + q_cc,
         n_cv + q_cv,
         n_cs + q_cs,
@@ -123,6 +128,13 @@ def _step(
         n_vs + q_vs,
         n_ss + q_ss,
     )
+
+
+def _step(
+    p: Cov, dt: float, transition: tuple[tuple[float, float, float], Cov], r: float
+) -> tuple[Cov, tuple[float, float, float], Cov]:
+    """Predict ``p`` over ``dt`` and update with one reading: (prior, gain, posterior)."""
+    prior = predict_covariance(p, dt, transition)
     cc, cv, cs, vv, vs, ss = prior
     s = ss + r
     k_c, k_v, k_s = cs / s, vs / s, ss / s

@@ -26,8 +26,10 @@ from fog_temp_comp.core.reading_repeat import RepeatedReadings
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.tdot_kalman import INDEPENDENT_AFTER_S
 from fog_temp_comp.core.tdot_kalman import _warm_up as _warm_up_plain
+from fog_temp_comp.core.tdot_kalman import predict_covariance as predict_plain
 from fog_temp_comp.core.tdot_kalman_lag import _round_dt, cached_transition
 from fog_temp_comp.core.tdot_kalman_lag import _warm_up as _warm_up_lag
+from fog_temp_comp.core.tdot_kalman_lag import predict_covariance as predict_lag
 from fog_temp_comp.core.units import S_PER_MIN
 
 __all__ = ['QuantizedKalmanTdotEstimator']
@@ -93,7 +95,7 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         """Forget all samples."""
         self._stamp = math.nan
         self._x: list[float] = []
-        self._p: list[float] = []
+        self._p: Any = []  # covariance: 3 floats (plain) or 6 (sensor lag)
         self._warm: Any = ()  # the Gaussian filter's covariance: 3 or 6 floats
         self._ready = False
         self._estimate: TdotEstimate | None = None
@@ -164,10 +166,7 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
 
     def _step_plain(self, dt: float, y: float, damp: float) -> None:
         """Predict (T, Tdot) over ``dt`` s and update with reading ``y``, damped by ``damp``."""
-        p00, p01, p11 = self._p
-        q = self.q
-        p00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
-        p01, p11 = p01 + dt * p11 + q * dt * dt / 2.0, p11 + q * dt
+        p00, p01, p11 = predict_plain(self._p, dt, self.q)
         x0 = self._x[0] + dt * self._x[1]
         ez, vz, log_mass = quantized_update(x0, p00, y, self.quantum, self.noise_var)
         self.log_likelihood += max(log_mass, self._log_floor)
@@ -177,17 +176,10 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
 
     def _step_lag(self, dt: float, y: float, damp: float) -> None:
         """Predict (coil T, coil Tdot, sensor T) over ``dt`` s and update with reading ``y``."""
-        (a, b, c), (q_cc, q_cv, q_cs, q_vv, q_vs, q_ss) = self._transition_for(dt)
-        cc, cv, cs, vv, vs, ss = self._p
+        transition = self._transition_for(dt)
+        cc, cv, cs, vv, vs, ss = predict_lag(self._p, dt, transition)
+        (a, b, c), _ = transition
         tc, v, ts = self._x
-        f_c, f_v, f_s = (
-            b * cc + c * cv + a * cs,
-            b * cv + c * vv + a * vs,
-            b * cs + c * vs + a * ss,
-        )
-        cc, cv = cc + 2.0 * dt * cv + dt * dt * vv + q_cc, cv + dt * vv + q_cv
-        cs, vv, vs = f_c + dt * f_v + q_cs, vv + q_vv, f_v + q_vs
-        ss = b * f_c + c * f_v + a * f_s + q_ss
         tc, ts = tc + dt * v, a * ts + b * tc + c * v
         ez, vz, log_mass = quantized_update(ts, ss, y, self.quantum, self.noise_var)
         self.log_likelihood += max(log_mass, self._log_floor)

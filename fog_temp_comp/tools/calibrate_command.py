@@ -86,8 +86,6 @@ def calibrate_command(
     stdout = stdout or sys.stdout
     if not output.parent.is_dir():
         raise ValueError(f'-o {output}: directory {output.parent} does not exist')
-    if output.exists() or output.is_symlink():  # before the fit, not after it (checked again)
-        raise FileExistsError(f'{output}: exists already, not overwriting')
     report = options.report_dir if options else None
     with AtomicOutputs(output, report) as outputs:  # -o, --report: complete, or not at all
         return _calibrate(bags, output, outputs, options, settings, gyro_topic, temp_topic, stdout)
@@ -104,6 +102,7 @@ def _calibrate(
     stdout: TextIO,
 ) -> int:
     """:func:`calibrate_command` writing its outputs to the temporary paths of ``outputs``."""
+    yaml_path = outputs.path(output)  # first: an existing -o is refused before any bag is read
     opt = options or CalibrateOptions()
     if opt.terms is not None and not opt.terms:
         raise ValueError('--terms: give at least one model term')
@@ -145,7 +144,7 @@ def _calibrate(
     coeffs = result.coefficients
     if opt.no_constant:
         coeffs = _without_constant(coeffs)
-    save(coeffs, outputs.path(output))
+    save(coeffs, yaml_path)
     _print_fit(result, coeffs, len(records), output, stdout)
     runs = _validate(opt, coeffs, [(b.name, load_record(b)) for b in opt.validate], stdout)
     if opt.report_dir is not None:
