@@ -210,7 +210,13 @@ def test_realistic_plan_runs_and_is_seeded() -> None:
 
 @pytest.mark.parametrize(
     ('field', 'value'),
-    [('coil_lag_s', -1.0), ('chamber_damping', 0.0), ('bias_random_walk_deg_h_per_sqrt_h', -1)],
+    [
+        ('coil_lag_s', -1.0),
+        ('chamber_damping', 0.0),
+        ('bias_random_walk_deg_h_per_sqrt_h', -1),
+        ('temp_noise_correlation_s', -1.0),
+        ('temp_step_nonlinearity', -0.1),
+    ],
 )
 def test_bad_realism_fields_raise(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
