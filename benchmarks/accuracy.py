@@ -187,6 +187,36 @@ def checks(rows: dict[str, dict[str, float]], against: str = 'oracle') -> dict[s
     }
 
 
+def line_counts(
+    results: Sequence[dict[str, object]], pipeline: str = 'default', against: str = 'oracle'
+) -> tuple[dict[str, int], int]:
+    """How many results' ``pipeline`` rows meet each line against ``against``, and all four."""
+    counts = dict.fromkeys(LIMITS, 0)
+    every = 0
+    for res in results:
+        rows = res['rows']
+        assert isinstance(rows, dict)
+        ok = checks({'default': rows[pipeline], against: rows[against]}, against)
+        for k, v in ok.items():
+            counts[k] += int(v)
+        every += int(all(ok.values()))
+    return counts, every
+
+
+def median_excess(results: Sequence[dict[str, object]], pipeline: str) -> dict[str, float]:
+    """Medians of ``pipeline`` against the oracle: 100 s as a ratio, the others as differences."""
+    out = {}
+    for key in LIMITS:
+        values = []
+        for res in results:
+            rows = res['rows']
+            assert isinstance(rows, dict)
+            a, o = rows[pipeline][key], rows['oracle'][key]
+            values.append(a / o if key == 's100' else a - o)
+        out[key] = float(np.median(values))
+    return out
+
+
 def format_results(results: Sequence[dict[str, object]]) -> str:
     """Markdown: per plant and seed, every pipeline; then the acceptance summary per set."""
     lines = [
@@ -233,15 +263,7 @@ def summary(results: Sequence[dict[str, object]]) -> str:
         if not sub:
             continue
         for against in ('oracle', 'ideal fit', 'ideal GLS'):
-            counts = {k: 0 for k in LIMITS}
-            every = 0
-            for res in sub:
-                rows = res['rows']
-                assert isinstance(rows, dict)
-                ok = checks(rows, against)
-                for k, v in ok.items():
-                    counts[k] += int(v)
-                every += int(all(ok.values()))
+            counts, every = line_counts(sub, 'default', against)
             n = len(sub)
             lines.append(
                 f'| {which} | {n} | {against} | {counts["r10"]}/{n} | {counts["s100"]}/{n} '
@@ -258,19 +280,10 @@ def summary(results: Sequence[dict[str, object]]) -> str:
         if not sub:
             continue
         for name in PIPELINES[1:]:
-
-            def med(key: str, ratio: bool, name: str = name, sub: list = sub) -> float:
-                values = []
-                for res in sub:
-                    rows = res['rows']
-                    assert isinstance(rows, dict)
-                    a, o = rows[name][key], rows['oracle'][key]
-                    values.append(a / o if ratio else a - o)
-                return float(np.median(values))
-
+            med = median_excess(sub, name)
             lines.append(
-                f'| {which} | {name} | {med("r10", False):+.4f} | {med("s100", True):.3f} '
-                f'| {med("range_cycles", False):+.3f} | {med("range_soaks", False):+.3f} |'
+                f'| {which} | {name} | {med["r10"]:+.4f} | {med["s100"]:.3f} '
+                f'| {med["range_cycles"]:+.3f} | {med["range_soaks"]:+.3f} |'
             )
     return '\n'.join(lines)
 
