@@ -249,6 +249,7 @@ def calibrate_detailed(
     fit: str = 'ols',
     hac_lag: int | None = None,
     provenance: dict[str, Any] | None = None,
+    series: Sequence[EstimateSeries] | None = None,
 ) -> CalibrationResult:
     """Fit the drift model on one or more chamber records (each keeps its own time span).
 
@@ -287,6 +288,9 @@ def calibrate_detailed(
         Newey-West lag of the standard errors (default: data-driven).
     provenance : dict, optional
         Entries added to the coefficients' provenance (e.g. the Earth-rate removal).
+    series : sequence of EstimateSeries, optional
+        Each record's precomputed estimates, lagged and shaped as ``settings`` asks (see
+        :func:`grid_table`); not with ``fit_coil_lag``.
 
     Returns
     -------
@@ -297,14 +301,20 @@ def calibrate_detailed(
         raise CalibrationError('no records to calibrate on')
     if fit not in ('ols', 'gls'):
         raise ValueError(f"fit must be 'ols' or 'gls', got {fit!r}")
+    if fit_coil_lag and series is not None:
+        raise ValueError('precomputed series cannot be given with fit_coil_lag')
     lag_fit: dict[str, object] | None = None
     if fit_coil_lag:
         settings, table, lag_fit = _fit_coil_lag(
             records, settings, terms, coil_lag_bounds_s, coil_lag_highpass_s, online_tdot
         )
     else:
+        given = list(series) if series is not None else [None] * len(records)
         table = GridTable.concatenate(
-            [grid_table(r, settings, online_tdot=online_tdot) for r in records]
+            [
+                grid_table(r, settings, series=s, online_tdot=online_tdot)
+                for r, s in zip(records, given, strict=True)
+            ]
         )
     warnings = check_identifiable(table, terms)
     fits = fit_table(table, terms, lag=hac_lag, gls=fit == 'gls')

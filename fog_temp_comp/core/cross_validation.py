@@ -27,7 +27,7 @@ from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.tdot import offline_estimates
 from fog_temp_comp.core.tdot_estimate import EstimateSeries
 
-__all__ = ['MAX_SHRINK_FRACTION', 'cross_validate']
+__all__ = ['MAX_SHRINK_FRACTION', 'cross_validate', 'shaped_series']
 
 #: the shrinkage threshold may reach at most this fraction of the training run's typical
 #: |Tdot| (90th percentile): the garrote must be nearly linear over the calibrated range, or a
@@ -49,33 +49,58 @@ def _series(
     records: Sequence[ChamberRecord], base: DenoiseSettings, estimator: tuple[float, float]
 ) -> list[EstimateSeries]:
     """The Kalman series of ``estimator`` = (walk, sensor lag s) on each record (cached)."""
-    cache = _SERIES_CACHE.get()
-    key = (tuple(id(r) for r in records), base, estimator)
-    if cache is not None and key in cache:
-        return list(cache[key][1])
-    series = _compute_series(records, base, estimator)
-    if cache is not None:
-        cache[key] = (list(records), series)
-    return list(series)
-
-
-def _compute_series(
-    records: Sequence[ChamberRecord], base: DenoiseSettings, estimator: tuple[float, float]
-) -> list[EstimateSeries]:
     walk, sensor_lag_s = estimator
     settings = dataclasses.replace(
         base,
         method='kalman',
         kalman_rate_walk_degC_per_min_per_sqrt_s=walk,
         sensor_lag_s=sensor_lag_s,
+    )
+    return _unshaped_series(records, settings)
+
+
+def _unshaped_series(
+    records: Sequence[ChamberRecord], settings: DenoiseSettings
+) -> list[EstimateSeries]:
+    """The Kalman filter's own series of ``settings`` on each record, without any shaping.
+
+    Cached by the records' ids and the filter's settings (the shaping ones set to 0), so the
+    final fit reuses the series its cross-validation computed.
+    """
+    settings = dataclasses.replace(
+        settings,
         tdot_shrink_sigmas=0.0,
         tdot_wiener_window_s=0.0,
         tdot_lag_s=0.0,
         coil_lag_s=0.0,
     )
-    return [
+    cache = _SERIES_CACHE.get()
+    key = (tuple(id(r) for r in records), settings)
+    if cache is not None and key in cache:
+        return list(cache[key][1])
+    series = [
         offline_estimates(settings, r.temp_stamps_s, r.temperature_degC, coil_lag=False)
         for r in records
+    ]
+    if cache is not None:
+        cache[key] = (list(records), series)
+    return list(series)
+
+
+def shaped_series(
+    records: Sequence[ChamberRecord], settings: DenoiseSettings
+) -> list[EstimateSeries]:
+    """Each record's Kalman series through ``settings``' Wiener gain, coil lag and shaping.
+
+    What :func:`~fog_temp_comp.core.calibration.grid_table` computes for method ``'kalman'``
+    (bit for bit), from the series cache while
+    :func:`~fog_temp_comp.core.model_choice.choose_and_calibrate` runs.
+    """
+    return [
+        s.wiener(settings.tdot_wiener_window_s)
+        .lagged(settings.coil_lag_s)
+        .shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s)
+        for s in _unshaped_series(records, settings)
     ]
 
 

@@ -53,6 +53,7 @@ from fog_temp_comp.core.cross_validation import (
     MAX_SHRINK_FRACTION,
     _series,
     cross_validate,
+    shaped_series,
 )
 from fog_temp_comp.core.cv_folds import (
     BLOCKS_PER_RUN,
@@ -379,5 +380,6 @@ def _choose_and_calibrate(
         fit=chosen.structure.fit,
         hac_lag=hac_lag,
         provenance={**(provenance or {}), 'selection': selection},
+        series=shaped_series(records, final),
     )
     return result, scores, chosen

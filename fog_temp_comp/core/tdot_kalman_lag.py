@@ -10,7 +10,6 @@ temperatures in degC, Tdot in degC/min (the state holds it in degC/s).
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -293,26 +292,57 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         z_all = hysteresis_series(self._hysteresis, z_all)
         t_array, z_array = average_readings(self._averager, t_all, z_all)
         t_in, z_in = t_array.tolist(), z_array.tolist()
-        out: list[tuple[float, float, float, float, bool]] = []
-        k = 0
+        # the estimates' stamps, coil temperatures, coil rates (degC/s) and rate variances
+        out: tuple[list[float], list[float], list[float], list[float]] = ([], [], [], [])
+        k = unready = 0
         if self._estimate is None and t_in:
             self._repeated.factor(t_in[0], z_in[0])
             self._start(t_in[0], z_in[0])
-            out.append((t_in[0], z_in[0], 0.0, self._p[3], False))
-            k = 1
+            for column, value in zip(out, (t_in[0], z_in[0], 0.0, self._p[3]), strict=True):
+                column.append(value)
+            k = unready = 1
         repeats = repeat_factors(self._repeated, t_array[k:], z_array[k:]).tolist()
-        stamp, (tc, v, ts), p, ready = self._stamp, self._x, self._p, self._ready
-        warm = self._warm
-        steady_dt = math.nan
-        gains = (0.0, 0.0, 0.0)
-        last_dt = math.nan
-        a = b = c = k_c = k_v = k_s = 0.0
-        transition = self._transitions.get(1.0) or sensor_lag_transition(1.0, self.tau, self.q)
         # the intervals, rounded in one vector operation; after a skipped sample, from the last
         # sample used
-        steps = (np.rint(np.diff(np.r_[stamp, t_array[k:]]) * _DT_SCALE) / _DT_SCALE).tolist()
+        steps = np.rint(np.diff(np.r_[self._stamp, t_array[k:]]) * _DT_SCALE) / _DT_SCALE
+        unready += self._run(t_in[k:], z_in[k:], steps.tolist(), repeats, out)
+        if out[0]:
+            self._estimate = self._make_estimate()
+        stamp, temperature, rate, variance = (np.array(c, dtype=np.float64) for c in out)
+        return EstimateSeries(
+            stamp,
+            temperature,
+            rate * S_PER_MIN,
+            np.sqrt(np.maximum(variance, 0.0)) * S_PER_MIN,
+            ready=np.arange(stamp.size) >= unready,  # not ready until the warm-up settles
+        )
+
+    def _run(
+        self,
+        t_in: list[float],
+        z_in: list[float],
+        steps: list[float],
+        repeats: list[float],
+        out: tuple[list[float], list[float], list[float], list[float]],
+    ) -> int:
+        """:meth:`add_series`' loop: :meth:`_update` on each reading, its helpers inlined.
+
+        ``steps``: each reading's interval (s, rounded) from the one before; ``repeats``: its
+        variance factor. The same operations in the same order as :func:`_step` and
+        :func:`predict_covariance`, so the same bits. Appends each estimate to ``out``'s
+        columns; returns how many of them are not ready (the first ones).
+        """
+        stamp, (tc, v, ts), p, ready = self._stamp, self._x, self._p, self._ready
+        warm, r_base, transitions = self._warm, self.r, self._transitions
+        tau, q = self.tau, self.q
+        steady_dt = last_dt = math.nan
+        a = b = c = k_c = k_v = k_s = r_dt = 0.0
+        q_cc = q_cv = q_cs = q_vv = q_vs = q_ss = 0.0
+        transition = transitions.get(1.0) or sensor_lag_transition(1.0, tau, q)
+        add_t, add_x, add_v, add_p = (column.append for column in out)
+        unready = 0
         skipped = False
-        for stamp_next, z, dt, repeat in zip(t_in[k:], z_in[k:], steps, repeats, strict=True):
+        for stamp_next, z, dt, repeat in zip(t_in, z_in, steps, repeats, strict=True):
             if skipped:
                 dt = _round_dt(stamp_next - stamp)
             if not dt > 0.0:
@@ -323,34 +353,48 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
                 steady_dt = math.nan
             if dt != last_dt:  # else: the same interval as the last sample's
                 last_dt = dt
-                transition = self._transition_for(dt)
-                (a, b, c), _ = transition
-            if dt != steady_dt:
-                _, gains, posterior = _step(p, dt, transition, self._r_at(dt) * repeat)
-                k_c, k_v, k_s = gains
-                previous, p = p, posterior
+                transition = cached_transition(transitions, dt, tau, q)
+                (a, b, c), (q_cc, q_cv, q_cs, q_vv, q_vs, q_ss) = transition
+                r_dt = r_base * max(1.0, INDEPENDENT_AFTER_S / dt)  # as _r_at
+            if dt != steady_dt:  # _step: F P F' + Q, then the update
+                cc, cv, cs, vv, vs, ss = p
+                f3_c = b * cc + c * cv + a * cs
+                f3_v = b * cv + c * vv + a * vs
+                f3_s = b * cs + c * vs + a * ss
+                n_cc = cc + 2.0 * dt * cv + dt * dt * vv + q_cc
+                n_cv = cv + dt * vv + q_cv
+                n_cs = f3_c + dt * f3_v + q_cs
+                n_vv = vv + q_vv
+                n_vs = f3_v + q_vs
+                n_ss = b * f3_c + c * f3_v + a * f3_s + q_ss
+                s = n_ss + r_dt * repeat
+                k_c, k_v, k_s = n_cs / s, n_vs / s, n_ss / s
+                previous, p = (
+                    p,
+                    (
+                        n_cc - k_c * n_cs,
+                        n_cv - k_c * n_vs,
+                        n_cs - k_c * n_ss,
+                        n_vv - k_v * n_vs,
+                        n_vs - k_v * n_ss,
+                        n_ss - k_s * n_ss,
+                    ),
+                )
                 steady_dt = dt if previous == p and repeat == 1.0 else math.nan
             if not ready:  # the warm-up only: once ready, no second step
-                warm, ready = _warm_up(warm, dt, transition, self._r_at(dt))
+                warm, ready = _warm_up(warm, dt, transition, r_dt)
+                unready += not ready
             pc, ps = tc + dt * v, a * ts + b * tc + c * v
             innovation = z - ps
             tc, v, ts = pc + k_c * innovation, v + k_v * innovation, ps + k_s * innovation
             stamp = stamp_next
-            out.append((stamp, tc, v, p[3], ready))
+            add_t(stamp)
+            add_x(tc)
+            add_v(v)
+            add_p(p[3])
         self._stamp, self._x, self._p, self._ready = stamp, (tc, v, ts), p, ready
         self._warm = warm
-        if out:
-            self._estimate = self._make_estimate()
-        columns: list[tuple[Any, ...]] = (
-            list(zip(*out, strict=True)) if out else [(), (), (), (), ()]
-        )
-        return EstimateSeries(
-            np.array(columns[0], dtype=np.float64),
-            np.array(columns[1], dtype=np.float64),
-            np.array(columns[2], dtype=np.float64) * S_PER_MIN,
-            np.sqrt(np.maximum(np.array(columns[3], dtype=np.float64), 0.0)) * S_PER_MIN,
-            ready=np.array(columns[4], dtype=bool),
-        )
+        return unready
 
     @property
     def tdot_std_degC_per_min(self) -> float:
