@@ -27,7 +27,7 @@ from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator,
 from fog_temp_comp.core.tdot_kalman import INDEPENDENT_AFTER_S
 from fog_temp_comp.core.tdot_kalman import _warm_up as _warm_up_plain
 from fog_temp_comp.core.tdot_kalman import predict_covariance as predict_plain
-from fog_temp_comp.core.tdot_kalman_lag import _round_dt, cached_transition
+from fog_temp_comp.core.tdot_kalman_lag import _DT_SCALE, _round_dt, cached_transition
 from fog_temp_comp.core.tdot_kalman_lag import _warm_up as _warm_up_lag
 from fog_temp_comp.core.tdot_kalman_lag import predict_covariance as predict_lag
 from fog_temp_comp.core.units import S_PER_MIN
@@ -210,13 +210,20 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         out_s: list[float] = []
         out_ready: list[bool] = []
         advance, k = self._advance, 3 if self.tau > 0.0 else 2
-        for stamp, z in zip(t_all.tolist(), z_all.tolist(), strict=True):
-            if advance(stamp, z):
-                out_t.append(stamp)
+        t_in, z_in = t_all.tolist(), z_all.tolist()
+        i = 0
+        # until ready (the plain model; the sensor lag's always), one reading at a time
+        while i < len(t_in) and not (self._ready and self.tau == 0.0):
+            if advance(t_in[i], z_in[i]):
+                out_t.append(t_in[i])
                 out_x.append(self._x[0])
                 out_v.append(self._x[1])
                 out_s.append(self._p[k])
                 out_ready.append(self._ready)
+            i += 1
+        if i < len(t_in):
+            self._run_plain(t_in[i:], z_in[i:], (out_t, out_x, out_v, out_s))
+            out_ready += [True] * (len(out_t) - len(out_ready))
         if out_t:
             self._estimate = self._make_estimate()
         std = np.sqrt(np.maximum(np.array(out_s, dtype=np.float64), 0.0)) * S_PER_MIN
@@ -227,6 +234,47 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
             std,
             ready=np.array(out_ready, dtype=bool),
         )
+
+    def _run_plain(
+        self,
+        t_in: list[float],
+        z_in: list[float],
+        out: tuple[list[float], list[float], list[float], list[float]],
+    ) -> None:
+        """:meth:`_advance` on each reading of a ready plain filter, its helpers inlined.
+
+        The same operations in the same order as :meth:`_step_plain` and ``predict_plain``, so
+        the same bits. Appends each reading used to ``out``: stamp, T, Tdot (degC/s) and its
+        variance.
+        """
+        isfinite, factor = math.isfinite, self._repeated.factor
+        q, quantum, noise_var, log_floor = self.q, self.quantum, self.noise_var, self._log_floor
+        stamp, (x0, x1), (p00, p01, p11) = self._stamp, self._x, self._p
+        log_likelihood = self.log_likelihood
+        add_t, add_x, add_v, add_s = (column.append for column in out)
+        for stamp_s, y in zip(t_in, z_in, strict=True):
+            if not (isfinite(stamp_s) and isfinite(y)):
+                continue
+            dt = round((stamp_s - stamp) * _DT_SCALE) / _DT_SCALE  # as _round_dt
+            if not dt >= MIN_INTERVAL_S:  # also a stamp not after the last one used
+                continue
+            damp = 1.0 / factor(stamp_s, y)
+            a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
+            a01 = p01 + dt * p11 + q * dt * dt / 2.0
+            a11 = p11 + q * dt
+            x0 = x0 + dt * x1
+            ez, vz, log_mass = quantized_update(x0, a00, y, quantum, noise_var)
+            log_likelihood += max(log_mass, log_floor)
+            g, h = damp * (ez - x0) / a00, damp * (a00 - vz) / (a00 * a00)
+            x0, x1 = x0 + a00 * g, x1 + a01 * g
+            p00, p01, p11 = a00 - a00 * a00 * h, a01 - a00 * a01 * h, a11 - a01 * a01 * h
+            stamp = stamp_s
+            add_t(stamp)
+            add_x(x0)
+            add_v(x1)
+            add_s(p11)
+        self._stamp, self._x, self._p = stamp, [x0, x1], [p00, p01, p11]
+        self.log_likelihood = log_likelihood
 
     def feed(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> int:
         """Feed samples shape (n,) in order without keeping the estimates; how many were used.
