@@ -309,18 +309,28 @@ def calibrate_detailed(
             records, settings, terms, coil_lag_bounds_s, coil_lag_highpass_s, online_tdot
         )
     else:
-        given = list(series) if series is not None else [None] * len(records)
-        table = GridTable.concatenate(
-            [
-                grid_table(r, settings, series=s, online_tdot=online_tdot)
-                for r, s in zip(records, given, strict=True)
-            ]
-        )
+        table = _grid_tables(records, settings, series, online_tdot)
     warnings = check_identifiable(table, terms)
     fits = fit_table(table, terms, lag=hac_lag, gls=fit == 'gls')
     extra = {**({'coil_lag_fit': lag_fit} if lag_fit is not None else {}), **(provenance or {})}
     coefficients = _coefficients(records, settings, terms, table, fits, warnings, extra)
     return CalibrationResult(coefficients, table, fits, warnings)
+
+
+def _grid_tables(
+    records: Sequence[ChamberRecord],
+    settings: DenoiseSettings,
+    series: Sequence[EstimateSeries] | None,
+    online_tdot: bool,
+) -> GridTable:
+    """The records' :func:`grid_table` rows, stacked (``series``: their precomputed estimates)."""
+    given = list(series) if series is not None else [None] * len(records)
+    return GridTable.concatenate(
+        [
+            grid_table(r, settings, series=s, online_tdot=online_tdot)
+            for r, s in zip(records, given, strict=True)
+        ]
+    )
 
 
 def _fit_coil_lag(
