@@ -76,31 +76,14 @@ class RepeatedReadings:
         return tau / self.run_limit_s if tau > self.run_limit_s else 1.0
 
 
-#: the last :func:`repeat_factors` call: (its state before, stamps and temperatures as bytes,
-#: the factors, its state after); calibration runs a dozen filters over the same readings
-_LAST: tuple[tuple[float, ...], bytes, bytes, FloatArray, tuple[float, float]] | None = None
-
-
 def repeat_factors(
     repeated: RepeatedReadings, stamps_s: FloatArray, temperature_degC: FloatArray
 ) -> FloatArray:
-    """:meth:`RepeatedReadings.factor` of every reading, shape (n,), updating ``repeated``.
-
-    A call on the same readings (bit for bit) from the same state as the last one reuses its
-    factors.
-    """
-    global _LAST
+    """:meth:`RepeatedReadings.factor` of every reading, shape (n,), updating ``repeated``."""
     if not repeated.enabled:
         return np.ones(len(stamps_s))
     half, limit = repeated.half_step_degC, repeated.run_limit_s
     level, start = repeated.run_degC, repeated.run_start_s
-    state = (half, limit, level, start)
-    t_bytes = np.ascontiguousarray(stamps_s, dtype=np.float64).tobytes()
-    z_bytes = np.ascontiguousarray(temperature_degC, dtype=np.float64).tobytes()
-    last = _LAST
-    if last is not None and _same(last[0], state) and last[1] == t_bytes and last[2] == z_bytes:
-        repeated.run_degC, repeated.run_start_s = last[4]
-        return last[3].copy()
     out: list[float] = []
     append = out.append
     for stamp, z in zip(stamps_s.tolist(), temperature_degC.tolist(), strict=True):
@@ -111,11 +94,4 @@ def repeat_factors(
         tau = stamp - start
         append(tau / limit if tau > limit else 1.0)
     repeated.run_degC, repeated.run_start_s = level, start
-    factors = np.array(out, dtype=np.float64)
-    _LAST = (state, t_bytes, z_bytes, factors.copy(), (level, start))
-    return factors
-
-
-def _same(a: tuple[float, ...], b: tuple[float, ...]) -> bool:
-    """Whether two states hold the same floats, bit for bit (NaN as NaN)."""
-    return np.array(a, dtype=np.float64).tobytes() == np.array(b, dtype=np.float64).tobytes()
+    return np.array(out, dtype=np.float64)
