@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from fog_temp_comp.core.calibration import CalibrationError, GridTable
+from fog_temp_comp.core.calibration import CalibrationError, GridTable, calibrate_detailed
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.model import PAPER_TERMS
 from fog_temp_comp.core.model_choice import (
@@ -271,3 +271,26 @@ def test_fold_score_equals_scoring_the_corrected_rows() -> None:
     np.testing.assert_allclose(got_logs, expected, rtol=0, atol=1e-9)
     assert got == pytest.approx(np.exp(np.mean(expected)), rel=1e-9)
     assert got < 0.5  # the model explains most of the rate: a score that could fail
+
+
+@pytest.mark.parametrize('lag', [{'sensor_lag_s': 300.0}, {'coil_lag_s': 300.0}])
+def test_the_final_fit_from_the_cross_validations_series_equals_a_fresh_fit(lag: dict) -> None:
+    """choose_and_calibrate reuses the cross-validation's Kalman series for the final fit.
+
+    Fitting the chosen settings and terms afresh (every filter run again) gives the same rows
+    and coefficients, bit for bit; a precomputed series is refused with a coil-lag search.
+    """
+    records = [cycle(dataclasses.replace(CHAMBER, **lag)).as_record()]
+    result, _, chosen = choose_and_calibrate(records, RECOMMENDED_SETTINGS)
+    settings = result.coefficients.denoise
+    assert settings.kalman_quantized_noise_degC > 0.0  # the quantized filter, run once
+    fresh = calibrate_detailed(
+        records, settings, terms=result.coefficients.model.terms, fit=chosen.structure.fit
+    )
+    for name in ('temperature_degC', 'tdot_degC_per_min', 'tdot_lag', 'rate_deg_h'):
+        np.testing.assert_array_equal(getattr(fresh.table, name), getattr(result.table, name))
+    np.testing.assert_array_equal(
+        fresh.coefficients.model.coefficients, result.coefficients.model.coefficients
+    )
+    with pytest.raises(ValueError, match='fit_coil_lag'):
+        calibrate_detailed(records, settings, fit_coil_lag=True, series=[None])  # type: ignore[list-item]
