@@ -187,6 +187,11 @@ def checks(rows: dict[str, dict[str, float]], against: str = 'oracle') -> dict[s
     }
 
 
+def figure_cells(m: dict[str, float]) -> str:
+    """A pipeline's four figures as Markdown cells: 10 s ratio, 100 s deg/h, the two ranges."""
+    return f'{m["r10"]:.4f} | {m["s100"]:.4f} | {m["range_cycles"]:.3f} | {m["range_soaks"]:.3f}'
+
+
 def line_counts(
     results: Sequence[dict[str, object]], pipeline: str = 'default', against: str = 'oracle'
 ) -> tuple[dict[str, int], int]:
@@ -244,10 +249,7 @@ def format_results(results: Sequence[dict[str, object]]) -> str:
                 if name == 'oracle'
                 else '| | | | | | | '
             )
-            lines.append(
-                f'{head}| {name} | {m["r10"]:.4f} | {m["s100"]:.4f} | {m["range_cycles"]:.3f} '
-                f'| {m["range_soaks"]:.3f} | {meets} |'
-            )
+            lines.append(f'{head}| {name} | {figure_cells(m)} | {meets} |')
     return '\n'.join(lines)
 
 

@@ -85,6 +85,7 @@ from accuracy import (
     TRAINING_RUN,
     add_pipeline_options,
     checks,
+    figure_cells,
     ideal_fit,
     line_counts,
     median_excess,
@@ -662,10 +663,7 @@ def format_results(results: Sequence[dict[str, object]]) -> str:
                 if name == 'oracle'
                 else '| | | | | | | | | '
             )
-            lines.append(
-                f'{head}| {name} | {m["r10"]:.4f} | {m["s100"]:.4f} | {m["range_cycles"]:.3f} '
-                f'| {m["range_soaks"]:.3f} | {meets} | {chosen} |'
-            )
+            lines.append(f'{head}| {name} | {figure_cells(m)} | {meets} | {chosen} |')
     return '\n'.join(lines)
 
 
