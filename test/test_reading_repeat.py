@@ -7,7 +7,11 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from fog_temp_comp.core.denoise import DenoiseSettings
-from fog_temp_comp.core.reading_repeat import RepeatedReadings, repeat_factors
+from fog_temp_comp.core.reading_repeat import (
+    RepeatedReadings,
+    _equal_value_runs,
+    repeat_factors,
+)
 from fog_temp_comp.core.tdot import kalman_estimator
 
 T0 = 1.7e9
@@ -44,6 +48,39 @@ def test_online_and_series_follow_the_rule() -> None:
     ]
     assert_array_equal(got, ref)
     assert max(ref) > 3.0 and ref.count(1.0) > 100  # both kinds of reading occur
+
+
+@pytest.mark.parametrize('dither', [False, True])
+def test_the_series_equals_the_online_rule_with_nans_and_a_carried_run(dither: bool) -> None:
+    """The series gives the online factors, bit for bit, with NaNs and from a run begun online.
+
+    Raw quantized readings make runs of equal values (found in vector operations); readings
+    that move by less than half a step (0.5 s means) go one at a time.
+    """
+    rng = np.random.default_rng(7)
+    stamps = T0 + np.cumsum(rng.uniform(0.5, 2.0, 4000))
+    temps = quantized(stamps, 20.0 + 0.3 * np.sin((stamps - T0) / 900.0), 0.004, 2)
+    if dither:  # means of a few readings: steps of a fraction of a quantum
+        temps = temps + rng.choice([0.0, 0.25 * QUANTUM], temps.size)
+    temps[[5, 6, 1500, 2999]] = np.nan
+    online = RepeatedReadings(QUANTUM, 0.1)
+    expected = [online.factor(t, z) for t, z in zip(stamps, temps, strict=True)]
+    series = RepeatedReadings(QUANTUM, 0.1)
+    head = [series.factor(t, z) for t, z in zip(stamps[:100], temps[:100], strict=True)]
+    got = np.r_[
+        head,
+        repeat_factors(series, stamps[100:2500], temps[100:2500]),
+        repeat_factors(series, stamps[2500:], temps[2500:]),
+    ]
+    assert_array_equal(got, expected)
+    assert (series.run_start_s, np.isnan(series.run_degC)) == (
+        online.run_start_s,
+        np.isnan(online.run_degC),
+    )
+    assert series.run_degC == online.run_degC or np.isnan(online.run_degC)
+    assert max(expected) > 2.0  # long runs occur
+    vector = _equal_value_runs(QUANTUM / 2, 37.5, np.nan, np.nan, stamps, temps)
+    assert (vector is None) == dither  # each path is the one exercised
 
 
 def test_a_constant_reading_weighs_less_and_less() -> None:

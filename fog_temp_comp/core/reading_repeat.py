@@ -79,11 +79,20 @@ class RepeatedReadings:
 def repeat_factors(
     repeated: RepeatedReadings, stamps_s: FloatArray, temperature_degC: FloatArray
 ) -> FloatArray:
-    """:meth:`RepeatedReadings.factor` of every reading, shape (n,), updating ``repeated``."""
+    """:meth:`RepeatedReadings.factor` of every reading, shape (n,), updating ``repeated``.
+
+    Readings that move by 0 or by half a step or more at a time (a quantized sensor's raw
+    readings) make runs of equal values, which are found in vector operations; other readings
+    (e.g. 0.5 s means that dither) go one at a time. The same factors either way, bit for bit.
+    """
     if not repeated.enabled:
         return np.ones(len(stamps_s))
     half, limit = repeated.half_step_degC, repeated.run_limit_s
     level, start = repeated.run_degC, repeated.run_start_s
+    vectorised = _equal_value_runs(half, limit, level, start, stamps_s, temperature_degC)
+    if vectorised is not None:
+        factors, (repeated.run_degC, repeated.run_start_s) = vectorised
+        return factors
     out: list[float] = []
     append = out.append
     for stamp, z in zip(stamps_s.tolist(), temperature_degC.tolist(), strict=True):
@@ -95,3 +104,39 @@ def repeat_factors(
         append(tau / limit if tau > limit else 1.0)
     repeated.run_degC, repeated.run_start_s = level, start
     return np.array(out, dtype=np.float64)
+
+
+def _equal_value_runs(
+    half: float,
+    limit: float,
+    level: float,
+    start: float,
+    stamps_s: FloatArray,
+    temperature_degC: FloatArray,
+) -> tuple[FloatArray, tuple[float, float]] | None:
+    """:func:`repeat_factors` where every run is of equal readings; None where it is not.
+
+    A reading continues its run when it is within half a step of the run's first. If every
+    reading either equals the one before or differs from it by half a step or more, the
+    readings that continue a run equal its first, so the runs start exactly where the value
+    changes (or is NaN). Returns the factors and the state after them: (run's first reading
+    degC, its stamp s).
+    """
+    t = np.asarray(stamps_s, dtype=np.float64)
+    z = np.asarray(temperature_degC, dtype=np.float64)
+    if z.size == 0:
+        return np.ones(0), (level, start)
+    step = np.abs(np.diff(np.r_[level, z]))
+    with np.errstate(invalid='ignore'):
+        continues = step < half  # NaN (a first or a NaN reading): a new run
+    if np.any(continues & (step != 0.0)):
+        return None
+    index = np.arange(z.size)
+    first = np.maximum.accumulate(np.where(continues, -1, index))
+    run_start = np.where(first >= 0, t[np.maximum(first, 0)], start)
+    tau = t - run_start
+    with np.errstate(invalid='ignore'):
+        factors = np.where(continues & (tau > limit), tau / limit, 1.0)
+    last = int(first[-1])
+    state = (float(z[last]), float(t[last])) if last >= 0 else (level, start)
+    return factors, state
