@@ -199,6 +199,21 @@ def test_identifiability_warns_on_an_ill_conditioned_design() -> None:
     warnings = check_identifiability(t, r, PAPER_TERMS, max_condition=1e6)
     assert warnings == []
     assert check_identifiability(t, r, PAPER_TERMS)[0].startswith('ill-conditioned fit')
+    # refusals only (what the cross-validation asks): no condition number, no warning
+    assert identifiability(t, r, PAPER_TERMS, max_condition=math.inf) == []
+
+
+@pytest.mark.parametrize('max_condition', [1e6, math.inf])
+def test_a_term_without_data_is_refused_with_or_without_the_condition_number(
+    max_condition: float,
+) -> None:
+    t = np.linspace(-40.0, 60.0, 500)
+    r = 0.2 * np.sin(np.linspace(0, 6 * np.pi, 500))
+    t[:] = 0.0  # T2 and T are all zeros, but the swing check only looks at 'T'
+    problems = identifiability(t, r, ('const', 'T2', 'Tdot'), max_condition=max_condition)
+    assert [(p.severity, p.message) for p in problems] == [
+        ('error', 'a design column is all zeros; its term has no data')
+    ]
 
 
 @pytest.mark.parametrize(

@@ -9,6 +9,7 @@ the node runs; none: raw). Rows of all bags are stacked and each axis is fitted 
 from __future__ import annotations
 
 import datetime as dt
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -210,10 +211,18 @@ def fit_table(
     return fit_gls(a, table.rate_deg_h, names=tuple(terms), bin_index=table.bin_index, lag=lag)
 
 
-def check_identifiable(table: GridTable, terms: Sequence[str]) -> list[str]:
-    """Refuse a fit the data cannot identify; return the warnings (ill-conditioning)."""
+def check_identifiable(
+    table: GridTable, terms: Sequence[str], *, refusals_only: bool = False
+) -> list[str]:
+    """Refuse a fit the data cannot identify; return the warnings (ill-conditioning).
+
+    ``refusals_only``: skip what can only warn (the condition number; none are returned).
+    """
+    limits = {'max_condition': math.inf} if refusals_only else {}
     try:
-        return check_identifiability(table.temperature_degC, table.tdot_degC_per_min, terms)
+        return check_identifiability(
+            table.temperature_degC, table.tdot_degC_per_min, terms, **limits
+        )
     except IdentifiabilityError as err:
         raise CalibrationError(str(err)) from None
 

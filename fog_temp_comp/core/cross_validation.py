@@ -264,7 +264,7 @@ def _folds(
 def _refusal(table: GridTable, terms: Sequence[str]) -> CalibrationError | None:
     """Why the final fit would refuse ``terms`` on these rows (None: it would not)."""
     try:
-        check_identifiable(table, terms)
+        check_identifiable(table, terms, refusals_only=True)
     except CalibrationError as err:
         return err
     return None

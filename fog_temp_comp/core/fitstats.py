@@ -413,7 +413,11 @@ def identifiability(
         return problems
     # the lead-lag pair Tdot / Tdot_lag is collinear by construction (its combination is what
     # is fitted, and cross-validation judges it); the condition number is that of the rest
-    cond = condition_number(design_matrix(t, r, [term for term in terms if term != 'Tdot_lag']))
+    design = design_matrix(t, r, [term for term in terms if term != 'Tdot_lag'])
+    if math.isinf(max_condition):  # no warning to give: only a zero column refuses (no SVD)
+        cond = math.inf if np.any(np.linalg.norm(design, axis=0) == 0) else 0.0
+    else:
+        cond = condition_number(design)
     if not math.isfinite(cond):
         problems.append(Problem('error', 'a design column is all zeros; its term has no data'))
     elif cond > max_condition:
