@@ -9,7 +9,7 @@ Run by hand (not in CI)::
 ``benchmarks/accuracy.py`` draws its plants from :mod:`fog_temp_comp.tools.simulate`: a chain of
 first-order lags and a drift that is a function of one coil temperature and its first-order-lag
 rate, the very family ``calibrate`` fits. This study draws plants from a generator written here,
-independently structured (numpy only, fixed seeds), and runs the paper's protocol on them with
+independently structured (numpy and scipy, fixed seeds), and runs the paper's protocol on them with
 default settings only, as ``accuracy.py``'s ``default`` row: ``calibrate`` with no flags
 (:func:`fog_temp_comp.core.model_choice.choose_and_calibrate`) on the 0.2 degC/min cycle, then
 the node's :class:`~fog_temp_comp.core.compensator.Compensator` (default guards) replays the
@@ -93,6 +93,7 @@ from accuracy import (
     pipeline_settings,
 )
 from numpy.typing import NDArray
+from scipy import linalg, signal
 
 from fog_temp_comp.core.calibration import calibrate
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
@@ -131,21 +132,6 @@ IDEAL_TERMS = ('const', 'T', 'T2', 'Tdot')
 
 def _logu(rng: np.random.Generator, low: float, high: float) -> float:
     return float(np.exp(rng.uniform(np.log(low), np.log(high))))
-
-
-def expm(m: FloatArray) -> FloatArray:
-    """Matrix exponential by scaling and squaring of a Taylor series (numpy only)."""
-    norm = float(np.max(np.sum(np.abs(m), axis=1)))
-    squarings = max(0, int(np.ceil(np.log2(norm / 0.25)))) if norm > 0.25 else 0
-    a = m / 2.0**squarings
-    out = np.eye(m.shape[0])
-    term = np.eye(m.shape[0])
-    for k in range(1, 20):
-        term = term @ a / k
-        out = out + term
-    for _ in range(squarings):
-        out = out @ out
-    return out
 
 
 @dataclass(frozen=True)
@@ -415,7 +401,7 @@ def thermal_states(plant: ForeignPlant, air: FloatArray) -> tuple[FloatArray, Fl
     aug[:n, :n] = plant.a
     aug[:n, n] = plant.b
     aug[n, n + 1] = 1.0
-    big = expm(aug)
+    big = linalg.expm(aug)
     phi, g_step, g_ramp = big[:n, :n], big[:n, n], big[:n, n + 1]
     g_next = g_ramp  # first-order hold: u(t) = u_k + (u_{k+1} - u_k) t
     g_now = g_step - g_ramp
@@ -432,13 +418,9 @@ def thermal_states(plant: ForeignPlant, air: FloatArray) -> tuple[FloatArray, Fl
 
 def _ar1(phi: FloatArray, drive: FloatArray) -> FloatArray:
     """``y[k] = phi * y[k-1] + drive[k]`` column by column, ``y[0] = drive[0]``."""
-    out = np.empty_like(drive)
-    y = drive[0].copy()
-    out[0] = y
-    for k in range(1, drive.shape[0]):
-        y = phi * y + drive[k]
-        out[k] = y
-    return out
+    return np.stack(
+        [signal.lfilter([1.0], [1.0, -p], drive[:, j]) for j, p in enumerate(phi)], axis=1
+    )
 
 
 def gyro_noise(plant: ForeignPlant, n: int, rng: np.random.Generator) -> FloatArray:

@@ -31,7 +31,7 @@ from fog_temp_comp.core.gls import fit_gls
 from fog_temp_comp.core.grid import bin_means, temperature_grid
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range, design_matrix
 from fog_temp_comp.core.record import ChamberRecord
-from fog_temp_comp.core.tdot import EstimateSeries, offline_estimates
+from fog_temp_comp.core.tdot import EstimateSeries, offline_estimates, shaped_as
 from fog_temp_comp.core.units import DEG_H_PER_RAD_S
 
 FloatArray = NDArray[np.float64]
@@ -154,12 +154,7 @@ def grid_table(
                     f'{record.path}: too few temperature bins ({tdot_raw.size + 1})'
                 )
             tdot = denoise_offline(tdot_raw, settings)
-            series = (
-                EstimateSeries(stamp, temp, tdot)
-                .wiener(settings.tdot_wiener_window_s)
-                .lagged(settings.coil_lag_s)
-                .shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s)
-            )
+            series = shaped_as(EstimateSeries(stamp, temp, tdot), settings)
         else:
             series = offline_estimates(
                 settings, record.temp_stamps_s, record.temperature_degC, online=True

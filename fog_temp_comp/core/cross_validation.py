@@ -24,7 +24,7 @@ from fog_temp_comp.core.cv_folds import _Fold, _parts, _score
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.model_candidates import Structure, StructureScore
 from fog_temp_comp.core.record import ChamberRecord
-from fog_temp_comp.core.tdot import offline_estimates
+from fog_temp_comp.core.tdot import offline_estimates, shaped_as
 from fog_temp_comp.core.tdot_estimate import EstimateSeries
 
 __all__ = ['MAX_SHRINK_FRACTION', 'cross_validate', 'shaped_series']
@@ -96,12 +96,7 @@ def shaped_series(
     (bit for bit), from the series cache while
     :func:`~fog_temp_comp.core.model_choice.choose_and_calibrate` runs.
     """
-    return [
-        s.wiener(settings.tdot_wiener_window_s)
-        .lagged(settings.coil_lag_s)
-        .shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s)
-        for s in _unshaped_series(records, settings)
-    ]
+    return [shaped_as(s, settings) for s in _unshaped_series(records, settings)]
 
 
 def _shrink_threshold(series: Sequence[EstimateSeries], sigmas: float) -> tuple[float, float]:

@@ -135,8 +135,8 @@ def _equal_value_runs(
     first = np.maximum.accumulate(np.where(continues, -1, index))
     run_start = np.where(first >= 0, t[np.maximum(first, 0)], start)
     tau = t - run_start
-    with np.errstate(invalid='ignore'):
-        factors = np.where(continues & (tau > limit), tau / limit, 1.0)
+    with np.errstate(invalid='ignore'):  # a run's first reading has tau 0: factor 1
+        factors = np.where(tau > limit, tau / limit, 1.0)
     last = int(first[-1])
     state = (float(z[last]), float(t[last])) if last >= 0 else (level, start)
     return factors, state

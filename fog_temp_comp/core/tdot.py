@@ -82,6 +82,7 @@ __all__ = [
     'make_estimator',
     'offline_estimates',
     'run_estimator',
+    'shaped_as',
     'shrink_tdot',
 ]
 
@@ -191,6 +192,11 @@ def offline_estimates(
             series = run_estimator(unshaped, stamps_s, temperature_degC)
     if not coil_lag:
         return series
+    return shaped_as(series, settings)
+
+
+def shaped_as(series: EstimateSeries, settings: DenoiseSettings) -> EstimateSeries:
+    """``series`` through ``settings``' Wiener gain, coil lag and shaping, in the node's order."""
     return (
         series.wiener(settings.tdot_wiener_window_s)
         .lagged(settings.coil_lag_s)
