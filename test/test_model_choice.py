@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from fog_temp_comp.core.calibration import CalibrationError, GridTable, calibrate_detailed
+from fog_temp_comp.core.cross_validation import shaped_series
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.model import PAPER_TERMS
 from fog_temp_comp.core.model_choice import (
@@ -292,5 +293,8 @@ def test_the_final_fit_from_the_cross_validations_series_equals_a_fresh_fit(lag:
     np.testing.assert_array_equal(
         fresh.coefficients.model.coefficients, result.coefficients.model.coefficients
     )
+    given = shaped_series(records, settings)
     with pytest.raises(ValueError, match='fit_coil_lag'):
-        calibrate_detailed(records, settings, fit_coil_lag=True, series=[None])  # type: ignore[list-item]
+        calibrate_detailed(records, settings, fit_coil_lag=True, series=given)
+    with pytest.raises(ValueError, match=r'one per record \(2 for 1\)'):
+        calibrate_detailed(records, settings, series=given * 2)

@@ -328,6 +328,8 @@ def _grid_tables(
     online_tdot: bool,
 ) -> GridTable:
     """The records' :func:`grid_table` rows, stacked (``series``: their precomputed estimates)."""
+    if series is not None and len(series) != len(records):
+        raise ValueError(f'precomputed series: one per record ({len(series)} for {len(records)})')
     given = list(series) if series is not None else [None] * len(records)
     return GridTable.concatenate(
         [
