@@ -60,7 +60,9 @@ The generator (plant ``p`` draws from ``default_rng((p, 1616))``; ranges uniform
   :mod:`fog_temp_comp.tools.plants`).
 
 Plants 0-7 were looked at when this study was written (their failures diagnosed); plants 8-15
-are held back: report them, never tune on them. Both sets are summarised separately.
+are held back: report them, never tune on them. Plants 16-31 are a second looked-at set, drawn
+in session 17 so that a change is judged on more plants than eight (``--plants`` them; they
+are not in the default run). Each set is summarised separately.
 
 The true drift and the coil's mean temperature and rate go into the package's
 :class:`~fog_temp_comp.tools.simulate.SimulatedRun`; the figures are ``accuracy.py``'s
@@ -116,6 +118,9 @@ PIPELINES = ('oracle', 'default', 'paper terms', 'ideal fit')
 LOOKED_AT_PLANTS = tuple(range(8))
 #: plants no pipeline change may be tuned on: report them, do not study them
 HELDBACK_PLANTS = tuple(range(8, 16))
+#: a second looked-at set, drawn in session 17 to judge a change on more than eight plants
+#: (``--plants 16 ... 31``; not in the default run)
+EXTRA_LOOKED_AT_PLANTS = tuple(range(16, 32))
 #: the setpoint profiles of the package's plan (start 20 degC, -40..60 degC, soaks 1 h / 2 h)
 PROFILE = SimulationConfig()
 IMU_HZ = 2.0
@@ -731,7 +736,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             results.append(res)
     print('\nPlants (foreign generator):\n\n' + format_plants(results))
     print('\n' + format_results(results) + '\n')
-    for name, plants in (('looked at', LOOKED_AT_PLANTS), ('held back', HELDBACK_PLANTS)):
+    sets = (
+        ('looked at', LOOKED_AT_PLANTS),
+        ('held back', HELDBACK_PLANTS),
+        ('looked at, second set', EXTRA_LOOKED_AT_PLANTS),
+    )
+    for name, plants in sets:
         subset = [r for r in results if r['plant'] in plants]
         if subset:
             print(f'\n{name} (plants {plants[0]}-{plants[-1]}):\n\n' + summary(subset))
