@@ -21,7 +21,9 @@ changes one thing beyond those ranges:
   std: a sensor that averages internally), where the Kalman filters assume white noise;
 - ``uneven_steps``: the sensor's quantizer has a differential nonlinearity of 0.5 step (each
   boundary displaced by up to a quarter step: codes 0.5-1.5 steps wide), where the
-  quantized likelihood assumes even steps.
+  quantized likelihood assumes even steps;
+- ``temp_20s``: temperature every 20 s (0.05 Hz; a slow housekeeping channel), longer than the
+  node's default 10 s staleness timeout.
 
 The paper's protocol runs on each with default settings (as ``benchmarks/accuracy.py``), and
 with the paper's terms for comparison; figures are against the oracle.
@@ -56,6 +58,7 @@ VARIANTS = (
     'noisy_gyro',
     'corr_noise',
     'uneven_steps',
+    'temp_20s',
 )
 
 
@@ -71,6 +74,7 @@ def variant(name: str, cfg: SimulationConfig) -> SimulationConfig:
         'noisy_gyro': {'arw_10s_deg_h': 0.1},
         'corr_noise': {'temp_noise_correlation_s': 10.0},
         'uneven_steps': {'temp_step_nonlinearity': 0.5},
+        'temp_20s': {'temp_hz': 0.05},
     }[name]
     return dataclasses.replace(cfg, **changes)  # type: ignore[arg-type]
 

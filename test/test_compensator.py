@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from fog_temp_comp.core.compensator import Compensator, replay
+from fog_temp_comp.core.compensator import Compensator, GuardSettings, replay
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H
@@ -258,6 +259,41 @@ def test_a_marked_hole_restarts_the_tdot_estimate_however_short(model: DriftMode
     assert holed.status.counters.temperature_gaps == 1
 
 
+def test_a_sensor_read_every_20_s_is_not_a_gap_at_every_reading(model: DriftModel) -> None:
+    """With the sensor's interval from calibrate, staleness waits 3 intervals, not 10 s."""
+    t0 = 1.7e9
+    settings = DenoiseSettings(method='kalman', temperature_quantum_degC=0.0)
+
+    def run(comp: Compensator, stop_s: int, start_s: int = 0, skip: range = range(0)) -> None:
+        for k in range(start_s, stop_s):  # gyro at 1 Hz, a 0.5 degC/min ramp read every 20 s
+            if k % 20 == 0 and k not in skip:
+                comp.add_temperature(t0 + k, 0.5 / 60 * k)
+            comp.correct_xyz(t0 + k + 0.5, 0.0, 0.0, 0.0)
+
+    unknown = Compensator(model, settings)
+    slow = Compensator(model, dataclasses.replace(settings, temperature_period_s=20.0))
+    assert (unknown.stale_after_s, slow.stale_after_s) == (10.0, 60.0)
+    run(unknown, 7200)
+    run(slow, 7200)
+    # without the interval every reading is a gap: Tdot restarts and never warms up
+    assert unknown.status.counters.temperature_gaps == 7200 // 20 - 1
+    assert not unknown.status.estimator_ready
+    assert unknown.status.counters.imu_held > 3000
+    assert slow.status.counters.temperature_gaps == 0
+    assert slow.status.counters.imu_held == 0
+    assert slow.status.estimator_ready
+    assert slow.status.tdot_degC_per_min == pytest.approx(0.5, rel=0.02)
+    # one reading lost is not a gap; a sensor silent for longer than 60 s is
+    run(slow, 7400, 7200, skip=range(7300, 7301))
+    assert slow.status.counters.temperature_gaps == 0
+    run(slow, 7600, 7400, skip=range(7420, 7500))
+    assert slow.status.counters.temperature_gaps == 1
+    assert slow.status.counters.imu_held == 40  # gyro 60.5-99.5 s after the reading at 7400
+    # a guard timeout longer than 3 intervals is kept
+    longer = Compensator(model, slow.denoise, GuardSettings(temperature_timeout_s=90.0))
+    assert longer.stale_after_s == 90.0
+
+
 # --------------------------------------------------------------------------------------------
 # correct_block: the same as correct_xyz one message at a time, bit for bit
 # --------------------------------------------------------------------------------------------
@@ -468,6 +504,31 @@ def test_correct_block_with_rest_learning_equals_correct_xyz() -> None:
     mixed = Compensator(model, settings, rest=rest)
     assert_array_equal(_drive(mixed, events, 'interleaved'), expected)
     _assert_same_state(one, mixed)
+
+
+def test_correct_block_equals_correct_xyz_with_a_sensor_read_every_20_s() -> None:
+    """The block path applies the slow sensor's staleness rule as the message path does."""
+    model = DriftModel(
+        PAPER_TERMS,
+        np.array([[10.0, -5.0, 2.0], [0.01, 0.02, -0.01], [1.0, -0.5, 0.3]]),
+        Range(15.0, 25.0),
+        Range(-0.5, 0.5),
+    )
+    settings = DenoiseSettings(method='kalman', temperature_period_s=20.0)
+    events = [e for e in _awkward_stream(seed=5) if e[0] == 'G' or round(e[1]) % 20 == 0]
+    one, blocks = Compensator(model, settings), Compensator(model, settings)
+    expected = _drive(one, events, 'each')
+    assert_array_equal(_drive(blocks, events, 'block', seed=4), expected)
+    _assert_same_state(one, blocks)
+    mixed = Compensator(model, settings)
+    assert_array_equal(_drive(mixed, events, 'interleaved', seed=2), expected)
+    _assert_same_state(one, mixed)
+    assert one.status.counters.temperature_gaps == 0
+    assert one.status.estimator_ready
+    # the stream exercises the rule: without the interval it is a gap at every reading
+    unknown = Compensator(model, dataclasses.replace(settings, temperature_period_s=0.0))
+    _drive(unknown, events, 'each')
+    assert unknown.status.counters.temperature_gaps > 100
 
 
 def test_correct_block_on_a_simulated_run(short_cycle: SimulatedRun) -> None:

@@ -298,3 +298,31 @@ def test_the_final_fit_from_the_cross_validations_series_equals_a_fresh_fit(lag:
         calibrate_detailed(records, settings, fit_coil_lag=True, series=given)
     with pytest.raises(ValueError, match=r'one per record \(2 for 1\)'):
         calibrate_detailed(records, settings, series=given * 2)
+
+
+def test_reading_interval_is_the_sensor_rate_not_its_jitter_or_a_lost_reading() -> None:
+    from fog_temp_comp.core.sensor_noise import reading_interval_s
+
+    cfg = dataclasses.replace(CHAMBER, temp_hz=0.05)
+    record = cycle(cfg).as_record()
+    assert reading_interval_s([record]) == 20.0
+    rng = np.random.default_rng(0)
+    stamps = 1.7e9 + 20.0 * np.arange(500) + rng.normal(0, 0.01, 500)  # jittered by 10 ms
+    stamps = np.delete(stamps, [100, 101, 300])  # readings lost
+    stamps = np.insert(stamps, 50, stamps[50])  # a repeated stamp
+    jittered = dataclasses.replace(
+        record, temp_stamps_s=stamps, temperature_degC=np.full(stamps.size, 20.0)
+    )
+    assert reading_interval_s([jittered]) == pytest.approx(20.0, abs=0.005)
+    one = dataclasses.replace(record, temp_stamps_s=stamps[:1], temperature_degC=np.ones(1))
+    assert reading_interval_s([one]) == 0.0
+
+
+def test_calibrate_records_the_temperature_sensor_interval() -> None:
+    """The YAML carries the interval, so the node's staleness rule fits a slow sensor."""
+    cfg = dataclasses.replace(CHAMBER, temp_hz=0.05, temp_quantum_degC=0.05, temp_noise_degC=0.01)
+    record = cycle(cfg).as_record()
+    chosen, _, _ = choose_and_calibrate([record], RECOMMENDED_SETTINGS)
+    assert chosen.coefficients.denoise.temperature_period_s == 20.0
+    fixed = calibrate_detailed([record], RECOMMENDED_SETTINGS, terms=PAPER_TERMS)
+    assert fixed.coefficients.denoise.temperature_period_s == 20.0

@@ -101,6 +101,7 @@ def test_diagnostics_report_state_values_and_provenance(harness: Harness) -> Non
     assert values['coefficients_bags'] == 'chamber_run'
     assert values['denoise'] == 'iir'
     assert values['temperature_reading_model'] == '-'  # not the Kalman filter
+    assert float(values['temperature_stale_after_s']) == 10.0  # the file has no interval
     assert values['imu_corrected'] == '1'
     assert status.hardware_id == 'imu_link'
 
@@ -249,6 +250,46 @@ def test_stale_temperature_follows_policy_and_warns(
         back = h.send_imu(T0 + 61.5, RATE)
         assert_allclose(rate_of(back), RATE - expected_correction(coefficients, 25.0))
         assert h.node.compensator.status.counters.temperature_gaps == 1
+    finally:
+        h.close()
+
+
+@pytest.mark.parametrize('period_s', [20.0, 0.0])
+def test_a_sensor_read_every_20_s_is_fresh_with_its_calibrated_interval(
+    ros_context: object, tmp_path: Path, coefficients: Coefficients, period_s: float
+) -> None:
+    """The node takes the sensor's interval from the file: 20 s readings are not stale.
+
+    Nor a gap at each reading; with 0 (an older file, or the parameter set to 0) the 10 s
+    timeout makes every reading a gap and the gyro between them stale.
+    """
+    import dataclasses
+
+    slow = dataclasses.replace(
+        coefficients,
+        denoise=dataclasses.replace(coefficients.denoise, temperature_period_s=20.0),
+    )
+    path = tmp_path / 'slow.yaml'
+    save(slow, path)
+    params = {'temperature_period_s': period_s} if period_s == 0.0 else {}
+    h = Harness(ros_context, start(ros_context, path, **params))
+    try:
+        assert h.node.compensator.stale_after_s == (60.0 if period_s else 10.0)
+        stale_after = diag_values(h.diagnose())['temperature_stale_after_s']
+        assert float(stale_after) == (60.0 if period_s else 10.0)
+        for k in range(0, 200, 20):  # 0.3 degC/min, read every 20 s, gyro at 0.5 Hz
+            h.send_temperature(T0 + k, 25.0 + 0.005 * k)
+            for j in range(1, 20, 2):
+                assert h.send_imu(T0 + k + j, RATE) is not None
+        counters = h.node.compensator.status.counters
+        status = h.diagnose()
+        if period_s:
+            assert (counters.temperature_gaps, counters.imu_held) == (0, 0)
+            assert status.level == OK, status.message
+        else:
+            assert counters.temperature_gaps == 9
+            assert counters.imu_held == 50  # 11, 13, ..., 19 s after each reading
+            assert 'temperature stale' in status.message or 'temperature gap' in status.message
     finally:
         h.close()
 

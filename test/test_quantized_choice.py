@@ -64,9 +64,11 @@ def test_a_quiet_quantized_sensor_gets_its_noise_fitted_and_the_exact_likelihood
     assert len(record['grid_degC']) == len(record['log_likelihood'])
     assert isinstance(kalman_estimator(denoise), QuantizedKalmanTdotEstimator)
     # the final fit ran with that filter: its settings are the chosen structure's plus sigma
-    assert dataclasses.replace(denoise, kalman_quantized_noise_degC=0.0) == (
-        chosen.structure.settings(sensor_noise_settings(result))
-    )
+    # (and the sensor's interval between readings, for the node's staleness rule)
+    assert denoise.temperature_period_s == pytest.approx(1.0 / QUIET.temp_hz, abs=1e-3)
+    assert dataclasses.replace(
+        denoise, kalman_quantized_noise_degC=0.0, temperature_period_s=0.0
+    ) == (chosen.structure.settings(sensor_noise_settings(result)))
 
 
 def sensor_noise_settings(result):

@@ -8,6 +8,7 @@ the node runs; none: raw). Rows of all bags are stacked and each axis is fitted 
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import math
 from collections.abc import Sequence
@@ -31,6 +32,7 @@ from fog_temp_comp.core.gls import fit_gls
 from fog_temp_comp.core.grid import bin_means, temperature_grid
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range, design_matrix
 from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.sensor_noise import reading_interval_s
 from fog_temp_comp.core.tdot import EstimateSeries, offline_estimates, shaped_as
 from fog_temp_comp.core.units import DEG_H_PER_RAD_S
 
@@ -352,8 +354,6 @@ def _fit_coil_lag(
     Returns the settings with the fitted ``coil_lag_s`` (s), their grid rows and the search's
     provenance entry.
     """
-    import dataclasses
-
     from scipy import ndimage  # here: only the coil-lag search needs it (start-up)
 
     from fog_temp_comp.core.coil import search_time_constant
@@ -417,8 +417,9 @@ def _coefficients(
 ) -> Coefficients:
     """The YAML's content of a fit.
 
-    The model with its calibrated T and Tdot ranges (degC, degC/min), the Tdot settings, the
-    fit summary and where the data came from.
+    The model with its calibrated T and Tdot ranges (degC, degC/min), the Tdot settings (with
+    the temperature sensor's interval between readings, s), the fit summary and where the data
+    came from.
     """
     model = DriftModel(
         tuple(terms),
@@ -428,7 +429,7 @@ def _coefficients(
     )
     return Coefficients(
         model=model,
-        denoise=settings,
+        denoise=dataclasses.replace(settings, temperature_period_s=reading_interval_s(records)),
         frame_id=common_frame_id(records),
         fit={**fit_summary(fits), **({'warnings': warnings} if warnings else {})},
         provenance={**records_provenance(records), **provenance},

@@ -25,9 +25,11 @@ from fog_temp_comp.core.compensator_arrays import BoolArray as BoolArray
 from fog_temp_comp.core.compensator_arrays import FloatArray, _BlockCorrection
 from fog_temp_comp.core.compensator_types import (
     STALE_POLICIES,
+    STALE_SAMPLE_INTERVALS,
     CompensatorCounters,
     CompensatorStatus,
     GuardSettings,
+    stale_after_s,
 )
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.model import SCALAR_TERMS, DriftModel
@@ -38,6 +40,7 @@ from fog_temp_comp.core.units import RAD_S_PER_DEG_H, S_PER_MIN
 
 __all__ = [
     'STALE_POLICIES',
+    'STALE_SAMPLE_INTERVALS',
     'Compensator',
     'CompensatorCounters',
     'CompensatorStatus',
@@ -91,7 +94,8 @@ class Compensator(_BlockCorrection):
             SCALAR_TERMS[term] for term in model.terms
         ]
         self._coefficient_rows = model.coefficients.tolist()
-        self._horizon_s = 2 * denoise.tdot_period_s + self._guard.temperature_timeout_s
+        self._stale_after_s = stale_after_s(self._guard, denoise.temperature_period_s)
+        self._horizon_s = 2 * denoise.tdot_period_s + self._stale_after_s
         self._holes: list[float] = []  # midpoints (s) of spans known lost, not yet passed
         self._next_hole = math.inf
 
@@ -122,7 +126,17 @@ class Compensator(_BlockCorrection):
     @guard.setter
     def guard(self, guard: GuardSettings) -> None:
         self._guard = guard
-        self._horizon_s = 2 * self.denoise.tdot_period_s + guard.temperature_timeout_s
+        self._stale_after_s = stale_after_s(guard, self.denoise.temperature_period_s)
+        self._horizon_s = 2 * self.denoise.tdot_period_s + self._stale_after_s
+
+    @property
+    def stale_after_s(self) -> float:
+        """Age (s) past which temperature is stale and a gap restarts Tdot.
+
+        The guard's ``temperature_timeout_s``, or 3 of the sensor's calibrated intervals
+        (``denoise.temperature_period_s``) where longer (:func:`stale_after_s`).
+        """
+        return self._stale_after_s
 
     def reset(self) -> None:
         """Forget the temperature history (keeps the counters)."""
@@ -140,7 +154,7 @@ class Compensator(_BlockCorrection):
 
         Rejected (and counted): non-finite values, a repeated stamp, a stamp slightly earlier
         than the previous one, an implausible jump. A stamp far earlier (time jump) resets the
-        state first; a gap longer than the timeout restarts the Tdot estimate.
+        state first; a gap longer than :attr:`stale_after_s` restarts the Tdot estimate.
         """
         status = self.status
         counters = status.counters
@@ -160,7 +174,7 @@ class Compensator(_BlockCorrection):
             self.reset()
             status = self.status
         elif status.has_temperature and (
-            stamp_s - last > guard.temperature_timeout_s
+            stamp_s - last > self._stale_after_s
             or (stamp_s >= self._next_hole and self._crosses_hole(stamp_s))
         ):
             counters.temperature_gaps += 1
@@ -273,9 +287,7 @@ class Compensator(_BlockCorrection):
             counters.imu_uncorrected += 1
             self._set_correction((0.0, 0.0, 0.0))
             return (x, y, z)
-        if stamp_ok and abs(stamp_s - status.last_temperature_stamp_s) > (
-            guard.temperature_timeout_s
-        ):
+        if stamp_ok and abs(stamp_s - status.last_temperature_stamp_s) > self._stale_after_s:
             status.temperature_stale = True
             if guard.stale_policy == 'none':
                 counters.imu_uncorrected += 1

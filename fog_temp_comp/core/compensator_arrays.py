@@ -38,6 +38,7 @@ class _BlockCorrection:
     _estimator: TdotEstimator
     _correction: tuple[float, float, float]
     _horizon_s: float
+    _stale_after_s: float
     _term_functions: list[Callable[[float, float, float], float]]
     _coefficient_rows: list[list[float]]
 
@@ -202,8 +203,8 @@ class _BlockCorrection:
         status.last_imu_stamp_s = float(t[-1])
         counters.imu_nonfinite += int(np.count_nonzero(~np.isfinite(rates).all(axis=1)))
         has = has_s[seg]
-        # abs(stamp_s - status.last_temperature_stamp_s) > guard.temperature_timeout_s
-        stale = has & (np.abs(t - last_s[seg]) > guard.temperature_timeout_s)
+        # abs(stamp_s - status.last_temperature_stamp_s) > self._stale_after_s
+        stale = has & (np.abs(t - last_s[seg]) > self._stale_after_s)
         fresh = has & ~stale
         n_stale = int(np.count_nonzero(stale))
         n_fresh = int(np.count_nonzero(fresh))

@@ -12,9 +12,20 @@ from dataclasses import dataclass, field
 
 from fog_temp_comp.core.names import TDOT_LIMIT_DEGC_PER_MIN
 
-__all__ = ['STALE_POLICIES', 'CompensatorCounters', 'CompensatorStatus', 'GuardSettings']
+__all__ = [
+    'STALE_POLICIES',
+    'STALE_SAMPLE_INTERVALS',
+    'CompensatorCounters',
+    'CompensatorStatus',
+    'GuardSettings',
+    'stale_after_s',
+]
 
 STALE_POLICIES = ('hold', 'none')
+#: temperature is stale (and a gap between readings restarts Tdot) only past this many of the
+#: sensor's nominal intervals (``DenoiseSettings.temperature_period_s``): one reading lost, and
+#: the next late, is not yet a gap
+STALE_SAMPLE_INTERVALS = 3.0
 
 
 @dataclass(frozen=True)
@@ -25,7 +36,9 @@ class GuardSettings:
     ----------
     temperature_timeout_s : float
         Temperature older (or newer) than this relative to a gyro stamp is stale; a gap this long
-        between temperature samples restarts the Tdot estimate.
+        between temperature samples restarts the Tdot estimate. A slow sensor gets longer: the
+        compensator waits :func:`stale_after_s`, at least :data:`STALE_SAMPLE_INTERVALS` of the
+        sensor's calibrated interval.
     stale_policy : str
         With stale temperature: ``'hold'`` keeps applying the last correction, ``'none'`` passes
         the gyro rate through uncorrected.
@@ -79,6 +92,15 @@ class GuardSettings:
             raise ValueError(
                 f'step_confirm_samples must be an integer >= 1, got {self.step_confirm_samples!r}'
             )
+
+
+def stale_after_s(guard: GuardSettings, temperature_period_s: float) -> float:
+    """Age (s) past which temperature is stale and a gap between readings restarts Tdot.
+
+    ``guard.temperature_timeout_s``, or :data:`STALE_SAMPLE_INTERVALS` of the sensor's nominal
+    interval ``temperature_period_s`` (s; 0: unknown) where that is longer.
+    """
+    return max(guard.temperature_timeout_s, STALE_SAMPLE_INTERVALS * temperature_period_s)
 
 
 @dataclass

@@ -121,6 +121,13 @@ class DenoiseSettings:
         (:mod:`fog_temp_comp.core.tdot_kalman_quantized`): a reading says the temperature plus
         that noise lies within its step. ``calibrate`` fits it by that likelihood
         (:mod:`fog_temp_comp.core.quantized_noise_fit`). Excludes the hysteresis.
+    temperature_period_s : float
+        The temperature sensor's nominal interval between readings, s, as ``calibrate``
+        measured it (the median interval of the training bags; 0: unknown). Not used by the
+        estimators: the compensator calls temperature stale only when it is older than
+        :data:`~fog_temp_comp.core.compensator_types.STALE_SAMPLE_INTERVALS` of these intervals
+        (and than its ``temperature_timeout_s``), so a sensor read every 20 s is not a gap at
+        every reading.
 
     """
 
@@ -148,6 +155,7 @@ class DenoiseSettings:
     kalman_repeat_rate_degC_per_min: float = 0.0
     kalman_hysteresis_quanta: float = 0.0
     kalman_quantized_noise_degC: float = 0.0
+    temperature_period_s: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field; raise ValueError naming the offending field."""
@@ -206,6 +214,7 @@ class DenoiseSettings:
             'tdot_wiener_window_s',
             'kalman_repeat_rate_degC_per_min',
             'kalman_quantized_noise_degC',
+            'temperature_period_s',
         ):
             value = _check_float(name, getattr(self, name))
             if value < 0.0:

@@ -41,6 +41,7 @@ from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.fitstats import AxisFitStats, condition_number, fit_summary
 from fog_temp_comp.core.model import DriftModel, Range, coefficient_key
 from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.sensor_noise import reading_interval_s
 from fog_temp_comp.core.units import AXES
 
 FloatArray = NDArray[np.float64]
@@ -453,7 +454,9 @@ def calibrate_with_prior(
     base = records_provenance(records)
     coefficients = Coefficients(
         model=model,
-        denoise=prior.settings,
+        denoise=dataclasses.replace(
+            prior.settings, temperature_period_s=reading_interval_s(records)
+        ),
         frame_id=common_frame_id(records),
         fit=summary,
         provenance={

@@ -1,7 +1,9 @@
-"""The temperature sensor as the training bags show it: quantization step and white noise, degC.
+"""The temperature sensor as the training bags show it: quantization step, white noise, rate.
 
-:func:`sensor_noise` measures both from the raw temperature samples; :class:`SensorNoise` puts
-them into the Kalman filter's measurement model (:class:`DenoiseSettings`).
+:func:`sensor_noise` measures the step and the noise (degC) from the raw temperature samples;
+:class:`SensorNoise` puts them into the Kalman filter's measurement model
+(:class:`DenoiseSettings`). :func:`reading_interval_s` measures the interval between readings
+(s), which the compensator's staleness rule scales with.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import numpy as np
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.record import ChamberRecord
 
-__all__ = ['SensorNoise', 'sensor_noise']
+__all__ = ['SensorNoise', 'reading_interval_s', 'sensor_noise']
 
 
 @dataclass(frozen=True)
@@ -69,3 +71,14 @@ def sensor_noise(records: Sequence[ChamberRecord]) -> SensorNoise:
     if quantum == 0.0:
         noise = max(noise, 1e-4)  # a model needs some measurement noise
     return SensorNoise(quantum, noise)
+
+
+def reading_interval_s(records: Sequence[ChamberRecord]) -> float:
+    """The temperature sensor's nominal interval between readings, s (0: fewer than two).
+
+    The median over the records of the intervals between successive readings, repeated
+    stamps left out, to the millisecond: a sensor's rate, not its jitter or a lost reading.
+    """
+    intervals = np.concatenate([np.diff(r.temp_stamps_s) for r in records] or [np.empty(0)])
+    intervals = intervals[intervals > 0]
+    return round(float(np.median(intervals)), 3) if intervals.size else 0.0

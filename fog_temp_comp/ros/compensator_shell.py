@@ -258,6 +258,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             imu_rate_hz=(counters.imu_total - previous.imu_total) / elapsed,
             temperature_rate_hz=(counters.temperature_total - previous.temperature_total)
             / elapsed,
+            stale_after_s=self.compensator.stale_after_s,
             frame_mismatches=self.frame_mismatches,
             unstamped=self.unstamped,
             require_frame_match=self._require_frame_match,

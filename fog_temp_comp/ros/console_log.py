@@ -11,7 +11,19 @@ from typing import Any
 
 from rclpy.subscription import Subscription
 
+from fog_temp_comp.core.compensator import STALE_SAMPLE_INTERVALS, Compensator
 from fog_temp_comp.ros.node_parameters import ParametersMixin
+
+
+def _stale_rule(compensator: Compensator) -> str:
+    """What makes temperature stale: the parameter, or the slow sensor's intervals (s)."""
+    timeout = compensator.guard.temperature_timeout_s
+    if compensator.stale_after_s == timeout:
+        return f'temperature_timeout_s {timeout:g}'
+    return (
+        f'stale after {compensator.stale_after_s:g} s: {STALE_SAMPLE_INTERVALS:g} intervals of '
+        f'the sensor, temperature_period_s {compensator.denoise.temperature_period_s:g}'
+    )
 
 
 class ConsoleLogMixin(ParametersMixin):
@@ -73,15 +85,15 @@ class ConsoleLogMixin(ParametersMixin):
         if counters.imu_held > previous.imu_held:
             log.warning(
                 f'temperature on {topic} stale: last sample {age_s:.1f} s before the gyro '
-                f'stamp (temperature_timeout_s {guard.temperature_timeout_s:g}): holding the '
+                f'stamp ({_stale_rule(self.compensator)}): holding the '
                 'last correction',
                 throttle_duration_sec=every,
             )
         if uncorrected and status.has_temperature and status.temperature_stale:
             log.error(
                 f'fallback to pass-through: temperature on {topic} stale, last sample '
-                f'{age_s:.1f} s before the gyro stamp (temperature_timeout_s '
-                f'{guard.temperature_timeout_s:g}, stale_policy none): gyro not corrected',
+                f'{age_s:.1f} s before the gyro stamp ({_stale_rule(self.compensator)}, '
+                'stale_policy none): gyro not corrected',
                 throttle_duration_sec=every,
             )
         if self._require_frame_match and self.frame_mismatches > self._last_frame_mismatches:

@@ -61,6 +61,7 @@ def build_report(
     reading_model: str = '-',
     imu_rate_hz: float,
     temperature_rate_hz: float,
+    stale_after_s: float = math.nan,
     frame_mismatches: int = 0,
     unstamped: int = 0,
     require_frame_match: bool = False,
@@ -69,7 +70,9 @@ def build_report(
 ) -> Report:
     """Summarise ``status``; ``previous`` are the counters at the last report (for deltas).
 
-    ``rest_bias_file`` is (path, what happened to it: loaded, refused and why, written, ...).
+    ``rest_bias_file`` is (path, what happened to it: loaded, refused and why, written, ...);
+    ``stale_after_s`` the age (s) past which temperature is stale (the compensator's
+    :attr:`~fog_temp_comp.core.compensator.Compensator.stale_after_s`).
     """
     counters = status.counters
     reasons = _temperature_reasons(status, previous)
@@ -93,6 +96,7 @@ def build_report(
     values += [
         ('imu_rate_hz', _num(imu_rate_hz)),
         ('temperature_rate_hz', _num(temperature_rate_hz)),
+        ('temperature_stale_after_s', _num(stale_after_s)),
         ('denoise', method),
         ('temperature_reading_model', reading_model),
         ('filter_ready', str(status.estimator_ready)),

@@ -127,13 +127,20 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
         'white noise (degC) of the temperature sensor before its quantization: the filter uses '
         'the exact likelihood of each quantized reading, kalman; 0 = off (calibrate fits it)',
     ),
+    'temperature_period_s': (
+        'temperature_period_s',
+        _T.DOUBLE,
+        "the temperature sensor's interval between readings (s): temperature is stale only "
+        'after 3 of them (and temperature_timeout_s); 0 = unknown (calibrate measures it)',
+    ),
 }
 _GUARD_DEFAULTS = GuardSettings()
 #: input guards: name -> (default, text)
 GUARD_PARAMETERS: dict[str, tuple[Any, str]] = {
     'temperature_timeout_s': (
         _GUARD_DEFAULTS.temperature_timeout_s,
-        'temperature older than this (s) relative to a gyro stamp is stale',
+        'temperature older than this (s) relative to a gyro stamp is stale (or than 3 '
+        'intervals of a slower sensor: temperature_period_s)',
     ),
     'stale_policy': (
         _GUARD_DEFAULTS.stale_policy,
