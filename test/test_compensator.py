@@ -15,6 +15,8 @@ from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H
 from fog_temp_comp.tools.simulate import SimulatedRun, true_model
 
+from simdata import SHORT_CHAMBER
+
 
 @pytest.fixture()
 def model() -> DriftModel:
@@ -259,6 +261,54 @@ def test_a_marked_hole_restarts_the_tdot_estimate_however_short(model: DriftMode
     assert holed.status.counters.temperature_gaps == 1
 
 
+def test_gyro_before_the_first_temperature_waits_for_it_then_passes_through(
+    model: DriftModel,
+) -> None:
+    """What cannot be corrected yet is dropped (for stale_after_s), not published as raw."""
+    t0 = 1.7e9
+    rate = (1e-4, -2e-4, 3e-4)
+    comp = Compensator(model, DenoiseSettings())
+    assert [comp.correct_xyz(t0 + 0.5 * k, *rate) for k in range(20)] == [None] * 20
+    assert comp.correct_xyz(0.0, *rate) == rate  # no stamp: not waited for, passed through
+    comp.add_temperature(t0 + 9.8, 25.0)
+    got = comp.correct_xyz(t0 + 10.0, *rate)
+    assert_allclose(got, np.array(rate) - model.drift_deg_h(25.0, 0.0) * RAD_S_PER_DEG_H)
+    counters = comp.status.counters
+    assert (counters.imu_awaiting_temperature, counters.imu_uncorrected) == (20, 1)
+    assert counters.imu_total == 22
+    # no temperature at all: dropped for 10 s, then passed through (the node errors)
+    silent = Compensator(model, DenoiseSettings())
+    outputs = [silent.correct_xyz(t0 + 0.5 * k, *rate) for k in range(24)]
+    assert outputs == [None] * 21 + [rate] * 3  # 0..10 s waited, 10.5 s on passed
+    silent.add_temperature(t0 + 12.0, 25.0)
+    assert silent.correct_xyz(t0 + 12.5, *rate) != rate
+    # a time jump back resets the state: the gyro waits for a temperature again
+    assert silent.correct_xyz(t0 - 100.0, *rate) is None
+    assert silent.status.counters.time_jumps == 1
+
+
+def test_a_temperature_stream_starting_late_leaves_no_raw_gyro_in_the_output(
+    short_cycle: SimulatedRun,
+) -> None:
+    """A recorder's temperature often starts after the gyro: the first 10 s stay corrected."""
+    run = short_cycle
+    coeffs = true_model(SHORT_CHAMBER)
+    late = run.temp_stamps_s + 0.7
+    out = replay(
+        Compensator(coeffs, DenoiseSettings()),
+        run.imu_stamps_s,
+        run.rates_rad_s,
+        late,
+        run.temperature_degC,
+    )
+    first = run.imu_stamps_s < late[0]
+    assert first.sum() >= 1 and np.isnan(out[first]).all()  # dropped, not raw
+    oracle = run.rates_rad_s - run.true_drift_deg_h * RAD_S_PER_DEG_H
+    window = ~first & (run.imu_stamps_s < run.imu_stamps_s[0] + 10.0)
+    error_deg_h = np.abs(out[window].mean(axis=0) - oracle[window].mean(axis=0)) / RAD_S_PER_DEG_H
+    assert np.all(error_deg_h < 0.1), error_deg_h  # raw samples here would add D0 / 10 = ~1
+
+
 def test_a_sensor_read_every_20_s_is_not_a_gap_at_every_reading(model: DriftModel) -> None:
     """With the sensor's interval from calibrate, staleness waits 3 intervals, not 10 s."""
     t0 = 1.7e9
@@ -453,7 +503,9 @@ def test_correct_block_equals_correct_xyz_bit_for_bit(
     # the stream exercises what it claims to
     assert counters.imu_duplicate and counters.imu_out_of_order and counters.imu_zero_stamp
     assert counters.time_jumps and counters.temperature_gaps and counters.imu_nonfinite
-    assert counters.imu_corrected and counters.imu_uncorrected
+    assert counters.imu_corrected and counters.imu_awaiting_temperature  # gyro before temperature
+    if one.stale_after_s < 5.0:  # the first temperature comes 6 s after the gyro: waited, passed
+        assert counters.imu_uncorrected > 150
     assert counters.imu_held or counters.imu_uncorrected > 300
     assert counters.imu_temperature_clamped or not one.guard.clamp_temperature
     assert counters.imu_tdot_clamped + counters.imu_tdot_extrapolated

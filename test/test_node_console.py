@@ -108,10 +108,11 @@ def test_temperature_missing_warns_throttled(
     harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
 ) -> None:
     h = harness_factory()
+    assert h.send_imu(T0, RATE) is None  # waiting for the first temperature (10 s)
     lines = three_times(
         Console(capfd),
         h,
-        lambda k: h.send_imu(T0 + k, RATE),
+        lambda k: h.send_imu(T0 + 11 + k, RATE),
         'WARN',
         r'^no temperature received on /imu/temperature: gyro passed through uncorrected',
     )

@@ -174,9 +174,10 @@ def test_gyro_time_jump_backwards_resets_and_reports(harness: Harness) -> None:
         harness.send_temperature(T0 + k, 20.0 + k / 60.0)
         harness.send_imu(T0 + k + 0.5, RATE)
     out = harness.send_imu(T0 - 3600.0, RATE)  # bag looped
-    assert out is not None
-    # after the reset there is no temperature yet: passed through, not a stale correction
-    assert_array_equal(rate_of(out), RATE)
+    # after the reset there is no temperature yet: the gyro waits for one (not published),
+    # rather than taking a stale correction
+    assert out is None
+    assert harness.node.compensator.status.counters.imu_awaiting_temperature == 1
     assert harness.node.compensator.status.counters.time_jumps == 1
     harness.send_temperature(T0 - 3599.0, 20.0)
     assert harness.send_imu(T0 - 3598.5, RATE) is not None
@@ -212,18 +213,27 @@ def test_burst_of_10000_messages_is_survived_and_accounted_for(
 
 # ------------------------------------------------------------------ temperature input
 def test_no_temperature_ever_passes_through_and_errors(harness: Harness) -> None:
+    # the first 10 s (temperature_timeout_s) the gyro waits for a temperature, unpublished
     for k in range(3):
+        assert harness.send_imu(T0 + k, RATE) is None
+    status = harness.diagnose()
+    assert status.level == WARN and 'waiting for the first temperature' in status.message
+    # none came: the gyro passes through uncorrected, an error
+    for k in range(11, 14):
         out = harness.send_imu(T0 + k, RATE)
         assert out is not None
         assert_array_equal(rate_of(out), RATE)
     status = harness.diagnose()
     assert status.level == ERROR and 'no temperature' in status.message
+    counters = harness.node.compensator.status.counters
+    assert (counters.imu_awaiting_temperature, counters.imu_uncorrected) == (3, 3)
 
 
 def test_temperature_only_after_gyro_starts(harness: Harness, coefficients: Coefficients) -> None:
-    first = harness.send_imu(T0, RATE)
-    assert first is not None
-    assert_array_equal(rate_of(first), RATE)
+    # a recorder's temperature often starts after the gyro: the gyro before it is not
+    # published (it cannot be corrected yet), rather than published raw as if corrected
+    assert harness.send_imu(T0, RATE) is None
+    assert harness.node.compensator.status.counters.imu_awaiting_temperature == 1
     harness.send_temperature(T0 + 1.0, 25.0)
     out = harness.send_imu(T0 + 1.1, RATE)
     assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0), rtol=1e-12)

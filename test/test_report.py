@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -193,3 +194,20 @@ def test_allan_deviation_of_white_noise_falls_as_one_over_root_tau() -> None:
     expected = sigma / np.sqrt(curve.taus_s[short])
     np.testing.assert_allclose(curve.adev_deg_h[short], expected, rtol=0.15)
     assert allan_deviation(np.arange(5.0), np.zeros(5)).taus_s.size == 0
+
+
+def test_scores_leave_out_the_rows_the_compensator_dropped() -> None:
+    """Gyro before the first temperature (or a repeated stamp) is NaN: scored on the rest."""
+    run = simulate_run('cycle', 1.0, SHORT_CHAMBER, seed=12)
+    coeffs = calibrate([run.as_record()], DenoiseSettings())
+    record = run.as_record()
+    late = dataclasses.replace(record, temp_stamps_s=record.temp_stamps_s + 1.5)
+    corrected = compensate_record(late, coeffs)
+    dropped = ~np.all(np.isfinite(corrected), axis=1)
+    assert dropped.sum() == 2  # the gyro at 0 and 1 s, before the temperature at 1.5 s
+    scores = score_record('cycle_1', run.imu_stamps_s, run.rates_rad_s, corrected)
+    kept = score_record(
+        'cycle_1', run.imu_stamps_s[~dropped], run.rates_rad_s[~dropped], corrected[~dropped]
+    )
+    assert scores == kept
+    assert all(np.isfinite([s.stability_after_deg_h, s.range_after_deg_h]).all() for s in scores)

@@ -238,9 +238,12 @@ class Compensator(_BlockCorrection):
     ) -> FloatArray | None:
         """Corrected angular rate (rad/s, shape (3,)) for one gyro sample, or None to drop it.
 
-        Only a repeated stamp is dropped. Without temperature (or with stale temperature and
-        ``stale_policy='none'``) the rate passes through unchanged; non-finite components are
-        left as they are and the others corrected.
+        A repeated stamp is dropped. Before the first temperature (at start-up, after a
+        reset) a stamped sample is dropped too, for :attr:`stale_after_s` after the first such
+        sample: what the node cannot yet correct is not published as if corrected. After that
+        (the temperature is missing), and with stale temperature and ``stale_policy='none'``,
+        the rate passes through unchanged; non-finite components are left as they are and the
+        others corrected.
         """
         x, y, z = (float(v) for v in np.asarray(rate_rad_s, dtype=np.float64).reshape(3))
         accel = None
@@ -284,6 +287,15 @@ class Compensator(_BlockCorrection):
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             counters.imu_nonfinite += 1
         if not status.has_temperature:
+            # at start-up (and after a reset) the gyro waits for the first temperature, for
+            # stale_after_s, dropped rather than passed through as if corrected; then it passes
+            if stamp_ok:
+                since = status.awaiting_temperature_since_s
+                if since != since:  # NaN: the first gyro message without temperature
+                    status.awaiting_temperature_since_s = since = stamp_s
+                if stamp_s - since <= self._stale_after_s:
+                    counters.imu_awaiting_temperature += 1
+                    return None
             counters.imu_uncorrected += 1
             self._set_correction((0.0, 0.0, 0.0))
             return (x, y, z)

@@ -133,14 +133,53 @@ class _BlockCorrection:
         ):
             raise ValueError(f'gyro_before must not decrease and stay within 0..{n}')
         accel = None if accel_m_s2 is None else np.asarray(accel_m_s2, np.float64).reshape(-1, 3)
-        if self.rest is None and self._no_reset_possible(t, temp_t):
-            return self._correct_arrays(t, rates, temp_t.tolist(), temp_v.tolist(), before)
         corrected = np.full((n, 3), np.nan)
         kept = np.ones(n, dtype=np.bool_)
-        done = 0
-        for stop, stamp, value in zip(
-            [*before.tolist(), n], [*temp_t.tolist(), None], [*temp_v.tolist(), None], strict=True
-        ):
+        done = first = 0
+        if self.rest is None and self._no_reset_possible(t, temp_t):
+            # before the first temperature (start-up) the gyro waits for it: one at a time up
+            # to the first temperature accepted, then the rest on arrays
+            while not self.status.has_temperature and first < before.size:
+                done = self._one_at_a_time(
+                    t, rates, accel, (corrected, kept), done, before[first : first + 1],
+                    temp_t[first : first + 1], temp_v[first : first + 1], to_end=False,
+                )  # fmt: skip
+                first += 1
+            if self.status.has_temperature:
+                corrected[done:], kept[done:] = self._correct_arrays(
+                    t[done:], rates[done:], temp_t[first:].tolist(), temp_v[first:].tolist(),
+                    before[first:] - done,
+                )  # fmt: skip
+                return corrected, kept
+        self._one_at_a_time(
+            t, rates, accel, (corrected, kept), done, before[first:], temp_t[first:],
+            temp_v[first:],
+        )  # fmt: skip
+        return corrected, kept
+
+    def _one_at_a_time(
+        self,
+        t: FloatArray,
+        rates: FloatArray,
+        accel: FloatArray | None,
+        out: tuple[FloatArray, BoolArray],
+        done: int,
+        before: NDArray[np.int64],
+        temp_t: FloatArray,
+        temp_v: FloatArray,
+        *,
+        to_end: bool = True,
+    ) -> int:
+        """Gyro rows from ``done`` on through :meth:`correct_xyz`, one at a time.
+
+        Temperature ``j`` goes in after row ``before[j]``, then the rows after the last one
+        (unless not ``to_end``). ``out`` is (corrected, kept), filled in place. Returns the
+        rows fed so far.
+        """
+        corrected, kept = out
+        stops = [*before.tolist(), *([t.size] if to_end else [])]
+        temps = [*zip(temp_t.tolist(), temp_v.tolist(), strict=True), *([None] if to_end else [])]
+        for stop, temp in zip(stops, temps, strict=True):
             for k in range(done, stop):
                 x, y, z = rates[k].tolist()
                 acc = None if accel is None else tuple(accel[k].tolist())
@@ -150,9 +189,9 @@ class _BlockCorrection:
                 else:
                     corrected[k] = got
             done = max(done, stop)
-            if stamp is not None and value is not None:
-                self.add_temperature(stamp, value)
-        return corrected, kept
+            if temp is not None:
+                self.add_temperature(*temp)
+        return done
 
     def _no_reset_possible(self, t: FloatArray, temp_t: FloatArray) -> bool:
         """Whether no message of the two streams can reset the state or be out of order."""

@@ -108,9 +108,11 @@ class CompensatorCounters:
     """Message counts since start (for diagnostics); every input lands in exactly one group."""
 
     imu_corrected: int = 0
-    imu_uncorrected: int = 0  # no temperature yet, or stale with stale_policy 'none'
+    imu_uncorrected: int = 0  # no temperature for stale_after_s, or stale with policy 'none'
     imu_held: int = 0  # corrected with a held correction (stale temperature, 'hold')
     imu_duplicate: int = 0  # dropped: same stamp as the previous gyro message
+    imu_awaiting_temperature: int = 0  # dropped: no temperature yet, within stale_after_s of
+    # the first gyro message (after it, the gyro passes through: imu_uncorrected)
     # flags, each also counted in one of the groups above:
     imu_out_of_order: int = 0  # stamp earlier than the previous one (still corrected)
     imu_nonfinite: int = 0  # NaN/inf component(s) left as they were, others corrected
@@ -129,8 +131,14 @@ class CompensatorCounters:
 
     @property
     def imu_total(self) -> int:
-        """Gyro messages received (each is counted once in one of the first four groups)."""
-        return self.imu_corrected + self.imu_uncorrected + self.imu_held + self.imu_duplicate
+        """Gyro messages received (each is counted once in one of the first five groups)."""
+        return (
+            self.imu_corrected
+            + self.imu_uncorrected
+            + self.imu_held
+            + self.imu_duplicate
+            + self.imu_awaiting_temperature
+        )
 
     @property
     def temperature_total(self) -> int:
@@ -168,5 +176,7 @@ class CompensatorStatus:
     estimator_ready: bool = False
     last_temperature_stamp_s: float = -math.inf
     last_imu_stamp_s: float = -math.inf
+    #: stamp (s) of the first gyro message waiting for the first temperature (NaN: none)
+    awaiting_temperature_since_s: float = math.nan
     correction_deg_h: tuple[float, float, float] = (0.0, 0.0, 0.0)
     counters: CompensatorCounters = field(default_factory=CompensatorCounters)

@@ -68,7 +68,16 @@ def score_record(
     corrected_rad_s: FloatArray,
     taus_s: Sequence[float] = TAUS_S,
 ) -> list[Score]:
-    """Scores of one run for every axis and averaging time."""
+    """Scores of one run for every axis and averaging time.
+
+    Rows the compensator dropped (NaN: a repeated stamp, gyro before the first temperature)
+    are left out of both the raw and the corrected means, so both cover the same samples.
+    """
+    keep = np.all(np.isfinite(corrected_rad_s), axis=1)
+    if not keep.all():
+        stamps_s, raw_rad_s, corrected_rad_s = (
+            stamps_s[keep], raw_rad_s[keep], corrected_rad_s[keep]
+        )  # fmt: skip
     scores = []
     for tau in taus_s:
         before = window_means(stamps_s, raw_rad_s * DEG_H_PER_RAD_S, tau)

@@ -124,8 +124,12 @@ def _temperature_reasons(
     counters = status.counters
     reasons: list[tuple[int, str]] = []
     if not status.has_temperature:
-        if counters.imu_total:
+        if counters.imu_uncorrected:
             reasons.append((ERROR, 'no temperature received: gyro passed through uncorrected'))
+        elif counters.imu_total:
+            reasons.append(
+                (WARN, 'waiting for the first temperature: gyro not published until it comes')
+            )
         else:
             reasons.append((WARN, 'waiting for gyro and temperature messages'))
         return reasons

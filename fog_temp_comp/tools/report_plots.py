@@ -99,6 +99,9 @@ def plot_run(
     stamps = np.asarray(run.stamps_s, dtype=np.float64)
     raw = np.asarray(run.raw_rad_s, dtype=np.float64) * DEG_H_PER_RAD_S
     corrected = np.asarray(run.corrected_rad_s, dtype=np.float64) * DEG_H_PER_RAD_S
+    # rows the compensator dropped (gyro before the first temperature, a repeated stamp)
+    keep = np.all(np.isfinite(corrected), axis=1)
+    stamps, raw, corrected = stamps[keep], raw[keep], corrected[keep]
     name = f'timeseries_{slug}.png'
     _plot_timeseries(out / name, run, stamps, raw, corrected)
     figures = [
