@@ -604,3 +604,32 @@ def test_output_in_a_missing_directory(
     out = tmp_path / 'no_such_dir' / 'coeffs.yaml'
     assert calibrate([train_bag], out) == 1
     assert str(out) in error_line(capsys)
+
+
+def test_a_bump_in_the_training_bag_is_dropped_and_reported(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    train_run: SimulatedRun,
+    train_bag: Path,
+) -> None:
+    """One sample of 3 deg/s (a touch of the turntable): warned, in the YAML, fit unharmed."""
+    rates = train_run.rates_rad_s.copy()
+    rates[1000] += np.deg2rad(3.0)
+    bag = write_run(tmp_path / 'bumped', train_run, rates)
+    out, reference = tmp_path / 'bumped.yaml', tmp_path / 'clean.yaml'
+    assert calibrate([train_bag], reference, '--terms', 'const,T,Tdot') == 0
+    capsys.readouterr()
+    assert calibrate([bag], out, '--terms', 'const,T,Tdot') == 0
+    warning = [line for line in capsys.readouterr().out.splitlines() if 'outliers' in line]
+    assert len(warning) == 1 and warning[0].startswith('WARNING: ')
+    assert '1 of ' in warning[0] and 'a bump or a data error?' in warning[0]
+    data = read_yaml(out)
+    (entry,) = data['provenance']['gyro_outliers'].values()
+    assert entry['bins_dropped'] == 1
+    assert entry['worst_deviation_deg_h'] > 1000.0  # 3 deg/s over a 10 s bin of 1 Hz samples
+    clean = read_yaml(reference)
+    assert 'gyro_outliers' not in clean['provenance']
+    for axis in AXES:
+        errors = clean['fit'][axis]['standard_errors']
+        for key, value in clean['axes'][axis].items():
+            assert abs(data['axes'][axis][key] - value) < 0.5 * errors[key], (axis, key)

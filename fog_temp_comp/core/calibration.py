@@ -30,6 +30,7 @@ from fog_temp_comp.core.fitstats import (
 )
 from fog_temp_comp.core.gls import fit_gls
 from fog_temp_comp.core.grid import bin_means, temperature_grid
+from fog_temp_comp.core.gyro_outliers import without_gyro_outliers
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range, design_matrix
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.sensor_noise import reading_interval_s
@@ -256,6 +257,7 @@ def calibrate_detailed(
     hac_lag: int | None = None,
     provenance: dict[str, Any] | None = None,
     series: Sequence[EstimateSeries] | None = None,
+    drop_gyro_outliers: bool = True,
 ) -> CalibrationResult:
     """Fit the drift model on one or more chamber records (each keeps its own time span).
 
@@ -271,12 +273,8 @@ def calibrate_detailed(
         Fit the sensor-to-coil lag ``coil_lag_s`` (s) by a 1-D search
         (:func:`fog_temp_comp.core.coil.search_time_constant`); the result replaces
         ``settings.coil_lag_s`` and the search is recorded in ``provenance['coil_lag_fit']``.
-        Otherwise ``settings.coil_lag_s`` is used as given. The objective is the sum over
-        axes and records of the squared least-squares residual after a high-pass (the
-        residual minus its ``coil_lag_highpass_s`` moving average, per record): the slow part
-        of the residual is bias wander, which carries no information on the lag but would
-        dominate a plain residual sum of squares (on the simulator the plain objective scatters
-        the fitted lag by +-25 % from seed to seed, the high-passed one by +-8 %).
+        Otherwise ``settings.coil_lag_s`` is used as given. The objective is the residual sum
+        of squares after a high-pass (see :func:`_fit_coil_lag`).
     coil_lag_bounds_s : tuple of float
         Search interval of the lag, s.
     coil_lag_highpass_s : float
@@ -297,6 +295,8 @@ def calibrate_detailed(
     series : sequence of EstimateSeries, optional
         Each record's precomputed estimates, lagged and shaped as ``settings`` asks (see
         :func:`grid_table`); not with ``fit_coil_lag``.
+    drop_gyro_outliers : bool
+        Leave out gyro bins a bump threw far off (:func:`without_outliers`; with a warning).
 
     Returns
     -------
@@ -309,6 +309,9 @@ def calibrate_detailed(
         raise ValueError(f"fit must be 'ols' or 'gls', got {fit!r}")
     if fit_coil_lag and series is not None:
         raise ValueError('precomputed series cannot be given with fit_coil_lag')
+    outliers: list[str] = []
+    if drop_gyro_outliers:
+        records, outliers, provenance = without_outliers(records, settings, provenance)
     lag_fit: dict[str, object] | None = None
     if fit_coil_lag:
         settings, table, lag_fit = _fit_coil_lag(
@@ -316,11 +319,42 @@ def calibrate_detailed(
         )
     else:
         table = _grid_tables(records, settings, series, online_tdot)
-    warnings = check_identifiable(table, terms)
+    warnings = outliers + check_identifiable(table, terms)
     fits = fit_table(table, terms, lag=hac_lag, gls=fit == 'gls')
     extra = {**({'coil_lag_fit': lag_fit} if lag_fit is not None else {}), **(provenance or {})}
     coefficients = _coefficients(records, settings, terms, table, fits, warnings, extra)
     return CalibrationResult(coefficients, table, fits, warnings)
+
+
+def without_outliers(
+    records: Sequence[ChamberRecord],
+    settings: DenoiseSettings,
+    provenance: dict[str, Any] | None = None,
+) -> tuple[list[ChamberRecord], list[str], dict[str, Any] | None]:
+    """The records without their gyro outlier bins (:mod:`fog_temp_comp.core.gyro_outliers`).
+
+    Bins of ``settings.tdot_period_s``. Returns the records, a warning per record that had
+    any, and ``provenance`` with their entry ``gyro_outliers`` (per bag: bins dropped, the
+    worst deviation, the thresholds, the first stamps) where there were any.
+    """
+    period_s = settings.tdot_period_s
+    cleaned, warnings, dropped = [], [], {}
+    for record in records:
+        clean, outliers = without_gyro_outliers(record, period_s)
+        cleaned.append(clean)
+        if outliers is not None:
+            start = record.imu_stamps_s[0] if record.imu_stamps_s.size else 0.0
+            warnings.append(
+                f'{record.path}: {outliers.stamps_s.size} of {outliers.bins} gyro bins of '
+                f'{period_s:g} s dropped as outliers (up to {outliers.deviation_deg_h:.3g} '
+                f'deg/h off their running median, threshold '
+                f'{float(outliers.threshold_deg_h.max()):.3g} deg/h; the first '
+                f'{outliers.stamps_s[0] - start:.0f} s into the run): a bump or a data error?'
+            )
+            dropped[str(record.path)] = outliers.to_dict()
+    if dropped:
+        provenance = {**(provenance or {}), 'gyro_outliers': dropped}
+    return cleaned, warnings, provenance
 
 
 def _grid_tables(
@@ -350,6 +384,12 @@ def _fit_coil_lag(
     online_tdot: bool,
 ) -> tuple[DenoiseSettings, GridTable, dict[str, object]]:
     """The coil lag search of :func:`calibrate_detailed`.
+
+    The objective is the sum over axes and records of the squared least-squares residual
+    after a high-pass (the residual minus its ``highpass_s`` moving average, per record): the
+    slow part of the residual is bias wander, which carries no information on the lag but would
+    dominate a plain residual sum of squares (on the simulator the plain objective scatters
+    the fitted lag by +-25 % from seed to seed, the high-passed one by +-8 %).
 
     Returns the settings with the fitted ``coil_lag_s`` (s), their grid rows and the search's
     provenance entry.

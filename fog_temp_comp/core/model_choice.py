@@ -47,6 +47,7 @@ from fog_temp_comp.core.calibration import (
     calibrate_detailed,
     check_identifiable,
     table_of,
+    without_outliers,
 )
 from fog_temp_comp.core.cross_validation import (
     _SERIES_CACHE,
@@ -332,6 +333,9 @@ def _choose_and_calibrate(
     quantized_likelihood: bool,
 ) -> tuple[CalibrationResult, list[StructureScore], StructureScore]:
     """:func:`choose_and_calibrate` with the series cache set."""
+    # gyro outliers (a bump, a data error) out of every candidate's rows and the final fit
+    records, outlier_warnings, provenance = without_outliers(records, base, provenance)
+    heldout, _, _ = without_outliers(heldout, base)
     noise = sensor_noise(records)
     base = noise.apply(dataclasses.replace(base, method='kalman', coil_lag_s=0.0))
     candidates = list(structures) if structures is not None else default_structures()
@@ -381,5 +385,7 @@ def _choose_and_calibrate(
         hac_lag=hac_lag,
         provenance={**(provenance or {}), 'selection': selection},
         series=shaped_series(records, final),
+        drop_gyro_outliers=False,  # done above
     )
+    result.warnings[:0] = outlier_warnings
     return result, scores, chosen

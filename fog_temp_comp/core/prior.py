@@ -34,6 +34,7 @@ from fog_temp_comp.core.calibration import (
     GridTable,
     common_frame_id,
     records_provenance,
+    without_outliers,
 )
 from fog_temp_comp.core.calibration import grid_table as _grid_table
 from fog_temp_comp.core.coefficients import Coefficients
@@ -425,6 +426,7 @@ def calibrate_with_prior(
     """
     if not records:
         raise CalibrationError('no records to calibrate on')
+    records, outlier_warnings, provenance = without_outliers(records, prior.settings, provenance)
     fleet_lag = prior.settings.coil_lag_s
     if fit_coil_lag and fleet_lag > 0:
         lag = unit_coil_lag(records, prior)
@@ -472,7 +474,7 @@ def calibrate_with_prior(
             **(provenance or {}),
         },
     )
-    return CalibrationResult(coefficients, table, fits, warnings)
+    return CalibrationResult(coefficients, table, fits, outlier_warnings + warnings)
 
 
 def _posterior_fits(table: GridTable, prior: FleetPrior, weight: float) -> list[AxisFitStats]:
