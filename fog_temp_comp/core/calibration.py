@@ -30,9 +30,9 @@ from fog_temp_comp.core.fitstats import (
 )
 from fog_temp_comp.core.gls import fit_gls
 from fog_temp_comp.core.grid import bin_means, temperature_grid
-from fog_temp_comp.core.gyro_outliers import without_gyro_outliers
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range, design_matrix
 from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.record_cleaning import without_outliers
 from fog_temp_comp.core.sensor_noise import reading_interval_s
 from fog_temp_comp.core.tdot import EstimateSeries, offline_estimates, shaped_as
 from fog_temp_comp.core.units import DEG_H_PER_RAD_S
@@ -296,7 +296,7 @@ def calibrate_detailed(
         Each record's precomputed estimates, lagged and shaped as ``settings`` asks (see
         :func:`grid_table`); not with ``fit_coil_lag``.
     drop_gyro_outliers : bool
-        Leave out gyro bins a bump threw far off (:func:`without_outliers`; with a warning).
+        Leave out gyro outliers and temperature glitches (:func:`without_outliers`, warned).
 
     Returns
     -------
@@ -324,37 +324,6 @@ def calibrate_detailed(
     extra = {**({'coil_lag_fit': lag_fit} if lag_fit is not None else {}), **(provenance or {})}
     coefficients = _coefficients(records, settings, terms, table, fits, warnings, extra)
     return CalibrationResult(coefficients, table, fits, warnings)
-
-
-def without_outliers(
-    records: Sequence[ChamberRecord],
-    settings: DenoiseSettings,
-    provenance: dict[str, Any] | None = None,
-) -> tuple[list[ChamberRecord], list[str], dict[str, Any] | None]:
-    """The records without their gyro outlier bins (:mod:`fog_temp_comp.core.gyro_outliers`).
-
-    Bins of ``settings.tdot_period_s``. Returns the records, a warning per record that had
-    any, and ``provenance`` with their entry ``gyro_outliers`` (per bag: bins dropped, the
-    worst deviation, the thresholds, the first stamps) where there were any.
-    """
-    period_s = settings.tdot_period_s
-    cleaned, warnings, dropped = [], [], {}
-    for record in records:
-        clean, outliers = without_gyro_outliers(record, period_s)
-        cleaned.append(clean)
-        if outliers is not None:
-            start = record.imu_stamps_s[0] if record.imu_stamps_s.size else 0.0
-            warnings.append(
-                f'{record.path}: {outliers.stamps_s.size} of {outliers.bins} gyro bins of '
-                f'{period_s:g} s dropped as outliers (up to {outliers.deviation_deg_h:.3g} '
-                f'deg/h off their running median, threshold '
-                f'{float(outliers.threshold_deg_h.max()):.3g} deg/h; the first '
-                f'{outliers.stamps_s[0] - start:.0f} s into the run): a bump or a data error?'
-            )
-            dropped[str(record.path)] = outliers.to_dict()
-    if dropped:
-        provenance = {**(provenance or {}), 'gyro_outliers': dropped}
-    return cleaned, warnings, provenance
 
 
 def _grid_tables(

@@ -47,7 +47,6 @@ from fog_temp_comp.core.calibration import (
     calibrate_detailed,
     check_identifiable,
     table_of,
-    without_outliers,
 )
 from fog_temp_comp.core.cross_validation import (
     _SERIES_CACHE,
@@ -80,6 +79,7 @@ from fog_temp_comp.core.model_candidates import (
 from fog_temp_comp.core.model_choice_record import _selection, format_scores
 from fog_temp_comp.core.quantized_noise_fit import noise_before_quantization
 from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.record_cleaning import without_outliers
 from fog_temp_comp.core.sensor_noise import SensorNoise, sensor_noise
 
 __all__ = [

@@ -34,7 +34,6 @@ from fog_temp_comp.core.calibration import (
     GridTable,
     common_frame_id,
     records_provenance,
-    without_outliers,
 )
 from fog_temp_comp.core.calibration import grid_table as _grid_table
 from fog_temp_comp.core.coefficients import Coefficients
@@ -42,6 +41,7 @@ from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.fitstats import AxisFitStats, condition_number, fit_summary
 from fog_temp_comp.core.model import DriftModel, Range, coefficient_key
 from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.record_cleaning import without_outliers
 from fog_temp_comp.core.sensor_noise import reading_interval_s
 from fog_temp_comp.core.units import AXES
 
