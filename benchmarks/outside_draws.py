@@ -23,7 +23,16 @@ changes one thing beyond those ranges:
   boundary displaced by up to a quarter step: codes 0.5-1.5 steps wide), where the
   quantized likelihood assumes even steps;
 - ``temp_20s``: temperature every 20 s (0.05 Hz; a slow housekeeping channel), longer than the
-  node's default 10 s staleness timeout.
+  node's default 10 s staleness timeout;
+
+and three defects of recorded data (the simulated runs changed after the fact):
+
+- ``late_temp``: every run's temperature starts (and stays) 0.7 s after its gyro, as a
+  recorder's does;
+- ``gyro_bump``: the training run holds one gyro sample 2 deg/s off, 3000 s into it (a touch of
+  the turntable);
+- ``temp_glitches``: the training run holds three temperature readings of -128 degC (a sensor's
+  error code).
 
 The paper's protocol runs on each with default settings (as ``benchmarks/accuracy.py``), and
 with the paper's terms for comparison; figures are against the oracle.
@@ -46,7 +55,7 @@ from fog_temp_comp.core.model import PAPER_TERMS
 from fog_temp_comp.core.model_choice import choose_and_calibrate
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H
 from fog_temp_comp.tools.plants import draw_plant
-from fog_temp_comp.tools.simulate import SimulationConfig, simulate_plan
+from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig, simulate_plan
 
 VARIANTS = (
     'base',
@@ -59,6 +68,9 @@ VARIANTS = (
     'corr_noise',
     'uneven_steps',
     'temp_20s',
+    'late_temp',
+    'gyro_bump',
+    'temp_glitches',
 )
 
 
@@ -75,8 +87,28 @@ def variant(name: str, cfg: SimulationConfig) -> SimulationConfig:
         'corr_noise': {'temp_noise_correlation_s': 10.0},
         'uneven_steps': {'temp_step_nonlinearity': 0.5},
         'temp_20s': {'temp_hz': 0.05},
-    }[name]
+    }.get(name, {})
     return dataclasses.replace(cfg, **changes)  # type: ignore[arg-type]
+
+
+def with_defect(name: str, runs: dict[str, SimulatedRun]) -> dict[str, SimulatedRun]:
+    """``runs`` with the recorded-data defect ``name`` (unchanged for the other variants)."""
+    if name == 'late_temp':
+        return {
+            n: dataclasses.replace(r, temp_stamps_s=r.temp_stamps_s + 0.7) for n, r in runs.items()
+        }
+    train = runs[TRAINING_RUN]
+    if name == 'gyro_bump':
+        rates = train.rates_rad_s.copy()
+        rates[int(np.searchsorted(train.imu_stamps_s, train.imu_stamps_s[0] + 3000.0))] += (
+            np.deg2rad(2.0)
+        )
+        return {**runs, TRAINING_RUN: dataclasses.replace(train, rates_rad_s=rates)}
+    if name == 'temp_glitches':
+        temps = train.temperature_degC.copy()
+        temps[np.random.default_rng(3).choice(temps.size, 3, replace=False)] = -128.0
+        return {**runs, TRAINING_RUN: dataclasses.replace(train, temperature_degC=temps)}
+    return runs
 
 
 def study(
@@ -93,7 +125,7 @@ def study(
     --gaussian-readings``.
     """
     cfg = variant(name, draw_plant(plant))
-    runs = simulate_plan(cfg, seed=seed)
+    runs = with_defect(name, simulate_plan(cfg, seed=seed))
     held = {n: r for n, r in runs.items() if n != TRAINING_RUN}
     train = [runs[TRAINING_RUN].as_record()]
     rows = {
