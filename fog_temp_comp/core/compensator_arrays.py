@@ -100,8 +100,8 @@ class _BlockCorrection:
         stamps not decreasing), the temperatures go in first, one at a time, each leaving a
         snapshot of the Tdot estimate, and every gyro sample is then corrected with the
         snapshot before it, on arrays, with the same IEEE operations in the same order as
-        :meth:`_update_correction`. Otherwise the gyro samples between two temperatures go
-        through :meth:`correct_xyz` one at a time.
+        :meth:`_update_correction`. Otherwise, and before the first temperature (the gyro
+        then waits for it), the gyro samples go through :meth:`correct_xyz` one at a time.
 
         Parameters
         ----------
@@ -247,7 +247,8 @@ class _BlockCorrection:
         fresh = has & ~stale
         n_stale = int(np.count_nonzero(stale))
         n_fresh = int(np.count_nonzero(fresh))
-        counters.imu_uncorrected += n - n_stale - n_fresh  # no temperature yet
+        # no temperature yet: never here (correct_interleaved takes the start-up one at a time)
+        counters.imu_uncorrected += n - n_stale - n_fresh
         if guard.stale_policy == 'none':
             counters.imu_uncorrected += n_stale
         else:
