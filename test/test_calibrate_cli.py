@@ -622,7 +622,7 @@ def test_a_bump_in_the_training_bag_is_dropped_and_reported(
     assert calibrate([bag], out, '--terms', 'const,T,Tdot') == 0
     warning = [line for line in capsys.readouterr().out.splitlines() if 'outliers' in line]
     assert len(warning) == 1 and warning[0].startswith('WARNING: ')
-    assert '1 of ' in warning[0] and 'a bump or a data error?' in warning[0]
+    assert '1 of ' in warning[0] and 'a bump, a rotation or a data error?' in warning[0]
     data = read_yaml(out)
     (entry,) = data['provenance']['gyro_outliers'].values()
     assert entry['bins_dropped'] == 1

@@ -11,6 +11,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from fog_temp_comp.core.calibration import calibrate_detailed
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.gyro_outliers import (
+    MAX_DRIFT_EXCURSION_DEG_H,
     THRESHOLD_FLOOR_DEG_H,
     gyro_outlier_bins,
     without_gyro_outliers,
@@ -123,3 +124,14 @@ def test_the_running_median_is_scipys_nearest_median_filter(rng: np.random.Gener
     expected = rate - ndimage.median_filter(rate, size=(OUTLIER_WINDOW_BINS, 1), mode='nearest')
     _, deviation, _ = gyro_outlier_bins(rate)
     assert_array_equal(deviation, np.abs(expected).max(axis=1))
+
+
+def test_a_rotation_however_long_is_not_drift(rng: np.random.Generator) -> None:
+    """Ten minutes at 0.2 deg/s (a rate test between the chamber's steps) all go."""
+    rate = drift_bins(rng)
+    rate[1000:1060, 2] += 720.0
+    mask, deviation, _ = gyro_outlier_bins(rate)
+    assert_array_equal(np.flatnonzero(mask), np.arange(1000, 1060))
+    assert deviation[1030] == pytest.approx(720.0, abs=5.0)
+    rate[1000:1060, 2] -= 720.0 - 0.9 * MAX_DRIFT_EXCURSION_DEG_H  # within reach of a drift
+    assert not gyro_outlier_bins(rate)[0][1010:1050].any()

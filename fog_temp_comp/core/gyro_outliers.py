@@ -6,8 +6,10 @@ and least squares, which weighs squares, bends every coefficient to it (one 2 de
 2 Hz made a calibration's 100 s stability 14x the oracle's). The drift changes slowly and the
 noise is small, so such a bin stands out from the running median of its neighbours, which
 follows ramps and keeps steps: :func:`gyro_outlier_bins` flags bins further from it than
-:data:`OUTLIER_SIGMAS` robust standard deviations, and :func:`without_gyro_outliers` drops their
-gyro samples from a record, so that no grid row is made of them. Rates in deg/h (the record's
+:data:`OUTLIER_SIGMAS` robust standard deviations, and those further than 0.1 deg/s from the
+run's median however long they last (no drift is that large: the unit was turned), and
+:func:`without_gyro_outliers` drops their gyro samples from a record, so that no grid row is
+made of them. Rates in deg/h (the record's
 in rad/s), times in s.
 """
 
@@ -25,6 +27,7 @@ from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.units import DEG_H_PER_RAD_S
 
 __all__ = [
+    'MAX_DRIFT_EXCURSION_DEG_H',
     'OUTLIER_SIGMAS',
     'OUTLIER_WINDOW_BINS',
     'THRESHOLD_FLOOR_DEG_H',
@@ -40,6 +43,9 @@ OUTLIER_SIGMAS = 10.0
 #: and further than this, deg/h: below it a bin's error costs a fit little (a bump worth
 #: fitting around is tens to thousands of deg/h), and a fast drift is never flagged
 THRESHOLD_FLOOR_DEG_H = 0.1
+#: a bin this far from the run's median, deg/h (0.1 deg/s), is never a static gyro's drift,
+#: however long it lasts (a rate test on the turntable between the chamber's steps)
+MAX_DRIFT_EXCURSION_DEG_H = 360.0
 
 
 @dataclass(frozen=True)
@@ -78,7 +84,8 @@ def gyro_outlier_bins(
     the axes (K,), deg/h, and the per-axis threshold (3,), deg/h: ``sigmas`` times the bins'
     noise, at least :data:`THRESHOLD_FLOOR_DEG_H`. The noise is the robust standard deviation
     (1.4826 MAD) of the bin-to-bin differences over sqrt(2): white noise exactly; a drift's
-    ramps and steps only raise it.
+    ramps and steps only raise it. A bin further than :data:`MAX_DRIFT_EXCURSION_DEG_H` from
+    the run's median is an outlier too, however many follow it (the unit was turned).
     """
     rate = np.asarray(rate_deg_h, dtype=np.float64)
     if rate.shape[0] < window_bins:
@@ -93,7 +100,10 @@ def gyro_outlier_bins(
     noise = 1.4826 * np.median(np.abs(steps - np.median(steps, axis=0)), axis=0) / np.sqrt(2.0)
     threshold = np.maximum(sigmas * noise, THRESHOLD_FLOOR_DEG_H)
     far = np.abs(residual) > threshold
-    return far.any(axis=1), np.abs(residual).max(axis=1), threshold
+    excursion = np.abs(rate - np.median(rate, axis=0))
+    moving = excursion > MAX_DRIFT_EXCURSION_DEG_H
+    deviation = np.maximum(np.abs(residual), np.where(moving, excursion, 0.0))
+    return (far | moving).any(axis=1), deviation.max(axis=1), threshold
 
 
 def without_gyro_outliers(

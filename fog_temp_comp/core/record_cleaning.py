@@ -54,9 +54,10 @@ def without_outliers(
             warnings.append(
                 f'{record.path}: {outliers.stamps_s.size} of {outliers.bins} gyro bins of '
                 f'{period_s:g} s dropped as outliers (up to {outliers.deviation_deg_h:.3g} '
-                f'deg/h off their running median, threshold '
+                f'deg/h off the drift around them, threshold '
                 f'{float(outliers.threshold_deg_h.max()):.3g} deg/h; the first '
-                f'{outliers.stamps_s[0] - start:.0f} s into the run): a bump or a data error?'
+                f'{outliers.stamps_s[0] - start:.0f} s into the run): a bump, a rotation or a '
+                'data error?'
             )
             dropped[str(record.path)] = outliers.to_dict()
     if glitched:
