@@ -143,3 +143,14 @@ def test_example_coefficients_shipped_in_config_load() -> None:
     assert coeffs.model.terms == (*PAPER_TERMS, 'T2')
     assert coeffs.denoise.method == 'kalman'
     assert coeffs.denoise.coil_lag_s > 0
+
+
+def test_a_file_written_before_the_sensor_interval_loads_with_it_unknown(tmp_path: Path) -> None:
+    """``denoise.temperature_period_s`` is new: an older file lacks it and loads as 0."""
+    path = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
+    data = yaml.safe_load(path.read_text(encoding='utf-8'))
+    assert data['denoise'].pop('temperature_period_s') == 2.0  # calibrate measured 0.5 Hz
+    older = tmp_path / 'older.yaml'
+    older.write_text(yaml.safe_dump(data), encoding='utf-8')
+    assert load(older).denoise.temperature_period_s == 0.0
+    assert load(path).denoise.temperature_period_s == 2.0
