@@ -70,10 +70,7 @@ def metrics(runs: dict[str, SimulatedRun], corrected: dict[str, np.ndarray]) -> 
     r10, s100, rc, rs = [], [], [], []
     for name, out in corrected.items():
         run = runs[name]
-        keep = np.all(np.isfinite(out), axis=1)
-        for s in score_record(
-            name, run.imu_stamps_s[keep], run.rates_rad_s[keep], out[keep], (10.0, 100.0)
-        ):
+        for s in score_record(name, run.imu_stamps_s, run.rates_rad_s, out, (10.0, 100.0)):
             if s.tau_s == 10.0:
                 r10.append(s.stability_after_deg_h / s.stability_before_deg_h)
                 ratio = s.range_after_deg_h / s.range_before_deg_h

@@ -527,10 +527,7 @@ def per_run(
     out = []
     for name, rate in corrected.items():
         run = runs[name]
-        keep = np.all(np.isfinite(rate), axis=1)
-        scores = score_record(
-            name, run.imu_stamps_s[keep], run.rates_rad_s[keep], rate[keep], (10.0, 100.0)
-        )
+        scores = score_record(name, run.imu_stamps_s, run.rates_rad_s, rate, (10.0, 100.0))
         s100 = {s.axis: s.stability_after_deg_h for s in scores if s.tau_s == 100.0}
         for s in scores:
             if s.tau_s == 10.0:

@@ -201,13 +201,8 @@ def offline_compensate(record: ChamberRecord, coeffs: Coefficients) -> FloatArra
 
 
 def _score(name: str, record: ChamberRecord, corrected: FloatArray) -> list[Score]:
-    keep = np.all(np.isfinite(corrected), axis=1)
     return score_record(
-        name,
-        record.imu_stamps_s[keep],
-        record.rates_rad_s[keep],
-        corrected[keep],
-        taus_s=SELECTION_TAUS_S,
+        name, record.imu_stamps_s, record.rates_rad_s, corrected, taus_s=SELECTION_TAUS_S
     )
 
 

@@ -25,7 +25,12 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load
-from fog_temp_comp.core.compensator import STALE_POLICIES, Compensator, GuardSettings
+from fog_temp_comp.core.compensator import (
+    STALE_POLICIES,
+    STALE_SAMPLE_INTERVALS,
+    Compensator,
+    GuardSettings,
+)
 from fog_temp_comp.core.denoise import (
     BOUNDARY_MODES,
     METHODS,
@@ -131,7 +136,8 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
         'temperature_period_s',
         _T.DOUBLE,
         "the temperature sensor's interval between readings (s): temperature is stale only "
-        'after 3 of them (and temperature_timeout_s); 0 = unknown (calibrate measures it)',
+        f'after {STALE_SAMPLE_INTERVALS:g} of them (and temperature_timeout_s); 0 = unknown '
+        '(calibrate measures it)',
     ),
 }
 _GUARD_DEFAULTS = GuardSettings()
@@ -139,8 +145,8 @@ _GUARD_DEFAULTS = GuardSettings()
 GUARD_PARAMETERS: dict[str, tuple[Any, str]] = {
     'temperature_timeout_s': (
         _GUARD_DEFAULTS.temperature_timeout_s,
-        'temperature older than this (s) relative to a gyro stamp is stale (or than 3 '
-        'intervals of a slower sensor: temperature_period_s)',
+        'temperature older than this (s) relative to a gyro stamp is stale (or than '
+        f'{STALE_SAMPLE_INTERVALS:g} intervals of a slower sensor: temperature_period_s)',
     ),
     'stale_policy': (
         _GUARD_DEFAULTS.stale_policy,
