@@ -138,6 +138,24 @@ def test_duplicate_stamp_is_ignored(model: DriftModel) -> None:
     assert comp.status.temperature_degC == 20.0
 
 
+def test_same_gyro_message_twice_is_dropped_and_a_repeated_stamp_corrected(
+    model: DriftModel,
+) -> None:
+    comp = Compensator(model, DenoiseSettings())
+    assert comp.add_temperature(5.0, 20.0)
+    first = comp.correct(5.5, [1e-3, 2e-3, 3e-3])
+    assert first is not None
+    assert comp.correct(5.5, [1e-3, 2e-3, 3e-3]) is None  # the same message again
+    # another sample on the same stamp (a device clock coarser than the sample interval)
+    second = comp.correct(5.5, [2e-3, 2e-3, 3e-3])
+    assert second is not None
+    assert_allclose(second - first, [1e-3, 0.0, 0.0], rtol=0, atol=1e-15)  # same correction
+    assert comp.correct(5.5, [2e-3, 2e-3, 3e-3]) is None  # which is itself repeated
+    counters = comp.status.counters
+    assert counters.imu_duplicate == 2 and counters.imu_repeated_stamp == 1
+    assert counters.imu_corrected == 2 and counters.imu_total == 4
+
+
 def test_backwards_stamp_resets_filter_state(model: DriftModel) -> None:
     comp = Compensator(model, DenoiseSettings(method='iir'))
     for k in range(600):
@@ -359,8 +377,9 @@ def _awkward_stream(seed: int, temp_hz: int = 1) -> list[Event]:
 
     Gyro before the first temperature, a steady ramp and a fast one (Tdot clamped or
     extrapolated), temperatures beyond the calibrated range (clamped), a temperature gap (stale,
-    restart), a glitch and a confirmed step, NaN rates and temperatures, duplicate, zero and
-    out-of-order stamps, a time jump back (reset), temperature stamps running ahead of the gyro.
+    restart), a glitch and a confirmed step, NaN rates and temperatures, duplicate messages,
+    repeated, zero and out-of-order stamps, a time jump back (reset), temperature stamps running
+    ahead of the gyro.
     """
     rng = np.random.default_rng(seed)
     events: list[Event] = []
@@ -391,7 +410,9 @@ def _awkward_stream(seed: int, temp_hz: int = 1) -> list[Event]:
             if rng.random() < 0.002:
                 xyz = (math.nan, xyz[1], math.inf)
             if rng.random() < 0.001 and events and events[-1][0] == 'G':
-                s = events[-1][1]  # duplicate stamp
+                s = events[-1][1]  # a repeated stamp, with other rates (a coarse clock)
+                if rng.random() < 0.5:
+                    xyz = events[-1][2]  # or the same message twice
             elif rng.random() < 0.001:
                 s = s - 0.3  # out of order
             elif rng.random() < 0.0005:
@@ -501,7 +522,8 @@ def test_correct_block_equals_correct_xyz_bit_for_bit(
     _assert_same_state(one, mixed)
     counters = blocks.status.counters
     # the stream exercises what it claims to
-    assert counters.imu_duplicate and counters.imu_out_of_order and counters.imu_zero_stamp
+    assert counters.imu_duplicate and counters.imu_repeated_stamp
+    assert counters.imu_out_of_order and counters.imu_zero_stamp
     assert counters.time_jumps and counters.temperature_gaps and counters.imu_nonfinite
     assert counters.imu_corrected and counters.imu_awaiting_temperature  # gyro before temperature
     if one.stale_after_s < 5.0:  # the first temperature comes 6 s after the gyro: waited, passed

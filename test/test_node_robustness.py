@@ -144,6 +144,21 @@ def test_duplicate_gyro_stamp_is_dropped_and_reported(harness: Harness) -> None:
     assert 'duplicate gyro' in harness.diagnose().message
 
 
+def test_repeated_gyro_stamp_with_other_rates_is_corrected_and_reported(
+    harness: Harness, coefficients: Coefficients
+) -> None:
+    harness.send_temperature(T0, 25.0)
+    assert harness.send_imu(T0 + 0.1, RATE) is not None
+    other = RATE + np.array([1e-4, -2e-4, 0.0])
+    out = harness.send_imu(T0 + 0.1, other)  # a device clock coarser than the samples
+    assert out is not None
+    expected = other - expected_correction(coefficients, 25.0)
+    assert_allclose(rate_of(out), expected, rtol=1e-12)
+    assert len(harness.received) == 2
+    message = harness.diagnose().message
+    assert 'repeated with other rates' in message and 'duplicate gyro' not in message
+
+
 def test_out_of_order_gyro_stamp_still_corrected(
     harness: Harness, coefficients: Coefficients
 ) -> None:

@@ -388,7 +388,8 @@ def test_compensator_corrects_imu(
         def send() -> None:
             # sensor-data QoS is best effort, so the temperature is re-sent too: with the same
             # stamp the node counts a duplicate and keeps one sample (Tdot = 0). Gyro stamps
-            # increase by 10 ms (a repeated one is dropped), within the temperature timeout.
+            # increase by 10 ms (the same message twice is dropped), within the temperature
+            # timeout.
             temp_pub.publish(temp_msg)
             sec, nanosec = divmod(next(sent) * 10_000_000, 1_000_000_000)
             imu_msg.header.stamp.sec, imu_msg.header.stamp.nanosec = 100 + sec, nanosec

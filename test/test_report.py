@@ -197,7 +197,7 @@ def test_allan_deviation_of_white_noise_falls_as_one_over_root_tau() -> None:
 
 
 def test_scores_leave_out_the_rows_the_compensator_dropped() -> None:
-    """Gyro before the first temperature (or a repeated stamp) is NaN: scored on the rest."""
+    """Gyro before the first temperature (or a message sent twice) is NaN: scored on the rest."""
     run = simulate_run('cycle', 1.0, SHORT_CHAMBER, seed=12)
     coeffs = calibrate([run.as_record()], DenoiseSettings())
     record = run.as_record()

@@ -87,6 +87,7 @@ class Compensator(_BlockCorrection):
         self._estimator: TdotEstimator = make_estimator(denoise)
         self.status = CompensatorStatus()
         self._correction = (0.0, 0.0, 0.0)  # rad/s
+        self._last_rates: tuple[float, float, float] = (math.nan, math.nan, math.nan)  # rad/s
         self._pending: list[tuple[float, float]] = []  # candidate samples of a temperature step
         self._last_temperature = math.nan
         # scalar evaluation of the model (the per-message hot path; no small numpy arrays)
@@ -238,7 +239,9 @@ class Compensator(_BlockCorrection):
     ) -> FloatArray | None:
         """Corrected angular rate (rad/s, shape (3,)) for one gyro sample, or None to drop it.
 
-        A repeated stamp is dropped. Before the first temperature (at start-up, after a
+        A message repeated (the previous stamp and the same rates) is dropped; a sample with the
+        previous stamp but other rates (a device clock coarser than the sample interval) is
+        corrected, and counted. Before the first temperature (at start-up, after a
         reset) a stamped sample is dropped too, for :attr:`stale_after_s` after the first such
         sample: what the node cannot yet correct is not published as if corrected. After that
         (the temperature is missing), and with stale temperature and ``stale_policy='none'``,
@@ -270,13 +273,20 @@ class Compensator(_BlockCorrection):
         guard = self.guard
         last = status.last_imu_stamp_s
         stamp_ok = stamp_s > 0 and math.isfinite(stamp_s)
+        repeated = False
         if not stamp_ok:
             counters.imu_zero_stamp += 1
         elif stamp_s > last:
             status.last_imu_stamp_s = stamp_s
+            self._last_rates = (x, y, z)
         elif stamp_s == last:
-            counters.imu_duplicate += 1
-            return None
+            # the same message twice is dropped; another sample on a coarse clock is corrected
+            if (x, y, z) == self._last_rates:
+                counters.imu_duplicate += 1
+                return None
+            counters.imu_repeated_stamp += 1
+            self._last_rates = (x, y, z)
+            repeated = True
         elif last - stamp_s >= guard.time_jump_threshold_s:
             counters.time_jumps += 1
             self.reset()
@@ -315,7 +325,7 @@ class Compensator(_BlockCorrection):
             return (x - cx, y - cy, z - cz)
         x, y, z = x - cx, y - cy, z - cz
         # learn only through the full model (estimator warmed up, temperature fresh)
-        if stamp_ok and status.estimator_ready and not status.temperature_stale:
+        if stamp_ok and not repeated and status.estimator_ready and not status.temperature_stale:
             bx, by, bz = self.rest.update(stamp_s, x, y, z, accel_m_s2)
         else:
             bx, by, bz = self.rest.applied_rad_s

@@ -37,6 +37,7 @@ class _BlockCorrection:
     _guard: GuardSettings
     _estimator: TdotEstimator
     _correction: tuple[float, float, float]
+    _last_rates: tuple[float, float, float]
     _horizon_s: float
     _stale_after_s: float
     _term_functions: list[Callable[[float, float, float], float]]
@@ -240,6 +241,8 @@ class _BlockCorrection:
             np.array(v) for v in zip(*snaps, strict=True)
         )
         status.last_imu_stamp_s = float(t[-1])
+        x, y, z = rates[-1].tolist()
+        self._last_rates = (x, y, z)  # rad/s, for the next message's repeat test
         counters.imu_nonfinite += int(np.count_nonzero(~np.isfinite(rates).all(axis=1)))
         has = has_s[seg]
         # abs(stamp_s - status.last_temperature_stamp_s) > self._stale_after_s

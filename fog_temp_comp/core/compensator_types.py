@@ -110,11 +110,12 @@ class CompensatorCounters:
     imu_corrected: int = 0
     imu_uncorrected: int = 0  # no temperature for stale_after_s, or stale with policy 'none'
     imu_held: int = 0  # corrected with a held correction (stale temperature, 'hold')
-    imu_duplicate: int = 0  # dropped: same stamp as the previous gyro message
+    imu_duplicate: int = 0  # dropped: same stamp and same rates as the previous gyro message
     imu_awaiting_temperature: int = 0  # dropped: no temperature yet, within stale_after_s of
     # the first gyro message (after it, the gyro passes through: imu_uncorrected)
     # flags, each also counted in one of the groups above:
     imu_out_of_order: int = 0  # stamp earlier than the previous one (still corrected)
+    imu_repeated_stamp: int = 0  # previous stamp, other rates (a coarse clock): corrected
     imu_nonfinite: int = 0  # NaN/inf component(s) left as they were, others corrected
     imu_zero_stamp: int = 0  # no usable stamp: corrected with the current correction
     imu_temperature_clamped: int = 0  # corrected with T clamped to the calibrated range

@@ -16,7 +16,8 @@ OK, WARN, ERROR = 0, 1, 2
 
 #: counters whose increase since the previous report is a warning
 _WARN_COUNTERS = {
-    'imu_duplicate': 'duplicate gyro stamps dropped',
+    'imu_duplicate': 'duplicate gyro messages dropped',
+    'imu_repeated_stamp': 'gyro stamps repeated with other rates (corrected; a coarse clock?)',
     'imu_out_of_order': 'out-of-order gyro stamps',
     'imu_nonfinite': 'non-finite gyro rates',
     'imu_zero_stamp': 'gyro messages without stamp',

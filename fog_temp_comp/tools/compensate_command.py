@@ -96,7 +96,8 @@ def compensate_command(
     (n_out, counters), compensator = _replay_atomically(run, in_bag, out_bag, strict)
     print(
         f'wrote {out_bag}: {n_out} corrected Imu on {output_topic} '
-        f'({counters.imu_awaiting_temperature} before the first temperature not written, '
+        f'({counters.imu_awaiting_temperature} before the first temperature and '
+        f'{counters.imu_duplicate} duplicates not written, '
         f'{counters.imu_uncorrected} passed through uncorrected)',
         file=stdout,
     )
