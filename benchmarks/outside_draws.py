@@ -25,14 +25,21 @@ changes one thing beyond those ranges:
 - ``temp_20s``: temperature every 20 s (0.05 Hz; a slow housekeeping channel), longer than the
   node's default 10 s staleness timeout;
 
-and three defects of recorded data (the simulated runs changed after the fact):
+three defects of recorded data (the simulated runs changed after the fact):
 
 - ``late_temp``: every run's temperature starts (and stays) 0.7 s after its gyro, as a
   recorder's does;
 - ``gyro_bump``: the training run holds one gyro sample 2 deg/s off, 3000 s into it (a touch of
   the turntable);
 - ``temp_glitches``: the training run holds three temperature readings of -128 degC (a sensor's
-  error code).
+  error code);
+
+and two sensors whose driver publishes faster than the sensor converts (each message the
+latest value, held):
+
+- ``held_temp``: a 1 Hz sensor published at 10 Hz with the gyro at 10 Hz (a temperature in
+  every IMU packet); ``temp_1hz`` is the same sensor published as it converts;
+- ``held_slow``: a 0.1 Hz sensor published at 1 Hz (``slow_temp`` published as it converts).
 
 The paper's protocol runs on each with default settings (as ``benchmarks/accuracy.py``), and
 with the paper's terms for comparison; figures are against the oracle.
@@ -71,7 +78,13 @@ VARIANTS = (
     'late_temp',
     'gyro_bump',
     'temp_glitches',
+    'temp_1hz',
+    'held_temp',
+    'held_slow',
 )
+
+#: republished temperature: (the sensor's own rate, the rate its last value is published at), Hz
+HELD = {'held_temp': (1.0, 10.0), 'held_slow': (0.1, 1.0)}
 
 
 def variant(name: str, cfg: SimulationConfig) -> SimulationConfig:
@@ -87,6 +100,9 @@ def variant(name: str, cfg: SimulationConfig) -> SimulationConfig:
         'corr_noise': {'temp_noise_correlation_s': 10.0},
         'uneven_steps': {'temp_step_nonlinearity': 0.5},
         'temp_20s': {'temp_hz': 0.05},
+        'temp_1hz': {'temp_hz': 1.0, 'imu_hz': 10.0},
+        'held_temp': {'temp_hz': HELD['held_temp'][0], 'imu_hz': 10.0},
+        'held_slow': {'temp_hz': HELD['held_slow'][0]},
     }.get(name, {})
     return dataclasses.replace(cfg, **changes)  # type: ignore[arg-type]
 
@@ -97,6 +113,8 @@ def with_defect(name: str, runs: dict[str, SimulatedRun]) -> dict[str, Simulated
         return {
             n: dataclasses.replace(r, temp_stamps_s=r.temp_stamps_s + 0.7) for n, r in runs.items()
         }
+    if name in HELD:
+        return {n: _republished(r, HELD[name][1]) for n, r in runs.items()}
     train = runs[TRAINING_RUN]
     if name == 'gyro_bump':
         rates = train.rates_rad_s.copy()
@@ -109,6 +127,15 @@ def with_defect(name: str, runs: dict[str, SimulatedRun]) -> dict[str, Simulated
         temps[np.random.default_rng(3).choice(temps.size, 3, replace=False)] = -128.0
         return {**runs, TRAINING_RUN: dataclasses.replace(train, temperature_degC=temps)}
     return runs
+
+
+def _republished(run: SimulatedRun, rate_hz: float) -> SimulatedRun:
+    """``run`` with its temperature published at ``rate_hz``, each the sensor's latest value."""
+    stamps = np.arange(run.temp_stamps_s[0], run.temp_stamps_s[-1], 1.0 / rate_hz)
+    latest = np.searchsorted(run.temp_stamps_s, stamps + 1e-9, side='right') - 1
+    return dataclasses.replace(
+        run, temp_stamps_s=stamps, temperature_degC=run.temperature_degC[latest]
+    )
 
 
 def study(
