@@ -173,6 +173,19 @@ def test_unset_stamps_in_the_second_half_are_counted(tmp_path: Path) -> None:
     assert err.count('100 messages on /imu/data_raw have no header stamp') == 2
 
 
+def test_two_clocks_are_judged_on_both_halves(tmp_path: Path) -> None:
+    """A gyro clock 2 % fast: 0-20 s ahead of the receive times, so each half alone differs."""
+    log_s = 1.7e9 + np.arange(20_000) * 0.05
+    stamps = log_s + 0.02 * (log_s - log_s[0])
+    bag, _ = write_bag(tmp_path / 'bag', imu_stamps=stamps)
+    two, _, one, _, err = read_both(bag)
+    assert_same(two, one)
+    lines = [line for line in err.splitlines() if 'look like two clocks' in line]
+    assert len(lines) == 2 and lines[0] == lines[1]
+    gyro_s = float(lines[0].split('gyro stamps are ')[1].split(' s')[0])
+    assert 8.0 < gyro_s < 12.0  # the whole bag's median, not one half's
+
+
 def test_a_damaged_chunk_in_the_second_half_is_reported_as_one_process_does(
     tmp_path: Path,
 ) -> None:

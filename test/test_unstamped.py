@@ -20,8 +20,14 @@ def run() -> SimulatedRun:
     return simulate_run('cycle', 2.0, SMALL, seed=5)
 
 
-def write(path: Path, fmt: str, run: SimulatedRun, *, unstamped: str = '') -> Path:
-    """The run as a bag, log time = true stamp; ``unstamped`` topic written with stamp 0."""
+def write(
+    path: Path, fmt: str, run: SimulatedRun, *, unstamped: str = '', temp_clock_s: float = 0.0
+) -> Path:
+    """The run as a bag, log time = true stamp; ``unstamped`` topic written with stamp 0.
+
+    ``temp_clock_s``: the temperature's header stamps run this far (s) ahead of the true time
+    (a driver on another clock).
+    """
     items = [(s, 0, k) for k, s in enumerate(run.temp_stamps_s.tolist())]
     items += [(s, 1, k) for k, s in enumerate(run.imu_stamps_s.tolist())]
     with BagWriter(path, fmt) as writer:
@@ -31,6 +37,8 @@ def write(path: Path, fmt: str, run: SimulatedRun, *, unstamped: str = '') -> Pa
             log = s_to_stamp_ns(stamp_s)
             topic = TEMP if which == 0 else IMU
             header = 0 if topic == unstamped else log
+            if topic == TEMP and header:
+                header = s_to_stamp_ns(stamp_s + temp_clock_s)
             if topic == IMU:
                 writer.write(IMU, log, make_imu(header, 'imu', run.rates_rad_s[k]))
             else:
@@ -93,3 +101,37 @@ def test_compensate_on_an_unstamped_temperature_equals_the_stamped_one(
     np.testing.assert_array_equal(out['bad'].rates_rad_s, out['good'].rates_rad_s)
     # and the correction did something (a Tdot and T model on a 2 degC/min cycle)
     assert not np.allclose(out['good'].rates_rad_s, run.rates_rad_s, atol=1e-9)
+
+
+@pytest.mark.parametrize('fmt', ['mcap', 'sqlite3', 'ros1'])
+def test_gyro_and_temperature_on_two_clocks_are_reported(
+    fmt: str, run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Temperature stamped 18 s ahead (GPS time against UTC): warned; 1 s (latency): not."""
+    read_record(write(tmp_path / name(fmt, 'near'), fmt, run, temp_clock_s=1.0))
+    assert 'WARNING' not in capsys.readouterr().err
+    read_record(write(tmp_path / name(fmt, 'far'), fmt, run, temp_clock_s=-18.0))
+    err = capsys.readouterr().err
+    assert err.count('WARNING') == 1 and 'look like two clocks' in err
+    assert 'gyro stamps are +0.0 s and the temperature stamps -18.0 s off' in err
+    assert 'paired with the gyro 18.0 s earlier' in err and '--time-source receive' in err
+
+
+def test_calibrate_by_receive_time_undoes_two_clocks(
+    run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    aligned = write(tmp_path / 'aligned', 'mcap', run)
+    apart = write(tmp_path / 'apart', 'mcap', run, temp_clock_s=600.0)
+    coeffs = {}
+    for label, bag, args in (
+        ('aligned', aligned, []),
+        ('by header', apart, []),
+        ('by receive', apart, ['--time-source', 'receive']),
+    ):
+        out = tmp_path / f'{label}.yaml'
+        base = ['calibrate', str(bag), '-o', str(out), '--terms', 'const,T,Tdot', '--quiet']
+        assert cli.main([*base, *args]) == 0
+        coeffs[label] = yaml.safe_load(out.read_text())['axes']
+        assert ('look like two clocks' in capsys.readouterr().err) == (label == 'by header')
+    assert coeffs['by receive'] == coeffs['aligned']
+    assert coeffs['by header'] != coeffs['aligned']  # what the warning is about

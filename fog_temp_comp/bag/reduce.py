@@ -91,7 +91,7 @@ class _SpanResult:
 
     reduction: _Reduction
     order: StampOrder
-    unstamped: dict[str, int]
+    unstamped: UnsetStamps
     frame_id: str
     stats: list[ScanStats]
     messages: int
@@ -115,7 +115,7 @@ def _reduce_span(
     if stream.salvage.recovered:  # the parent reads it again and records the damage
         return None
     return _SpanResult(
-        reduction, stream.order, stream.unstamped.counts, stream.frame_id, stream.span_stats,
+        reduction, stream.order, stream.unstamped, stream.frame_id, stream.span_stats,
         messages,
     )  # fmt: skip
 
@@ -141,8 +141,7 @@ def _read_in_two(stream: BagStream, reduction: _Reduction, period_s: float) -> b
         reduction.extend(part.reduction)
         stream.order.extend(part.order)
         stream.salvage.disorder = stream.order.disorder()
-        for topic, count in part.unstamped.items():
-            stream.unstamped.counts[topic] = stream.unstamped.counts.get(topic, 0) + count
+        stream.unstamped.merge(part.unstamped)
         stream.frame_id = stream.frame_id or part.frame_id
         stream.span_stats += part.stats
         if stream.progress is not None and part.stats:

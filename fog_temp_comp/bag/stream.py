@@ -271,8 +271,11 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
             raise BagError(f'{self.path}: cannot read messages (truncated bag?): {err}') from err
 
     def warn_unstamped(self, stderr: TextIO | None = None) -> None:
-        """One ``WARNING:`` line per topic whose unset header stamps took the receive time."""
-        self.unstamped.warn(self.path, stderr)
+        """One ``WARNING:`` line per topic whose unset header stamps took the receive time.
+
+        And one where the gyro's and the temperature's header stamps look like two clocks.
+        """
+        self.unstamped.warn(self.path, stderr, (self.imu_topic, self.temp_topic))
 
 
 def resolve_any_topic(reader: AnyReader, topic: str, flag: str) -> str:

@@ -156,9 +156,11 @@ class _StreamDecoding:
     def _stamped(self, kind: str, stamps: Any, log_ns: Any) -> Any:
         """Header stamps, s; an unset one (0: a driver that never stamps) takes its receive time.
 
-        Counted per topic in :attr:`unstamped`.
+        Counted per topic in :attr:`unstamped`, which also notes the stamps' offset from the
+        receive times.
         """
         if log_ns.size != np.size(stamps):
             return stamps
         topic = self.imu_topic if kind == 'imu' else self.temp_topic
+        self.unstamped.note_offsets(topic, stamps, log_ns)
         return self.unstamped.fill(topic, stamps, log_ns)

@@ -1,9 +1,16 @@
-"""Header stamps a driver left unset (0): the message's receive (log) time stands in for them.
+"""Header stamps against the bag's receive (log) times: unset ones, and two clocks.
 
 Some drivers never fill ``header.stamp``. Every reader of this package (``calibrate``,
 ``evaluate``, ``compensate``) then times such a message by its receive time in the bag, counts
 it per topic and warns once per topic; the node uses its clock on arrival
 (:mod:`fog_temp_comp.ros.node`).
+
+Gyro and temperature are aligned by header stamp. Where two drivers stamp with different
+clocks (a device's GPS time against the computer's UTC, 18 s apart; a clock set wrong) the
+alignment is off by their difference, which nothing in the data shows: the fit is silently
+worse. The recorder's receive times are one clock for both, so ``calibrate``'s reader notes
+each chunk's median of header stamp minus receive time per topic and warns when the gyro's
+and the temperature's differ by more than :data:`CLOCK_MISMATCH_S`.
 """
 
 from __future__ import annotations
@@ -15,9 +22,16 @@ from typing import TextIO
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ['UnsetStamps']
+__all__ = ['CLOCK_MISMATCH_S', 'UnsetStamps']
 
 NS_PER_S = 1e9
+
+#: gyro and temperature header stamps whose offsets from the receive times differ by more than
+#: this (s) are taken for two clocks; a driver's latency (ms to a second) stays well below it
+CLOCK_MISMATCH_S = 5.0
+
+#: header-minus-receive differences per chunk that its median is taken over (a subsample)
+_OFFSET_SAMPLES = 256
 
 
 class UnsetStamps:
@@ -26,6 +40,38 @@ class UnsetStamps:
     def __init__(self) -> None:
         #: topic -> messages whose header stamp was unset and took their receive time
         self.counts: dict[str, int] = {}
+        #: topic -> each chunk's median of header stamp minus receive time, s
+        self.offsets: dict[str, list[float]] = {}
+
+    def note_offsets(self, topic: str, stamps_s: ArrayLike, receive_ns: ArrayLike) -> None:
+        """Note the median of header stamp (s) minus receive time (ns) over one chunk."""
+        stamps = np.asarray(stamps_s, dtype=np.float64)
+        receive = np.asarray(receive_ns, dtype=np.int64)
+        if receive.size != stamps.size:
+            return
+        stamped = np.isfinite(stamps) & (stamps != 0.0)
+        if not stamped.any():
+            return
+        every = max(1, stamps.size // _OFFSET_SAMPLES)
+        diff = (stamps - receive / NS_PER_S)[::every][stamped[::every]]
+        if diff.size:
+            self.offsets.setdefault(topic, []).append(float(np.median(diff)))
+
+    def merge(self, other: UnsetStamps) -> None:
+        """Add what another reader (of a later part of the same bag) counted and noted."""
+        for topic, count in other.counts.items():
+            self.counts[topic] = self.counts.get(topic, 0) + count
+        for topic, offsets in other.offsets.items():
+            self.offsets.setdefault(topic, []).extend(offsets)
+
+    def clock_offsets_s(self, imu_topic: str, temp_topic: str) -> tuple[float, float] | None:
+        """(gyro, temperature) median header stamp minus receive time, s; None if unknown."""
+        if imu_topic not in self.offsets or temp_topic not in self.offsets:
+            return None
+        return (
+            float(np.median(self.offsets[imu_topic])),
+            float(np.median(self.offsets[temp_topic])),
+        )
 
     def fill(self, topic: str, stamps_s: ArrayLike, receive_ns: ArrayLike) -> NDArray[np.float64]:
         """``stamps_s`` (s) with each 0 replaced by the receive time ``receive_ns`` (ns)."""
@@ -39,11 +85,32 @@ class UnsetStamps:
         self.counts[topic] = self.counts.get(topic, 0) + int(unset.sum())
         return np.where(unset, receive / NS_PER_S, stamps)
 
-    def warn(self, bag: str | Path, stderr: TextIO | None = None) -> None:
-        """One ``WARNING:`` line per topic that had unset stamps."""
+    def warn(
+        self,
+        bag: str | Path,
+        stderr: TextIO | None = None,
+        topics: tuple[str, str] | None = None,
+    ) -> None:
+        """One ``WARNING:`` line per topic that had unset stamps, and one for two clocks.
+
+        ``topics``: (gyro, temperature), to compare their clocks (not compared without).
+        """
         for topic, count in self.counts.items():
             print(
                 f'WARNING: {bag}: {count} messages on {topic} have no header stamp (0); '
                 'their receive time is used (the driver does not stamp them)',
+                file=stderr or sys.stderr,
+            )
+        offsets = None if topics is None else self.clock_offsets_s(*topics)
+        if offsets is not None and abs(offsets[1] - offsets[0]) > CLOCK_MISMATCH_S:
+            gyro, temp = offsets
+            later = 'later' if temp > gyro else 'earlier'
+            print(
+                f'WARNING: {bag}: gyro and temperature header stamps look like two clocks: '
+                f'against the receive times the gyro stamps are {gyro:+.1f} s and the '
+                f'temperature stamps {temp:+.1f} s off (medians). Aligned by header stamp, each '
+                f'temperature is paired with the gyro {abs(temp - gyro):.1f} s {later}; if the '
+                'drivers stamp with different clocks, align by receive time '
+                '(--time-source receive)',
                 file=stderr or sys.stderr,
             )
