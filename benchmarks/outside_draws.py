@@ -34,12 +34,13 @@ three defects of recorded data (the simulated runs changed after the fact):
 - ``temp_glitches``: the training run holds three temperature readings of -128 degC (a sensor's
   error code);
 
-and two sensors whose driver publishes faster than the sensor converts (each message the
-latest value, held):
+and sensors whose driver publishes other than once per conversion:
 
 - ``held_temp``: a 1 Hz sensor published at 10 Hz with the gyro at 10 Hz (a temperature in
   every IMU packet); ``temp_1hz`` is the same sensor published as it converts;
-- ``held_slow``: a 0.1 Hz sensor published at 1 Hz (``slow_temp`` published as it converts).
+- ``held_slow``: a 0.1 Hz sensor published at 1 Hz (``slow_temp`` published as it converts);
+- ``on_change``: the plant's sensor published only when its reading changes (a CAN node, a
+  housekeeping channel): minutes between readings at a soak.
 
 The paper's protocol runs on each with default settings (as ``benchmarks/accuracy.py``), and
 with the paper's terms for comparison; figures are against the oracle.
@@ -81,6 +82,7 @@ VARIANTS = (
     'temp_1hz',
     'held_temp',
     'held_slow',
+    'on_change',
 )
 
 #: republished temperature: (the sensor's own rate, the rate its last value is published at), Hz
@@ -115,6 +117,8 @@ def with_defect(name: str, runs: dict[str, SimulatedRun]) -> dict[str, Simulated
         }
     if name in HELD:
         return {n: _republished(r, HELD[name][1]) for n, r in runs.items()}
+    if name == 'on_change':
+        return {n: _on_change(r) for n, r in runs.items()}
     train = runs[TRAINING_RUN]
     if name == 'gyro_bump':
         rates = train.rates_rad_s.copy()
@@ -135,6 +139,15 @@ def _republished(run: SimulatedRun, rate_hz: float) -> SimulatedRun:
     latest = np.searchsorted(run.temp_stamps_s, stamps + 1e-9, side='right') - 1
     return dataclasses.replace(
         run, temp_stamps_s=stamps, temperature_degC=run.temperature_degC[latest]
+    )
+
+
+def _on_change(run: SimulatedRun) -> SimulatedRun:
+    """``run`` with only the temperature readings that differ from the one before."""
+    values = run.temperature_degC
+    changed = np.r_[True, values[1:] != values[:-1]]
+    return dataclasses.replace(
+        run, temp_stamps_s=run.temp_stamps_s[changed], temperature_degC=values[changed]
     )
 
 

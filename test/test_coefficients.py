@@ -154,3 +154,21 @@ def test_a_file_written_before_the_sensor_interval_loads_with_it_unknown(tmp_pat
     older.write_text(yaml.safe_dump(data), encoding='utf-8')
     assert load(older).denoise.temperature_period_s == 0.0
     assert load(path).denoise.temperature_period_s == 2.0
+
+
+def test_a_file_written_before_the_hold_loads_as_a_periodic_sensor(tmp_path: Path) -> None:
+    """``denoise.temperature_hold_s`` is newer still: without it, 0 (published at its rate)."""
+    path = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
+    data = yaml.safe_load(path.read_text(encoding='utf-8'))
+    data['denoise'].pop('temperature_hold_s', None)
+    older = tmp_path / 'older.yaml'
+    older.write_text(yaml.safe_dump(data), encoding='utf-8')
+    assert load(older).denoise.temperature_hold_s == 0.0
+    data['denoise']['temperature_hold_s'] = 1290.5
+    held = tmp_path / 'held.yaml'
+    held.write_text(yaml.safe_dump(data), encoding='utf-8')
+    assert load(held).denoise.temperature_hold_s == 1290.5
+    data['denoise']['temperature_hold_s'] = -1.0
+    held.write_text(yaml.safe_dump(data), encoding='utf-8')
+    with pytest.raises(CoefficientsError, match='temperature_hold_s must be >= 0'):
+        load(held)

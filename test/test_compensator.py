@@ -605,6 +605,36 @@ def test_correct_block_equals_correct_xyz_with_a_sensor_read_every_20_s() -> Non
     assert unknown.status.counters.temperature_gaps > 100
 
 
+def test_a_reading_published_on_change_holds_until_the_next(model: DriftModel) -> None:
+    """With ``temperature_hold_s``, minutes between readings are neither stale nor a gap.
+
+    But the start-up wait stays the timeout, and a silence longer than the hold is stale.
+    """
+    t0 = 1.7e9
+    settings = DenoiseSettings(method='kalman', temperature_period_s=1.0)
+    held = Compensator(model, dataclasses.replace(settings, temperature_hold_s=900.0))
+    periodic = Compensator(model, settings)
+    assert (held.stale_after_s, held.wait_s) == (900.0, 10.0)
+    assert (periodic.stale_after_s, periodic.wait_s) == (10.0, 10.0)
+    for comp in (held, periodic):
+        for k in range(15):  # no temperature yet: dropped for the wait, then passed through
+            out = comp.correct_xyz(t0 + k, 1e-4, 0.0, 0.0)
+            assert (out is None) == (k <= 10)
+        # a soak read on change: a step every 5 min, then 20 min of silence
+        for k, stamp in enumerate([20, 320, 620, 920]):
+            comp.add_temperature(t0 + stamp, 20.0 + (k % 2) / 16)
+            for j in range(1, 300, 7):
+                comp.correct_xyz(t0 + stamp + j, 1e-4, 0.0, 0.0)
+        comp.add_temperature(t0 + 2120.0, 20.0)
+        comp.correct_xyz(t0 + 2121.0, 1e-4, 0.0, 0.0)
+    counters = held.status.counters
+    assert counters.temperature_gaps == 1  # the 20 min silence only
+    assert counters.imu_held == 0  # the gyro within 900 s of a reading is fresh
+    assert counters.imu_uncorrected == 4  # 11-14 s: after the wait, before any temperature
+    assert periodic.status.counters.temperature_gaps == 4  # every reading of the soak
+    assert periodic.status.counters.imu_held > 150
+
+
 def test_correct_block_on_a_simulated_run(short_cycle: SimulatedRun) -> None:
     """A clean run in blocks: every block takes the array path, with correct_xyz's output."""
     run = short_cycle

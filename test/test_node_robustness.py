@@ -279,6 +279,40 @@ def test_stale_temperature_follows_policy_and_warns(
         h.close()
 
 
+def test_a_temperature_published_on_change_holds_on_the_node(
+    ros_context: object, tmp_path: Path, coefficients: Coefficients
+) -> None:
+    """The node takes ``temperature_hold_s`` from the file: a soak read on change stays fresh.
+
+    Readings 5 min apart are neither stale nor a gap, and the diagnostics say how long a
+    reading holds; the start-up wait for the first temperature stays 10 s.
+    """
+    import dataclasses
+
+    held = dataclasses.replace(
+        coefficients,
+        denoise=dataclasses.replace(
+            coefficients.denoise, temperature_period_s=1.0, temperature_hold_s=900.0
+        ),
+    )
+    path = tmp_path / 'held.yaml'
+    save(held, path)
+    h = Harness(ros_context, start(ros_context, path))
+    try:
+        assert (h.node.compensator.stale_after_s, h.node.compensator.wait_s) == (900.0, 10.0)
+        assert float(diag_values(h.diagnose())['temperature_stale_after_s']) == 900.0
+        for k in range(0, 1200, 300):  # a soak whose reading changes every 5 min
+            h.send_temperature(T0 + k, 25.0 + (k // 300 % 2) / 16)
+            for j in range(1, 300, 10):
+                assert h.send_imu(T0 + k + j, RATE) is not None
+        counters = h.node.compensator.status.counters
+        assert (counters.temperature_gaps, counters.imu_held) == (0, 0)
+        status = h.diagnose()
+        assert 'stale' not in status.message and 'gap' not in status.message, status.message
+    finally:
+        h.close()
+
+
 @pytest.mark.parametrize('period_s', [20.0, 0.0])
 def test_a_sensor_read_every_20_s_is_fresh_with_its_calibrated_interval(
     ros_context: object, tmp_path: Path, coefficients: Coefficients, period_s: float

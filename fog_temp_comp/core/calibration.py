@@ -31,9 +31,9 @@ from fog_temp_comp.core.fitstats import (
 from fog_temp_comp.core.gls import fit_gls
 from fog_temp_comp.core.grid import bin_means, temperature_grid
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range, design_matrix
+from fog_temp_comp.core.publishing import with_reading_timing
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.record_cleaning import without_outliers
-from fog_temp_comp.core.sensor_noise import reading_interval_s
 from fog_temp_comp.core.tdot import EstimateSeries, offline_estimates, shaped_as
 from fog_temp_comp.core.units import DEG_H_PER_RAD_S
 
@@ -438,7 +438,7 @@ def _coefficients(
     )
     return Coefficients(
         model=model,
-        denoise=dataclasses.replace(settings, temperature_period_s=reading_interval_s(records)),
+        denoise=with_reading_timing(settings, records),
         frame_id=common_frame_id(records),
         fit={**fit_summary(fits), **({'warnings': warnings} if warnings else {})},
         provenance={**records_provenance(records), **provenance},

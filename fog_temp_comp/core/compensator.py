@@ -95,8 +95,7 @@ class Compensator(_BlockCorrection):
             SCALAR_TERMS[term] for term in model.terms
         ]
         self._coefficient_rows = model.coefficients.tolist()
-        self._stale_after_s = stale_after_s(self._guard, denoise.temperature_period_s)
-        self._horizon_s = 2 * denoise.tdot_period_s + self._stale_after_s
+        self._set_stale_rule()
         self._holes: list[float] = []  # midpoints (s) of spans known lost, not yet passed
         self._next_hole = math.inf
 
@@ -127,17 +126,35 @@ class Compensator(_BlockCorrection):
     @guard.setter
     def guard(self, guard: GuardSettings) -> None:
         self._guard = guard
-        self._stale_after_s = stale_after_s(guard, self.denoise.temperature_period_s)
-        self._horizon_s = 2 * self.denoise.tdot_period_s + self._stale_after_s
+        self._set_stale_rule()
+
+    def _set_stale_rule(self) -> None:
+        """The stale age, the start-up wait and the extrapolation horizon (s) of the guard."""
+        period = self.denoise.temperature_period_s
+        self._stale_after_s = stale_after_s(self._guard, period, self.denoise.temperature_hold_s)
+        # the start-up wait and the horizon are a sensor's intervals even where readings hold
+        # (published on change): a missing topic is not waited for an hour, nor a Tdot
+        # extrapolated over a hold
+        self._wait_s = stale_after_s(self._guard, period)
+        self._horizon_s = 2 * self.denoise.tdot_period_s + self._wait_s
 
     @property
     def stale_after_s(self) -> float:
         """Age (s) past which temperature is stale and a gap restarts Tdot.
 
         The guard's ``temperature_timeout_s``, or 3 of the sensor's calibrated intervals
-        (``denoise.temperature_period_s``) where longer (:func:`stale_after_s`).
+        (``denoise.temperature_period_s``), or the longest a reading published on change may
+        hold (``denoise.temperature_hold_s``), whichever is longest (:func:`stale_after_s`).
         """
         return self._stale_after_s
+
+    @property
+    def wait_s(self) -> float:
+        """How long (s) the gyro waits, unpublished, for the first temperature.
+
+        :attr:`stale_after_s` without the hold of a sensor published on change.
+        """
+        return self._wait_s
 
     def reset(self) -> None:
         """Forget the temperature history (keeps the counters)."""
@@ -242,7 +259,7 @@ class Compensator(_BlockCorrection):
         A message repeated (the previous stamp and the same rates) is dropped; a sample with the
         previous stamp but other rates (a device clock coarser than the sample interval) is
         corrected, and counted. Before the first temperature (at start-up, after a
-        reset) a stamped sample is dropped too, for :attr:`stale_after_s` after the first such
+        reset) a stamped sample is dropped too, for :attr:`wait_s` after the first such
         sample: what the node cannot yet correct is not published as if corrected. After that
         (the temperature is missing), and with stale temperature and ``stale_policy='none'``,
         the rate passes through unchanged; non-finite components are left as they are and the
@@ -303,7 +320,7 @@ class Compensator(_BlockCorrection):
                 since = status.awaiting_temperature_since_s
                 if since != since:  # NaN: the first gyro message without temperature
                     status.awaiting_temperature_since_s = since = stamp_s
-                if stamp_s - since <= self._stale_after_s:
+                if stamp_s - since <= self._wait_s:
                     counters.imu_awaiting_temperature += 1
                     return None
             counters.imu_uncorrected += 1

@@ -94,13 +94,21 @@ class GuardSettings:
             )
 
 
-def stale_after_s(guard: GuardSettings, temperature_period_s: float) -> float:
+def stale_after_s(
+    guard: GuardSettings, temperature_period_s: float, temperature_hold_s: float = 0.0
+) -> float:
     """Age (s) past which temperature is stale and a gap between readings restarts Tdot.
 
     ``guard.temperature_timeout_s``, or :data:`STALE_SAMPLE_INTERVALS` of the sensor's nominal
-    interval ``temperature_period_s`` (s; 0: unknown) where that is longer.
+    interval ``temperature_period_s`` (s; 0: unknown), or, for a sensor published only when
+    its reading changes, the longest a reading may hold ``temperature_hold_s`` (s; 0: a
+    sensor published at its rate), whichever is longest.
     """
-    return max(guard.temperature_timeout_s, STALE_SAMPLE_INTERVALS * temperature_period_s)
+    return max(
+        guard.temperature_timeout_s,
+        STALE_SAMPLE_INTERVALS * temperature_period_s,
+        temperature_hold_s,
+    )
 
 
 @dataclass

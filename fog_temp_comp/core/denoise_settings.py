@@ -128,6 +128,12 @@ class DenoiseSettings:
         :data:`~fog_temp_comp.core.compensator_types.STALE_SAMPLE_INTERVALS` of these intervals
         (and than its ``temperature_timeout_s``), so a sensor read every 20 s is not a gap at
         every reading.
+    temperature_hold_s : float
+        For a sensor whose driver publishes only when the reading changes, the longest a
+        reading may hold without a message, s (0: published at the sensor's rate).
+        ``calibrate`` detects such a sensor and sets it
+        (:func:`~fog_temp_comp.core.publishing.hold_interval_s`); the compensator then calls
+        temperature stale, and restarts Tdot at a gap, only past it. Not used by the estimators.
 
     """
 
@@ -156,6 +162,7 @@ class DenoiseSettings:
     kalman_hysteresis_quanta: float = 0.0
     kalman_quantized_noise_degC: float = 0.0
     temperature_period_s: float = 0.0
+    temperature_hold_s: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field; raise ValueError naming the offending field."""
@@ -215,6 +222,7 @@ class DenoiseSettings:
             'kalman_repeat_rate_degC_per_min',
             'kalman_quantized_noise_degC',
             'temperature_period_s',
+            'temperature_hold_s',
         ):
             value = _check_float(name, getattr(self, name))
             if value < 0.0:

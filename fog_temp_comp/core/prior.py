@@ -40,9 +40,9 @@ from fog_temp_comp.core.coefficients import Coefficients
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.fitstats import AxisFitStats, condition_number, fit_summary
 from fog_temp_comp.core.model import DriftModel, Range, coefficient_key
+from fog_temp_comp.core.publishing import with_reading_timing
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.record_cleaning import without_outliers
-from fog_temp_comp.core.sensor_noise import reading_interval_s
 from fog_temp_comp.core.units import AXES
 
 FloatArray = NDArray[np.float64]
@@ -456,9 +456,7 @@ def calibrate_with_prior(
     base = records_provenance(records)
     coefficients = Coefficients(
         model=model,
-        denoise=dataclasses.replace(
-            prior.settings, temperature_period_s=reading_interval_s(records)
-        ),
+        denoise=with_reading_timing(prior.settings, records),
         frame_id=common_frame_id(records),
         fit=summary,
         provenance={

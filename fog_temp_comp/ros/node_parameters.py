@@ -139,6 +139,12 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
         f'after {STALE_SAMPLE_INTERVALS:g} of them (and temperature_timeout_s); 0 = unknown '
         '(calibrate measures it)',
     ),
+    'temperature_hold_s': (
+        'temperature_hold_s',
+        _T.DOUBLE,
+        'for a temperature published only when it changes, the longest a reading may hold (s): '
+        'stale, and a gap, only past it; 0 = published at the sensor rate (calibrate detects it)',
+    ),
 }
 _GUARD_DEFAULTS = GuardSettings()
 #: input guards: name -> (default, text)

@@ -1,0 +1,102 @@
+"""A temperature published only when it changes: told from one published at the sensor's rate.
+
+Real simulated records, the detector and what ``calibrate`` writes; the compensator's side is
+in ``test_compensator.py`` and the node's in ``test_node_robustness.py``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.model_choice import choose_and_calibrate
+from fog_temp_comp.core.publishing import (
+    HOLD_FACTOR,
+    HOLD_MIN_S,
+    hold_interval_s,
+    published_on_change,
+)
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
+
+#: a 0.2 degC/min cycle over 0..40 degC with 30 min holds (about 8 h), gyro 0.5 Hz
+CHAMBER = SimulationConfig(
+    imu_hz=0.5,
+    temp_hz=1.0,
+    low_degC=0.0,
+    high_degC=40.0,
+    start_degC=20.0,
+    cycle_soak_s=1800.0,
+    lag_s=400.0,
+    arw_10s_deg_h=0.01,
+    temp_quantum_degC=1 / 16,
+    temp_noise_degC=0.005,
+)
+
+
+def on_change(record: ChamberRecord) -> ChamberRecord:
+    """``record`` as a driver publishing only changed readings would have recorded it."""
+    values = record.temperature_degC
+    changed = np.r_[True, values[1:] != values[:-1]]
+    return dataclasses.replace(
+        record, temp_stamps_s=record.temp_stamps_s[changed], temperature_degC=values[changed]
+    )
+
+
+@pytest.fixture(scope='module')
+def periodic() -> ChamberRecord:
+    return simulate_run('cycle', 0.2, CHAMBER, seed=3).as_record()
+
+
+def test_readings_published_on_change_are_told_from_periodic_ones(
+    periodic: ChamberRecord,
+) -> None:
+    changed = on_change(periodic)
+    assert changed.temp_stamps_s.size < periodic.temp_stamps_s.size / 3  # most repeated
+    assert not published_on_change([periodic])
+    assert published_on_change([changed])
+    assert hold_interval_s([periodic]) == 0.0
+    longest = float(np.diff(changed.temp_stamps_s).max())
+    assert longest > 60.0  # the holds at the cycle's ends
+    assert hold_interval_s([changed]) == pytest.approx(HOLD_FACTOR * longest, abs=1e-3)
+    # several bags: judged together, the longest interval of any
+    assert hold_interval_s([changed, changed]) == hold_interval_s([changed])
+
+
+def test_a_float_sensor_or_a_few_readings_are_not_taken_for_on_change(
+    periodic: ChamberRecord,
+) -> None:
+    """Unquantized readings never repeat either; nor do a handful of changes say anything."""
+    rng = np.random.default_rng(1)
+    noisy = periodic.temperature_degC + rng.normal(0.0, 0.01, periodic.temperature_degC.size)
+    floats = dataclasses.replace(periodic, temperature_degC=noisy)
+    assert not published_on_change([floats])
+    few = on_change(periodic)
+    few = dataclasses.replace(
+        few, temp_stamps_s=few.temp_stamps_s[:50], temperature_degC=few.temperature_degC[:50]
+    )
+    assert not published_on_change([few])
+
+
+def test_a_short_hold_is_at_least_a_minute(periodic: ChamberRecord) -> None:
+    """On a fast ramp the changes come every few seconds: the hold is never shorter than 60 s."""
+    ramp = on_change(periodic)
+    fast = dataclasses.replace(ramp, temp_stamps_s=ramp.temp_stamps_s[:400] / 100.0)
+    fast = dataclasses.replace(fast, temperature_degC=ramp.temperature_degC[:400])
+    assert published_on_change([fast])
+    assert hold_interval_s([fast]) == HOLD_MIN_S
+
+
+def test_calibrate_writes_the_hold_of_a_sensor_published_on_change(
+    periodic: ChamberRecord,
+) -> None:
+    changed = on_change(periodic)
+    chosen, _, _ = choose_and_calibrate([changed], RECOMMENDED_SETTINGS)
+    denoise = chosen.coefficients.denoise
+    assert denoise.temperature_hold_s == hold_interval_s([changed]) > 60.0
+    base, _, _ = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)
+    assert base.coefficients.denoise.temperature_hold_s == 0.0
+    assert base.coefficients.denoise.temperature_period_s == 1.0
