@@ -605,34 +605,53 @@ def test_correct_block_equals_correct_xyz_with_a_sensor_read_every_20_s() -> Non
     assert unknown.status.counters.temperature_gaps > 100
 
 
-def test_a_reading_published_on_change_holds_until_the_next(model: DriftModel) -> None:
-    """With ``temperature_hold_s``, minutes between readings are neither stale nor a gap.
+def test_a_reading_published_on_change_is_put_back_while_it_holds(model: DriftModel) -> None:
+    """With ``temperature_hold_s`` the held value is put back at the sensor's interval.
 
-    But the start-up wait stays the timeout, and a silence longer than the hold is stale.
+    The filter then sees what a sensor published at its rate would have sent: after each
+    change the estimate is that of the periodic stream, bit for bit. The held readings reach
+    the gyro 2 s late (the margin), and stop after the hold: a longer silence is stale.
     """
     t0 = 1.7e9
-    settings = DenoiseSettings(method='kalman', temperature_period_s=1.0)
-    held = Compensator(model, dataclasses.replace(settings, temperature_hold_s=900.0))
+    settings = DenoiseSettings(
+        method='kalman', temperature_period_s=1.0, temperature_quantum_degC=1 / 16
+    )
+    on_change = Compensator(model, dataclasses.replace(settings, temperature_hold_s=900.0))
     periodic = Compensator(model, settings)
-    assert (held.stale_after_s, held.wait_s) == (900.0, 10.0)
-    assert (periodic.stale_after_s, periodic.wait_s) == (10.0, 10.0)
-    for comp in (held, periodic):
-        for k in range(15):  # no temperature yet: dropped for the wait, then passed through
-            out = comp.correct_xyz(t0 + k, 1e-4, 0.0, 0.0)
-            assert (out is None) == (k <= 10)
-        # a soak read on change: a step every 5 min, then 20 min of silence
-        for k, stamp in enumerate([20, 320, 620, 920]):
-            comp.add_temperature(t0 + stamp, 20.0 + (k % 2) / 16)
-            for j in range(1, 300, 7):
-                comp.correct_xyz(t0 + stamp + j, 1e-4, 0.0, 0.0)
-        comp.add_temperature(t0 + 2120.0, 20.0)
-        comp.correct_xyz(t0 + 2121.0, 1e-4, 0.0, 0.0)
-    counters = held.status.counters
-    assert counters.temperature_gaps == 1  # the 20 min silence only
-    assert counters.imu_held == 0  # the gyro within 900 s of a reading is fresh
-    assert counters.imu_uncorrected == 4  # 11-14 s: after the wait, before any temperature
-    assert periodic.status.counters.temperature_gaps == 4  # every reading of the soak
-    assert periodic.status.counters.imu_held > 150
+    events: list[Event] = []
+    changes = {0: 20.0, 300: 20.0625, 320: 20.125, 700: 20.0625, 1000: 20.0}
+    value = 20.0
+    for k in range(1100):  # a soak read at 1 Hz, its reading changing 5 times; gyro at 2 Hz
+        value = changes.get(k, value)
+        events.append(('T', t0 + k, (value,)))
+        events += [('G', t0 + k + 0.25, (1e-4, 0.0, 0.0)), ('G', t0 + k + 0.75, (1e-4, 0.0, 0.0))]
+    sent = [e for e in events if e[0] == 'G' or round(e[1] - t0) in changes]
+    estimates: dict[str, list[tuple[float, float]]] = {'periodic': [], 'on change': []}
+    for label, comp, stream in (('periodic', periodic, events), ('on change', on_change, sent)):
+        for kind, stamp, values in stream:
+            if kind == 'T':
+                comp.add_temperature(stamp, values[0])
+                if round(stamp - t0) in changes:
+                    status = comp.status
+                    estimates[label].append((status.temperature_degC, status.tdot_degC_per_min))
+            else:
+                comp.correct_xyz(stamp, *values)
+    assert estimates['on change'] == estimates['periodic']  # after every change, exactly
+    counters = on_change.status.counters
+    assert counters.temperature_accepted == 5
+    # held readings at every second up to the last gyro stamp (1099.75 s) less the 2 s margin
+    assert counters.temperature_held == 1098 - 5
+    assert (counters.temperature_gaps, counters.imu_held) == (0, 0)
+    # the block path gives the per-message output (it takes such a stream one at a time)
+    blocks = Compensator(model, dataclasses.replace(settings, temperature_hold_s=900.0))
+    each = Compensator(model, dataclasses.replace(settings, temperature_hold_s=900.0))
+    assert_array_equal(_drive(blocks, sent, 'block', seed=1), _drive(each, sent, 'each'))
+    _assert_same_state(blocks, each)
+    # silent for longer than the hold: the held readings stop, and the temperature is stale
+    for k in range(1100, 2200):
+        on_change.correct_xyz(t0 + k + 0.25, 1e-4, 0.0, 0.0)
+    assert on_change.status.temperature_stale
+    assert on_change.status.last_temperature_stamp_s == t0 + 1000 + 900
 
 
 def test_correct_block_on_a_simulated_run(short_cycle: SimulatedRun) -> None:

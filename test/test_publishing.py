@@ -1,7 +1,8 @@
-"""A temperature published only when it changes: told from one published at the sensor's rate.
+"""A temperature published only when it changes: told from one published at its rate, put back.
 
-Real simulated records, the detector and what ``calibrate`` writes; the compensator's side is
-in ``test_compensator.py`` and the node's in ``test_node_robustness.py``.
+Real simulated records, the detector, the held readings put back and what ``calibrate``
+writes; the compensator's side is in ``test_compensator.py`` and the node's in
+``test_node_robustness.py``.
 """
 
 from __future__ import annotations
@@ -12,11 +13,14 @@ import numpy as np
 import pytest
 
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.held_readings import expand_held
 from fog_temp_comp.core.model_choice import choose_and_calibrate
 from fog_temp_comp.core.publishing import (
     HOLD_FACTOR,
     HOLD_MIN_S,
+    conversion_interval_s,
     hold_interval_s,
+    prepared,
     published_on_change,
 )
 from fog_temp_comp.core.record import ChamberRecord
@@ -90,6 +94,37 @@ def test_a_short_hold_is_at_least_a_minute(periodic: ChamberRecord) -> None:
     assert hold_interval_s([fast]) == HOLD_MIN_S
 
 
+def test_the_held_readings_put_back_are_the_periodic_record(periodic: ChamberRecord) -> None:
+    changed = on_change(periodic)
+    assert conversion_interval_s([changed]) == 1.0  # the sensor's 1 Hz, from the changes alone
+    records, settings = prepared([changed], RECOMMENDED_SETTINGS)
+    assert (settings.temperature_period_s, settings.temperature_hold_s) == (
+        1.0,
+        hold_interval_s([changed]),
+    )
+    (back,) = records
+    # up to the last gyro stamp less the 2 s margin, where the node stops putting them back
+    until = periodic.imu_stamps_s[-1] - 2.0
+    expected = periodic.temp_stamps_s < until
+    np.testing.assert_allclose(
+        back.temp_stamps_s, periodic.temp_stamps_s[expected], rtol=0, atol=1e-6
+    )
+    np.testing.assert_array_equal(back.temperature_degC, periodic.temperature_degC[expected])
+    # a sensor published at its rate is left as it is
+    (same,), timing = prepared([periodic], RECOMMENDED_SETTINGS)
+    assert same is periodic and timing.temperature_hold_s == 0.0
+
+
+def test_held_readings_stop_after_the_hold() -> None:
+    stamps = np.array([0.0, 0.5, 100.0])
+    values = np.array([1.0, 2.0, 3.0])
+    t, v = expand_held(stamps, values, 0.5, 10.0)
+    # none between 0 and 0.5 (the next reading is due), 20 after 0.5 (10 s), none after 100
+    assert t.size == 3 + 20
+    np.testing.assert_array_equal(t[2:22], 0.5 + 0.5 * np.arange(1, 21))
+    assert (v[2:22] == 2.0).all() and t[-1] == 100.0 and v[-1] == 3.0
+
+
 def test_calibrate_writes_the_hold_of_a_sensor_published_on_change(
     periodic: ChamberRecord,
 ) -> None:
@@ -97,6 +132,12 @@ def test_calibrate_writes_the_hold_of_a_sensor_published_on_change(
     chosen, _, _ = choose_and_calibrate([changed], RECOMMENDED_SETTINGS)
     denoise = chosen.coefficients.denoise
     assert denoise.temperature_hold_s == hold_interval_s([changed]) > 60.0
+    assert denoise.temperature_period_s == 1.0
+    # what the candidates were scored on is the periodic record: the same choice, the same fit
     base, _, _ = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)
+    assert chosen.coefficients.model.terms == base.coefficients.model.terms
+    np.testing.assert_allclose(
+        chosen.coefficients.model.coefficients, base.coefficients.model.coefficients, rtol=1e-6
+    )
     assert base.coefficients.denoise.temperature_hold_s == 0.0
     assert base.coefficients.denoise.temperature_period_s == 1.0

@@ -31,7 +31,7 @@ from fog_temp_comp.core.fitstats import (
 from fog_temp_comp.core.gls import fit_gls
 from fog_temp_comp.core.grid import bin_means, temperature_grid
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range, design_matrix
-from fog_temp_comp.core.publishing import with_reading_timing
+from fog_temp_comp.core.publishing import prepared, with_reading_timing
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.record_cleaning import without_outliers
 from fog_temp_comp.core.tdot import EstimateSeries, offline_estimates, shaped_as
@@ -275,11 +275,8 @@ def calibrate_detailed(
         ``settings.coil_lag_s`` and the search is recorded in ``provenance['coil_lag_fit']``.
         Otherwise ``settings.coil_lag_s`` is used as given. The objective is the residual sum
         of squares after a high-pass (see :func:`_fit_coil_lag`).
-    coil_lag_bounds_s : tuple of float
-        Search interval of the lag, s.
-    coil_lag_highpass_s : float
-        Length of the moving average removed from the residual in the lag objective, s
-        (0: plain residual sum of squares).
+    coil_lag_bounds_s, coil_lag_highpass_s : tuple of float, float
+        Search interval of the lag, s; moving average removed from its objective's residual, s.
     online_tdot : bool
         Fit with the Tdot the node computes (the online estimator run causally over each
         record) also for the grid methods; by default ``'wavelet'`` uses the paper's
@@ -296,7 +293,8 @@ def calibrate_detailed(
         Each record's precomputed estimates, lagged and shaped as ``settings`` asks (see
         :func:`grid_table`); not with ``fit_coil_lag``.
     drop_gyro_outliers : bool
-        Leave out gyro outliers and temperature glitches (:func:`without_outliers`, warned).
+        Leave out gyro outliers and temperature glitches (:func:`without_outliers`, warned),
+        then :func:`~fog_temp_comp.core.publishing.prepared` (False: the caller did both).
 
     Returns
     -------
@@ -309,9 +307,10 @@ def calibrate_detailed(
         raise ValueError(f"fit must be 'ols' or 'gls', got {fit!r}")
     if fit_coil_lag and series is not None:
         raise ValueError('precomputed series cannot be given with fit_coil_lag')
-    outliers: list[str] = []
     if drop_gyro_outliers:
-        records, outliers, provenance = without_outliers(records, settings, provenance)
+        records, settings, outliers, provenance = _cleaned(records, settings, provenance)
+    else:
+        outliers = []
     lag_fit: dict[str, object] | None = None
     if fit_coil_lag:
         settings, table, lag_fit = _fit_coil_lag(
@@ -324,6 +323,17 @@ def calibrate_detailed(
     extra = {**({'coil_lag_fit': lag_fit} if lag_fit is not None else {}), **(provenance or {})}
     coefficients = _coefficients(records, settings, terms, table, fits, warnings, extra)
     return CalibrationResult(coefficients, table, fits, warnings)
+
+
+def _cleaned(
+    records: Sequence[ChamberRecord],
+    settings: DenoiseSettings,
+    provenance: dict[str, Any] | None,
+) -> tuple[list[ChamberRecord], DenoiseSettings, list[str], dict[str, Any] | None]:
+    """:func:`without_outliers`, then :func:`~fog_temp_comp.core.publishing.prepared`."""
+    records, outliers, provenance = without_outliers(records, settings, provenance)
+    records, settings = prepared(records, settings)
+    return records, settings, outliers, provenance
 
 
 def _grid_tables(
@@ -438,7 +448,9 @@ def _coefficients(
     )
     return Coefficients(
         model=model,
-        denoise=with_reading_timing(settings, records),
+        denoise=settings  # the timing measured by prepared(), or else here
+        if settings.temperature_period_s > 0
+        else with_reading_timing(settings, records),
         frame_id=common_frame_id(records),
         fit={**fit_summary(fits), **({'warnings': warnings} if warnings else {})},
         provenance={**records_provenance(records), **provenance},

@@ -32,6 +32,7 @@ from fog_temp_comp.core.compensator_types import (
     stale_after_s,
 )
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.held_readings import HeldReadings
 from fog_temp_comp.core.model import SCALAR_TERMS, DriftModel
 from fog_temp_comp.core.rest import RestLearner, RestSettings
 from fog_temp_comp.core.tdot import make_estimator
@@ -96,6 +97,9 @@ class Compensator(_BlockCorrection):
         ]
         self._coefficient_rows = model.coefficients.tolist()
         self._set_stale_rule()
+        # a sensor published only on change: its held value put back at its interval
+        self._held = HeldReadings(denoise.temperature_period_s, denoise.temperature_hold_s)
+        self._held_due_s = math.inf  # a gyro stamp past this puts back held readings
         self._holes: list[float] = []  # midpoints (s) of spans known lost, not yet passed
         self._next_hole = math.inf
 
@@ -129,32 +133,21 @@ class Compensator(_BlockCorrection):
         self._set_stale_rule()
 
     def _set_stale_rule(self) -> None:
-        """The stale age, the start-up wait and the extrapolation horizon (s) of the guard."""
-        period = self.denoise.temperature_period_s
-        self._stale_after_s = stale_after_s(self._guard, period, self.denoise.temperature_hold_s)
-        # the start-up wait and the horizon are a sensor's intervals even where readings hold
-        # (published on change): a missing topic is not waited for an hour, nor a Tdot
-        # extrapolated over a hold
-        self._wait_s = stale_after_s(self._guard, period)
-        self._horizon_s = 2 * self.denoise.tdot_period_s + self._wait_s
+        """The stale age and the extrapolation horizon (s) of the guard."""
+        self._stale_after_s = stale_after_s(self._guard, self.denoise.temperature_period_s)
+        self._horizon_s = 2 * self.denoise.tdot_period_s + self._stale_after_s
 
     @property
     def stale_after_s(self) -> float:
         """Age (s) past which temperature is stale and a gap restarts Tdot.
 
         The guard's ``temperature_timeout_s``, or 3 of the sensor's calibrated intervals
-        (``denoise.temperature_period_s``), or the longest a reading published on change may
-        hold (``denoise.temperature_hold_s``), whichever is longest (:func:`stale_after_s`).
+        (``denoise.temperature_period_s``) where longer (:func:`stale_after_s`). A sensor
+        published only on change (``denoise.temperature_hold_s``) has its held value put back
+        at its interval (:mod:`~fog_temp_comp.core.held_readings`), so its silences are not
+        stale until the hold is over.
         """
         return self._stale_after_s
-
-    @property
-    def wait_s(self) -> float:
-        """How long (s) the gyro waits, unpublished, for the first temperature.
-
-        :attr:`stale_after_s` without the hold of a sensor published on change.
-        """
-        return self._wait_s
 
     def reset(self) -> None:
         """Forget the temperature history (keeps the counters)."""
@@ -163,6 +156,8 @@ class Compensator(_BlockCorrection):
         self._correction = (0.0, 0.0, 0.0)
         self._pending = []
         self._last_temperature = math.nan
+        self._held.reset()
+        self._held_due_s = math.inf
         if self.rest is not None:
             self.rest.reset()
 
@@ -180,6 +175,12 @@ class Compensator(_BlockCorrection):
         if not (math.isfinite(stamp_s) and math.isfinite(temperature_degC)) or stamp_s <= 0:
             counters.temperature_rejected += 1
             return False
+        held = self._held
+        if held.next_s < stamp_s:  # put back the held readings before this one
+            self._put_back_held(stamp_s - 0.5 * held.period_s)
+            if held.real_s < stamp_s <= status.last_temperature_stamp_s:
+                # later than the margin: after held readings it contradicts, taken just after
+                stamp_s = status.last_temperature_stamp_s + 1e-3
         last = status.last_temperature_stamp_s
         if stamp_s == last:
             counters.temperature_duplicate += 1
@@ -200,12 +201,28 @@ class Compensator(_BlockCorrection):
         elif not self._plausible(stamp_s, temperature_degC):
             return False
         counters.temperature_accepted += 1
-        status.last_temperature_stamp_s = stamp_s
-        status.has_temperature = True
-        status.temperature_stale = False
         self._last_temperature = temperature_degC
         if self.rest is not None:
             self.rest.temperature_degC = temperature_degC
+        self._held.real(stamp_s, temperature_degC)
+        self._held_due_s = self._held.next_s + self._held.margin_s
+        self._feed(stamp_s, temperature_degC)
+        return True
+
+    def _put_back_held(self, before_s: float) -> None:
+        """Feed the held readings due before ``before_s`` (s), counted as ``temperature_held``."""
+        held = self._held
+        for stamp_s in held.take(before_s):
+            self.status.counters.temperature_held += 1
+            self._feed(stamp_s, held.value_degC)
+        self._held_due_s = held.next_s + held.margin_s
+
+    def _feed(self, stamp_s: float, temperature_degC: float) -> None:
+        """One used reading into the estimator and the status."""
+        status = self.status
+        status.last_temperature_stamp_s = stamp_s
+        status.has_temperature = True
+        status.temperature_stale = False
         if self._estimator.add(stamp_s, temperature_degC):
             estimate = self._estimator.estimate
             assert estimate is not None
@@ -214,11 +231,12 @@ class Compensator(_BlockCorrection):
             status.tdot_raw_degC_per_min = estimate.raw_tdot_degC_per_min
             status.tdot_std_degC_per_min = estimate.tdot_std_degC_per_min
         status.estimator_ready = self._estimator.ready
-        return True
 
     def _restart_estimate(self) -> None:
         self._estimator.reset()
         self._pending = []
+        self._held.reset()
+        self._held_due_s = math.inf
 
     def _plausible(self, stamp_s: float, temperature_degC: float) -> bool:
         """Glitch filter: reject a sample that jumps away, unless the jump is confirmed."""
@@ -259,7 +277,7 @@ class Compensator(_BlockCorrection):
         A message repeated (the previous stamp and the same rates) is dropped; a sample with the
         previous stamp but other rates (a device clock coarser than the sample interval) is
         corrected, and counted. Before the first temperature (at start-up, after a
-        reset) a stamped sample is dropped too, for :attr:`wait_s` after the first such
+        reset) a stamped sample is dropped too, for :attr:`stale_after_s` after the first such
         sample: what the node cannot yet correct is not published as if corrected. After that
         (the temperature is missing), and with stale temperature and ``stale_policy='none'``,
         the rate passes through unchanged; non-finite components are left as they are and the
@@ -313,6 +331,8 @@ class Compensator(_BlockCorrection):
             counters.imu_out_of_order += 1
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             counters.imu_nonfinite += 1
+        if stamp_s > self._held_due_s:  # inf unless the sensor is published only on change
+            self._put_back_held(stamp_s - self._held.margin_s)
         if not status.has_temperature:
             # at start-up (and after a reset) the gyro waits for the first temperature, for
             # stale_after_s, dropped rather than passed through as if corrected; then it passes
@@ -320,7 +340,7 @@ class Compensator(_BlockCorrection):
                 since = status.awaiting_temperature_since_s
                 if since != since:  # NaN: the first gyro message without temperature
                     status.awaiting_temperature_since_s = since = stamp_s
-                if stamp_s - since <= self._wait_s:
+                if stamp_s - since <= self._stale_after_s:
                     counters.imu_awaiting_temperature += 1
                     return None
             counters.imu_uncorrected += 1

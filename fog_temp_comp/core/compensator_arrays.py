@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fog_temp_comp.core.compensator_types import CompensatorStatus, GuardSettings
+from fog_temp_comp.core.held_readings import HeldReadings
 from fog_temp_comp.core.model import DriftModel
 from fog_temp_comp.core.rest import RestLearner
 from fog_temp_comp.core.tdot_estimate import TdotEstimator
@@ -38,6 +39,7 @@ class _BlockCorrection:
     _estimator: TdotEstimator
     _correction: tuple[float, float, float]
     _last_rates: tuple[float, float, float]
+    _held: HeldReadings
     _horizon_s: float
     _stale_after_s: float
     _term_functions: list[Callable[[float, float, float], float]]
@@ -195,7 +197,13 @@ class _BlockCorrection:
         return done
 
     def _no_reset_possible(self, t: FloatArray, temp_t: FloatArray) -> bool:
-        """Whether no message of the two streams can reset the state or be out of order."""
+        """Whether no message of the two streams can reset the state or be out of order.
+
+        Nor put back a held reading (a sensor published only on change): those go one at a
+        time.
+        """
+        if self._held.period_s:
+            return False
         if t.size:
             if not (bool(np.all(np.isfinite(t))) and t[0] > 0):
                 return False

@@ -94,21 +94,13 @@ class GuardSettings:
             )
 
 
-def stale_after_s(
-    guard: GuardSettings, temperature_period_s: float, temperature_hold_s: float = 0.0
-) -> float:
+def stale_after_s(guard: GuardSettings, temperature_period_s: float) -> float:
     """Age (s) past which temperature is stale and a gap between readings restarts Tdot.
 
     ``guard.temperature_timeout_s``, or :data:`STALE_SAMPLE_INTERVALS` of the sensor's nominal
-    interval ``temperature_period_s`` (s; 0: unknown), or, for a sensor published only when
-    its reading changes, the longest a reading may hold ``temperature_hold_s`` (s; 0: a
-    sensor published at its rate), whichever is longest.
+    interval ``temperature_period_s`` (s; 0: unknown) where that is longer.
     """
-    return max(
-        guard.temperature_timeout_s,
-        STALE_SAMPLE_INTERVALS * temperature_period_s,
-        temperature_hold_s,
-    )
+    return max(guard.temperature_timeout_s, STALE_SAMPLE_INTERVALS * temperature_period_s)
 
 
 @dataclass
@@ -130,6 +122,7 @@ class CompensatorCounters:
     imu_tdot_clamped: int = 0  # corrected with Tdot clamped (calibrated range, or the limit)
     imu_tdot_extrapolated: int = 0  # corrected with Tdot beyond the calibrated range (linear)
     temperature_accepted: int = 0
+    temperature_held: int = 0  # a held value put back (a sensor published only on change)
     temperature_rejected: int = 0  # NaN/inf value or stamp
     temperature_duplicate: int = 0
     temperature_out_of_order: int = 0

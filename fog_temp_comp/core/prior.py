@@ -40,7 +40,7 @@ from fog_temp_comp.core.coefficients import Coefficients
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.fitstats import AxisFitStats, condition_number, fit_summary
 from fog_temp_comp.core.model import DriftModel, Range, coefficient_key
-from fog_temp_comp.core.publishing import with_reading_timing
+from fog_temp_comp.core.publishing import prepared
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.record_cleaning import without_outliers
 from fog_temp_comp.core.units import AXES
@@ -427,6 +427,8 @@ def calibrate_with_prior(
     if not records:
         raise CalibrationError('no records to calibrate on')
     records, outlier_warnings, provenance = without_outliers(records, prior.settings, provenance)
+    records, unit_settings = prepared(records, prior.settings)
+    prior = dataclasses.replace(prior, settings=unit_settings)
     fleet_lag = prior.settings.coil_lag_s
     if fit_coil_lag and fleet_lag > 0:
         lag = unit_coil_lag(records, prior)
@@ -456,7 +458,7 @@ def calibrate_with_prior(
     base = records_provenance(records)
     coefficients = Coefficients(
         model=model,
-        denoise=with_reading_timing(prior.settings, records),
+        denoise=prior.settings,
         frame_id=common_frame_id(records),
         fit=summary,
         provenance={

@@ -22,13 +22,17 @@ from collections.abc import Sequence
 import numpy as np
 
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.held_readings import HELD_MARGIN_S, expand_held
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.sensor_noise import reading_interval_s, sensor_noise
 
 __all__ = [
     'HOLD_FACTOR',
     'HOLD_MIN_S',
+    'conversion_interval_s',
+    'held_records',
     'hold_interval_s',
+    'prepared',
     'published_on_change',
     'with_reading_timing',
 ]
@@ -86,16 +90,64 @@ def hold_interval_s(records: Sequence[ChamberRecord]) -> float:
     return round(max(HOLD_FACTOR * longest, HOLD_MIN_S), 3)
 
 
+def conversion_interval_s(records: Sequence[ChamberRecord]) -> float:
+    """The interval (s) between a sensor's conversions, from readings published on change.
+
+    Successive changes (a reading dithering between two steps) come one conversion apart:
+    the median of the intervals up to 1.5 times the 5th percentile, to the millisecond.
+    """
+    gaps = np.concatenate([np.diff(r.temp_stamps_s) for r in records] or [np.empty(0)])
+    gaps = gaps[gaps > 0]
+    if not gaps.size:
+        return 0.0
+    short = gaps[gaps <= 1.5 * np.percentile(gaps, 5.0)]
+    return round(float(np.median(short)), 3)
+
+
 def with_reading_timing(
     settings: DenoiseSettings, records: Sequence[ChamberRecord]
 ) -> DenoiseSettings:
     """``settings`` with the records' reading interval and hold, s (what ``calibrate`` writes).
 
-    ``temperature_period_s``: :func:`~fog_temp_comp.core.sensor_noise.reading_interval_s`;
-    ``temperature_hold_s``: :func:`hold_interval_s`.
+    ``temperature_hold_s``: :func:`hold_interval_s`; ``temperature_period_s``: the
+    sensor's interval, :func:`~fog_temp_comp.core.sensor_noise.reading_interval_s` (or, on
+    change, :func:`conversion_interval_s`).
     """
-    return dataclasses.replace(
-        settings,
-        temperature_period_s=reading_interval_s(records),
-        temperature_hold_s=hold_interval_s(records),
-    )
+    hold = hold_interval_s(records)
+    period = conversion_interval_s(records) if hold else reading_interval_s(records)
+    return dataclasses.replace(settings, temperature_period_s=period, temperature_hold_s=hold)
+
+
+def held_records(
+    records: Sequence[ChamberRecord], settings: DenoiseSettings
+) -> list[ChamberRecord]:
+    """The records with the held readings of a sensor published on change put back.
+
+    As the compensator puts them back online, up to the last gyro stamp less the margin
+    (:func:`~fog_temp_comp.core.held_readings.expand_held`, with ``settings``' interval and
+    hold); unchanged for a sensor published at its rate (``temperature_hold_s`` 0).
+    """
+    period, hold = settings.temperature_period_s, settings.temperature_hold_s
+    if not (period > 0 and hold > 0):
+        return list(records)
+    margin = max(HELD_MARGIN_S, 2.0 * period)
+    out = []
+    for record in records:
+        until = float(record.imu_stamps_s.max()) - margin if record.imu_stamps_s.size else 0.0
+        stamps, values = expand_held(
+            record.temp_stamps_s, record.temperature_degC, period, hold, until
+        )
+        out.append(dataclasses.replace(record, temp_stamps_s=stamps, temperature_degC=values))
+    return out
+
+
+def prepared(
+    records: Sequence[ChamberRecord], settings: DenoiseSettings
+) -> tuple[list[ChamberRecord], DenoiseSettings]:
+    """Settings with the records' reading timing, and the records with held readings put back.
+
+    Every calibration path calls it once, on the cleaned records, before anything reads their
+    temperature (the sensor's noise, the candidates' series, the fit).
+    """
+    settings = with_reading_timing(settings, records)
+    return held_records(records, settings), settings
