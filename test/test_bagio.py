@@ -311,7 +311,10 @@ def test_no_temperature_topic(tmp_path: Path) -> None:
     path = write_messages(tmp_path / 'notemp', 'mcap', topics, few_messages(topics))
     with pytest.raises(BagError, match=TEMPERATURE_TYPE) as info:
         read_record(path)
-    assert IMU[0] in str(info.value)
+    message = str(info.value)
+    # every topic with its type, and the ways to name one (a number in another message)
+    assert f'{IMU[0]} ({IMU[1]})' in message and f'{NOTE[0]} ({NOTE[1]})' in message
+    assert '--temp-topic' in message and '--temp-field FIELD' in message
 
 
 def test_explicit_topics_without_leading_slash(tmp_path: Path) -> None:

@@ -142,7 +142,11 @@ def resolve_topic_in(topics: dict[str, str], topic: str | None, msgtype: str, fl
     if len(candidates) == 1:
         return candidates[0]
     if not candidates:
-        raise BagError(f'no {msgtype} topic in bag (topics: {sorted(topics) or "none"})')
+        listing = ', '.join(f'{n} ({t})' for n, t in sorted(topics.items())) or 'none'
+        hint = f'; name one with {flag}' if topics else ''
+        if topics and msgtype == TEMPERATURE_TYPE:
+            hint += ' (calibrate reads a number in another message with --temp-field FIELD)'
+        raise BagError(f'no {msgtype} topic in bag; topics: {listing}{hint}')
     raise BagError(f'several {msgtype} topics: {candidates}; choose one with {flag}')
 
 
