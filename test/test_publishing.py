@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from test_model_choice import CHAMBER as MODEL_CHOICE_CHAMBER
 
 from fog_temp_comp.bag.bagio import BagWriter, make_imu, make_temperature, s_to_stamp_ns
 from fog_temp_comp.bag.stream import read_record
@@ -29,22 +30,13 @@ from fog_temp_comp.core.publishing import (
 )
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.tools import cli
-from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
+from fog_temp_comp.tools.simulate import simulate_run
 
 IMU_TOPIC, TEMP_TOPIC = '/imu/data_raw', '/imu/temperature'
 
-#: a 0.2 degC/min cycle over 0..40 degC with 30 min holds (about 8 h), gyro 0.5 Hz
-CHAMBER = SimulationConfig(
-    imu_hz=0.5,
-    temp_hz=1.0,
-    low_degC=0.0,
-    high_degC=40.0,
-    start_degC=20.0,
-    cycle_soak_s=1800.0,
-    lag_s=400.0,
-    arw_10s_deg_h=0.01,
-    temp_quantum_degC=1 / 16,
-    temp_noise_degC=0.005,
+#: test_model_choice's 8 h cycle (1 Hz temperature), its sensor quantized to 1/16 degC
+CHAMBER = dataclasses.replace(
+    MODEL_CHOICE_CHAMBER, temp_quantum_degC=1 / 16, temp_noise_degC=0.005
 )
 
 
