@@ -647,6 +647,20 @@ def test_a_reading_published_on_change_is_put_back_while_it_holds(model: DriftMo
     each = Compensator(model, dataclasses.replace(settings, temperature_hold_s=900.0))
     assert_array_equal(_drive(blocks, sent, 'block', seed=1), _drive(each, sent, 'each'))
     _assert_same_state(blocks, each)
+    # a hole (a lost chunk of a damaged bag): nothing is put back past its midpoint, and the
+    # next reading restarts the estimate there, as for a sensor published at its rate
+    holed = Compensator(model, dataclasses.replace(settings, temperature_hold_s=900.0))
+    holed.mark_holes([(t0 + 500.0, t0 + 502.0)])
+    last_before: list[float] = []
+    for kind, stamp, values in sent:
+        if kind == 'T':
+            if round(stamp - t0) == 700:
+                last_before.append(holed.status.last_temperature_stamp_s)
+            holed.add_temperature(stamp, values[0])
+        else:
+            holed.correct_xyz(stamp, *values)
+    assert t0 + 500.0 <= last_before[0] <= t0 + 501.0
+    assert holed.status.counters.temperature_gaps == 1
     # silent for longer than the hold: the held readings stop, and the temperature is stale
     for k in range(1100, 2200):
         on_change.correct_xyz(t0 + k + 0.25, 1e-4, 0.0, 0.0)

@@ -210,8 +210,13 @@ class Compensator(_BlockCorrection):
         return True
 
     def _put_back_held(self, before_s: float) -> None:
-        """Feed the held readings due before ``before_s`` (s), counted as ``temperature_held``."""
+        """Feed the held readings due before ``before_s`` (s), counted as ``temperature_held``.
+
+        Not past a hole (:meth:`mark_holes`): what the sensor said there is lost.
+        """
         held = self._held
+        if held.real_s < self._next_hole:
+            before_s = min(before_s, self._next_hole)
         for stamp_s in held.take(before_s):
             self.status.counters.temperature_held += 1
             self._feed(stamp_s, held.value_degC)
