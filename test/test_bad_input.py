@@ -311,6 +311,10 @@ DATA: list[tuple[str, str, Callable[[dict[str, np.ndarray]], None], str, str]] =
         slice(200, 210), a['imu_stamps_s'][200]), 'diagnostic', '9 duplicate'),
     ('duplicate temperature stamps', 'mcap', lambda a: a['temp_stamps_s'].__setitem__(
         slice(20, 30), a['temp_stamps_s'][20]), 'diagnostic', '9 duplicate'),
+    ('temperature in millidegrees', 'sqlite3', lambda a: a.__setitem__(
+        'temperature_degC', a['temperature_degC'] * 1000.0), 'error', 'not degrees Celsius'),
+    ('temperature in kelvin', 'mcap', lambda a: a.__setitem__(
+        'temperature_degC', a['temperature_degC'] + 273.15), 'ok', ''),
     ('gyro and temperature not overlapping', 'mcap',
      lambda a: a.__setitem__('temp_stamps_s', a['temp_stamps_s'] + 1e5), 'error', 'overlap'),
     ('gyro and temperature not overlapping', 'sqlite3',

@@ -12,12 +12,40 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.gyro_outliers import without_gyro_outliers
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.temperature_glitches import without_temperature_glitches
 
-__all__ = ['without_outliers']
+__all__ = ['PLAUSIBLE_DEGC', 'check_degrees_celsius', 'without_outliers']
+
+#: a record whose median temperature lies outside this range (degC) is not in degrees Celsius;
+#: kelvin passes (an offset, which the fit takes as it is), millidegrees or tenths do not
+PLAUSIBLE_DEGC = (-273.15, 1000.0)
+
+
+def check_degrees_celsius(records: Sequence[ChamberRecord]) -> None:
+    """Raise ValueError, naming the record, where its temperatures are not degrees Celsius.
+
+    ``sensor_msgs/Temperature`` carries degC; a driver that publishes millidegrees or tenths
+    would make every quantization step a jump of many degrees, which the node's glitch guard
+    rejects, and the fit would be silently wrong.
+    """
+    for record in records:
+        values = record.temperature_degC[np.isfinite(record.temperature_degC)]
+        if not values.size:
+            continue
+        median = float(np.median(values))
+        if not PLAUSIBLE_DEGC[0] <= median <= PLAUSIBLE_DEGC[1]:
+            raise ValueError(
+                f'{record.path}: temperatures on {record.temp_topic} around {median:.6g} '
+                f'(median of {values.size} readings, {values.min():.6g} to {values.max():.6g}):'
+                ' not degrees Celsius, which sensor_msgs/Temperature carries (a driver '
+                'publishing millidegrees or tenths?); convert them, or read the right field '
+                'with --temp-field'
+            )
 
 
 def without_outliers(
@@ -27,12 +55,15 @@ def without_outliers(
 ) -> tuple[list[ChamberRecord], list[str], dict[str, Any] | None]:
     """The records without their temperature glitches and gyro outlier bins.
 
+    Temperatures that are not degrees Celsius are refused first (:func:`check_degrees_celsius`).
+
     Gyro bins of ``settings.tdot_period_s``; the glitch rule is the node's default guard's.
     Returns the records, a warning per record and kind, and ``provenance`` with the entries
     ``temperature_glitches`` (per bag: readings dropped, the first stamps and values) and
     ``gyro_outliers`` (per bag: bins dropped, the worst deviation, the thresholds, the first
     stamps) where there were any.
     """
+    check_degrees_celsius(records)
     period_s = settings.tdot_period_s
     cleaned, warnings = [], []
     glitched: dict[str, Any] = {}
