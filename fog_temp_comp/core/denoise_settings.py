@@ -129,11 +129,12 @@ class DenoiseSettings:
         (and than its ``temperature_timeout_s``), so a sensor read every 20 s is not a gap at
         every reading.
     temperature_hold_s : float
-        For a sensor whose driver publishes only when the reading changes, the longest a
-        reading may hold without a message, s (0: published at the sensor's rate).
-        ``calibrate`` detects such a sensor and sets it
-        (:func:`~fog_temp_comp.core.publishing.hold_interval_s`); the compensator then calls
-        temperature stale, and restarts Tdot at a gap, only past it. Not used by the estimators.
+        For a sensor whose driver publishes only when the reading changes, how long (s) after
+        each reading its value is put back at ``temperature_period_s`` (0: published at the
+        sensor's rate). ``calibrate`` detects such a sensor and sets it
+        (:func:`~fog_temp_comp.core.publishing.hold_interval_s`); calibrate and the compensator
+        put the held readings back alike (:mod:`~fog_temp_comp.core.held_readings`). Not used
+        by the estimators.
 
     """
 

@@ -26,11 +26,16 @@ from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ['HELD_MARGIN_S', 'HeldReadings', 'expand_held']
+__all__ = ['HELD_MARGIN_S', 'HeldReadings', 'expand_held', 'held_margin_s']
 
 #: a held reading is put back once a gyro stamp is this far past it (s; or 2 sensor intervals,
 #: where longer): a real temperature message arrives at most this late after its gyro
 HELD_MARGIN_S = 2.0
+
+
+def held_margin_s(period_s: float) -> float:
+    """How far (s) a gyro stamp must be past a held reading to put it back."""
+    return max(HELD_MARGIN_S, 2.0 * period_s)
 
 
 class HeldReadings:
@@ -41,7 +46,7 @@ class HeldReadings:
         self.period_s = period_s if period_s > 0 and hold_s > 0 else 0.0
         self.hold_s = hold_s
         #: a gyro stamp this far (s) past a held reading's stamp puts it back
-        self.margin_s = max(HELD_MARGIN_S, 2.0 * period_s)
+        self.margin_s = held_margin_s(period_s)
         self.value_degC = math.nan
         self._real_s = math.nan
         self._j = 1

@@ -4,14 +4,15 @@ Some drivers (a CAN node, a slow housekeeping channel) publish a quantized tempe
 when it changes. Readings published at the sensor's rate repeat often (a quantized sensor's
 readings stay on one step between crossings, at a soak for minutes), while readings published
 on change never repeat, and the intervals between them run from one conversion to many
-minutes at a soak. Between two such messages the reading held: a gap is no sign of a lost
-sensor, and the compensator must neither call the temperature stale nor restart its Tdot
-estimate there. (Treated as gaps, a soak's holds restarted the estimate at every change: 100 s
-stability 3.5-12x the oracle instead of 1.3-1.4x, README.)
+minutes at a soak. Between two such messages the reading held: a silence is no sign of a
+lost sensor. (Treated as gaps, a soak's silences restarted the Tdot estimate at every change:
+100 s stability 3.5-12x the oracle instead of 1.3-1.4x, README.)
 
-:func:`hold_interval_s` tells the two apart from the calibration bags and gives the longest a
-reading may hold (s; 0 for a sensor published at its rate), which ``calibrate`` writes as
-``denoise.temperature_hold_s``. Stamps in s, temperatures in degC.
+:func:`hold_interval_s` tells the two apart from the calibration bags and gives how long a
+reading's value is put back after it (s; 0 for a sensor published at its rate), which
+``calibrate`` writes as ``denoise.temperature_hold_s``; :func:`prepared` measures that and the
+sensor's interval and puts the held readings back (:mod:`~fog_temp_comp.core.held_readings`).
+Stamps in s, temperatures in degC.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
-from fog_temp_comp.core.held_readings import HELD_MARGIN_S, expand_held
+from fog_temp_comp.core.held_readings import expand_held, held_margin_s
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.sensor_noise import reading_interval_s, sensor_noise
 
@@ -130,7 +131,7 @@ def held_records(
     period, hold = settings.temperature_period_s, settings.temperature_hold_s
     if not (period > 0 and hold > 0):
         return list(records)
-    margin = max(HELD_MARGIN_S, 2.0 * period)
+    margin = held_margin_s(period)
     out = []
     for record in records:
         until = float(record.imu_stamps_s.max()) - margin if record.imu_stamps_s.size else 0.0

@@ -16,15 +16,10 @@ from fog_temp_comp.ros.node_parameters import ParametersMixin
 
 
 def _stale_rule(compensator: Compensator) -> str:
-    """What makes temperature stale: the parameter, the slow sensor's intervals or a hold (s)."""
+    """What makes temperature stale: the parameter, or the slow sensor's intervals (s)."""
     timeout = compensator.guard.temperature_timeout_s
     if compensator.stale_after_s == timeout:
         return f'temperature_timeout_s {timeout:g}'
-    if compensator.stale_after_s == compensator.denoise.temperature_hold_s:
-        return (
-            f'stale after {compensator.stale_after_s:g} s: temperature_hold_s, a reading '
-            'published only when it changes holds that long'
-        )
     return (
         f'stale after {compensator.stale_after_s:g} s: {STALE_SAMPLE_INTERVALS:g} intervals of '
         f'the sensor, temperature_period_s {compensator.denoise.temperature_period_s:g}'

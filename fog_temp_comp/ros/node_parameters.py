@@ -142,8 +142,9 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
     'temperature_hold_s': (
         'temperature_hold_s',
         _T.DOUBLE,
-        'for a temperature published only when it changes, the longest a reading may hold (s): '
-        'stale, and a gap, only past it; 0 = published at the sensor rate (calibrate detects it)',
+        'for a temperature published only when it changes, how long (s) after each reading its '
+        'value is put back at temperature_period_s; 0 = published at the sensor rate '
+        '(calibrate detects it)',
     ),
 }
 _GUARD_DEFAULTS = GuardSettings()
