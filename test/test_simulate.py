@@ -96,6 +96,26 @@ def test_coil_lags_the_housing_sensor() -> None:
     assert_allclose(dt[10:-10], run.true_tdot_degC_per_min[10:-10], atol=4e-3)
 
 
+def test_power_on_heating_warms_the_housing_from_equilibrium() -> None:
+    """A soak at power-on: the housing starts at the air and settles heating_degC above it."""
+    base = dataclasses.replace(
+        SHORT_CHAMBER, lag_s=300.0, temp_noise_degC=0.0, temp_quantum_degC=0.0
+    )
+    heated = dataclasses.replace(base, power_on_heating_degC=4.0)
+    cold = simulate_run('soak', -20.0, base, seed=2)
+    warm = simulate_run('soak', -20.0, heated, seed=2)
+    rise = warm.true_temperature_degC - cold.true_temperature_degC
+    t = warm.imu_stamps_s - warm.imu_stamps_s[0]
+    # a first-order rise through the housing lag (the 1 s grid's first-order hold: 0.01 degC)
+    assert_allclose(rise, 4.0 * -np.expm1(-t / 300.0), atol=0.01)
+    assert abs(rise[0]) < 0.02 and rise[-1] > 3.9
+    # at power-on the coil's rate jumps to heating / lag, in degC/min, and the drift follows it
+    first = (t > 0.5) & (t < 5.0)
+    assert warm.true_tdot_degC_per_min[0] == 0.0
+    assert_allclose(warm.true_tdot_degC_per_min[first], 4.0 / 300.0 * 60.0, rtol=0.03)
+    assert np.ptp(warm.true_drift_deg_h[:, 0]) > np.ptp(cold.true_drift_deg_h[:, 0]) + 0.5
+
+
 def test_chamber_controller_overshoots_ramp_ends() -> None:
     cfg = dataclasses.replace(SHORT_CHAMBER, chamber_period_s=900.0, chamber_damping=0.4)
     bp_t, bp_x = chamber_profile('cycle', 1.0, cfg)
@@ -216,6 +236,7 @@ def test_realistic_plan_runs_and_is_seeded() -> None:
         ('bias_random_walk_deg_h_per_sqrt_h', -1),
         ('temp_noise_correlation_s', -1.0),
         ('temp_step_nonlinearity', -0.1),
+        ('power_on_heating_degC', -1.0),
     ],
 )
 def test_bad_realism_fields_raise(field: str, value: float) -> None:

@@ -10,7 +10,9 @@ Physics (all documented units):
   controller to it, which lags the ramps and overshoots at their ends; plus a controller
   oscillation (``soak_oscillation_degC`` on soaks, ``cycle_oscillation_degC`` on cycles);
 - gyro housing, where the temperature sensor sits: first-order lag of the chamber air, time
-  constant ``lag_s``;
+  constant ``lag_s``; with ``power_on_heating_degC`` the unit's own dissipation warms it that
+  much above the air from each run's start (a power-on: the run starts in equilibrium with the
+  air, and the housing rises through the same lag);
 - fibre coil: first-order lag of the housing, time constant ``coil_lag_s`` (0: the sensor reads
   the coil, as in the paper); the coil temperature and its exact rate drive the drift;
 - drift per axis: ``D = d0 + dt*T + dtdot*Tdot + t2*T^2 + t_tdot*T*Tdot`` (deg/h), x near the
@@ -144,6 +146,7 @@ class SimulationConfig:
     motion_rate_deg_s: float = 5.0
     temp_noise_correlation_s: float = 0.0
     temp_step_nonlinearity: float = 0.0
+    power_on_heating_degC: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ('imu_hz', 'temp_hz', 'lag_s', 'soak_duration_s'):
@@ -158,6 +161,7 @@ class SimulationConfig:
             'motion_period_s',
             'motion_rate_deg_s',
             'temp_noise_correlation_s',
+            'power_on_heating_degC',
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
@@ -476,6 +480,10 @@ def _thermal_path(
         chamber = chamber + cfg.cycle_oscillation_degC * np.sin(
             2 * np.pi * t_grid / cfg.soak_oscillation_period_s + phase
         )
+    if cfg.power_on_heating_degC > 0:
+        # the dissipation switches on after the first instant: the housing's environment steps
+        # up by the heating, from equilibrium with the air
+        chamber = chamber + cfg.power_on_heating_degC * (t_grid > 0)
     housing_t, housing_tdot = first_order_lag(chamber, dt, cfg.lag_s)
     if cfg.coil_lag_s > 0:
         coil_t, coil_tdot = first_order_lag(housing_t, dt, cfg.coil_lag_s)
