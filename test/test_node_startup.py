@@ -371,3 +371,47 @@ def test_sensor_lag_filter_on_the_node_is_the_offline_one_and_starts_quietly(
     np.testing.assert_allclose(corrected, offline, rtol=0, atol=1e-15)
     bound = noise_10s_deg_h(soak)
     assert np.all(np.abs(error_means_deg_h(soak, corrected)[:6]) <= bound)
+
+
+def test_sensor_lag_filter_restarted_mid_ramp_does_not_spike(
+    ros_context: object, tmp_path: Path
+) -> None:
+    """A node started while the unit cools at 1 degC/min (a restart, or a gap that restarts Tdot).
+
+    The coil then leads the sensor by its rate times the lag, which the filter's start-up prior
+    assumes. Until the filter has warmed up its Tdot term is left out, so each 10 s mean is off
+    the oracle's by at most that term (plus noise), never more: a prior of coil and sensor
+    together (right at power-on from equilibrium) makes the filter chase the moving sensor with
+    a coil rate several times the true one, a spike of several deg/h.
+    """
+    train = simulate_run('cycle', 0.2, PLANT, seed=21).as_record()
+    structure = Structure(('const', 'T', 'Tdot', 'T2'), 0.001, 0.5, sensor_lag_s=200.0)
+    result, _, _ = choose_and_calibrate([train], RECOMMENDED_SETTINGS, structures=[structure])
+    path = tmp_path / 'coeffs.yaml'
+    save(result.coefficients, path)
+    run = simulate_run('cycle', 1.0, PLANT, seed=23)
+    # on the cooling ramp (the longer one), once it runs at 0.9 degC/min, for 20 min
+    start = run.imu_stamps_s[np.argmax(run.true_tdot_degC_per_min < -0.9)]
+    imu = (run.imu_stamps_s >= start) & (run.imu_stamps_s < start + 1200.0)
+    temp = (run.temp_stamps_s >= start) & (run.temp_stamps_s < start + 1200.0)
+    mid_ramp = dataclasses.replace(
+        run,
+        imu_stamps_s=run.imu_stamps_s[imu],
+        rates_rad_s=run.rates_rad_s[imu],
+        true_drift_deg_h=run.true_drift_deg_h[imu],
+        true_temperature_degC=run.true_temperature_degC[imu],
+        true_tdot_degC_per_min=run.true_tdot_degC_per_min[imu],
+        temp_stamps_s=run.temp_stamps_s[temp],
+        temperature_degC=run.temperature_degC[temp],
+    )
+    assert np.all(mid_ramp.true_tdot_degC_per_min[:10] < -0.85)  # it starts on the ramp
+    corrected = through_node(ros_context, path, mid_ramp)
+    oracle = mid_ramp.rates_rad_s * DEG_H_PER_RAD_S - mid_ramp.true_drift_deg_h
+    error = window_means(mid_ramp.imu_stamps_s, corrected * DEG_H_PER_RAD_S - oracle, 10.0)
+    tdot_term = np.abs(
+        window_means(mid_ramp.imu_stamps_s, mid_ramp.true_tdot_degC_per_min[:, None], 10.0)
+        * PLANT.coefficients[2]
+    )
+    error = error - np.median(error[-30:], axis=0)  # the D0 misfit, once the filter has settled
+    bound = tdot_term + 3.0 * noise_10s_deg_h(mid_ramp)
+    assert np.all(np.abs(error) <= bound), np.max(np.abs(error) - bound, axis=0)
