@@ -279,6 +279,43 @@ def test_stale_temperature_follows_policy_and_warns(
         h.close()
 
 
+@pytest.mark.parametrize(('offset_s', 'side'), [(-18.0, 'behind'), (7.0, 'ahead of')])
+def test_temperature_stamped_by_another_clock_is_reported(
+    harness: Harness, offset_s: float, side: str
+) -> None:
+    """A temperature driver on another clock (GPS time against UTC: 18 s) gets a WARN.
+
+    18 s behind, every temperature is stale at the gyro stamps; 7 s ahead it is fresh but
+    misaligned, which nothing else shows. Each arrives while the gyro flows, so its stamp is
+    compared with the gyro's latest.
+    """
+    for k in range(8):
+        harness.send_imu(T0 + k, RATE)
+        harness.send_temperature(T0 + k + 0.5 + offset_s, 25.0)
+    status = harness.diagnose()
+    values = diag_values(status)
+    assert status.level == WARN
+    assert f'temperature stamps {abs(offset_s + 0.5):.1f} s {side} the gyro stamps' in (
+        status.message
+    )
+    assert 'two clocks' in status.message
+    assert float(values['temperature_stamp_offset_s']) == pytest.approx(offset_s + 0.5)
+
+
+def test_temperature_on_the_gyros_clock_is_not_taken_for_two_clocks(harness: Harness) -> None:
+    """A 1 Hz temperature among 10 Hz gyro messages, up to 0.9 s apart: one clock."""
+    for k in range(100):
+        if k % 10 == 0:
+            harness.send_temperature(T0 + k / 10, 25.0)
+        harness.send_imu(T0 + k / 10 + 0.05, RATE)
+    status = harness.diagnose()
+    assert 'two clocks' not in status.message
+    # each temperature arrives 0.05 s after the gyro stamped 0.1 s before it
+    assert float(diag_values(status)['temperature_stamp_offset_s']) == pytest.approx(
+        0.05, abs=1e-6
+    )
+
+
 def test_a_temperature_published_on_change_holds_on_the_node(
     ros_context: object, tmp_path: Path, coefficients: Coefficients
 ) -> None:

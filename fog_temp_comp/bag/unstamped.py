@@ -22,13 +22,11 @@ from typing import TextIO
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fog_temp_comp.core.stamp_offset import CLOCK_MISMATCH_S
+
 __all__ = ['CLOCK_MISMATCH_S', 'UnsetStamps']
 
 NS_PER_S = 1e9
-
-#: gyro and temperature header stamps whose offsets from the receive times differ by more than
-#: this (s) are taken for two clocks; a driver's latency (ms to a second) stays well below it
-CLOCK_MISMATCH_S = 5.0
 
 #: header-minus-receive differences per chunk that its median is taken over (a subsample)
 _OFFSET_SAMPLES = 256

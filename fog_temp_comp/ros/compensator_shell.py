@@ -27,6 +27,7 @@ from std_srvs.srv import Trigger
 
 from fog_temp_comp.core.coefficients import CoefficientsError
 from fog_temp_comp.core.compensator import Compensator
+from fog_temp_comp.core.stamp_offset import ArrivalOffsets
 from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.bias_learning import BiasLearningMixin
 from fog_temp_comp.ros.console_log import ConsoleLogMixin
@@ -95,6 +96,9 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             self.config.rest,
         )
         self._warm_up_start_s = None
+        #: temperature stamps against the gyro's latest on arrival: two clocks, seen live
+        self._arrival = ArrivalOffsets()
+        self._imu_total_at_temperature = 0
         self._load_learned_bias()
 
     def _create_output(self, *args: Any, **kwargs: Any) -> Publisher:
@@ -197,9 +201,14 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
     def _on_temperature(self, msg: Temperature) -> None:
         stamp = msg.header.stamp
         stamp_s = stamp.sec + stamp.nanosec * 1e-9 or self._unset_stamp_s()
-        was_ready = self.compensator.status.estimator_ready
+        status = self.compensator.status
+        was_ready = status.estimator_ready
         if self.compensator.add_temperature(stamp_s, msg.temperature):
             self._track_warm_up(stamp_s, was_ready)
+            imu_total = status.counters.imu_total
+            if imu_total > self._imu_total_at_temperature:  # the gyro flows: compare clocks
+                self._arrival.add(stamp_s, status.last_imu_stamp_s)
+            self._imu_total_at_temperature = imu_total
 
     def _on_at_rest(self, msg: Bool) -> None:
         if self.configured and self.compensator.rest is not None:
@@ -261,6 +270,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             stale_after_s=self.compensator.stale_after_s,
             frame_mismatches=self.frame_mismatches,
             unstamped=self.unstamped,
+            temperature_stamp_offset_s=self._arrival.median_s,
+            two_clocks=self._arrival.two_clocks,
             require_frame_match=self._require_frame_match,
             rest=None if self.compensator.rest is None else self.compensator.rest.finish(),
             rest_bias_file=(

@@ -1,8 +1,8 @@
 """Console lines of the compensator node: its configuration, warm-up, and what went wrong.
 
-What went wrong: no temperature, stale temperature, clamped temperature or Tdot, gyro frame_id
-mismatch. Each kind of warning has its own call (rclpy throttles per call site), at most one
-line per ``log_throttle_s`` seconds.
+What went wrong: no temperature, stale temperature, temperature and gyro stamped by two
+clocks, clamped temperature or Tdot, gyro frame_id mismatch. Each kind of warning has its own
+call (rclpy throttles per call site), at most one line per ``log_throttle_s`` seconds.
 """
 
 from __future__ import annotations
@@ -12,6 +12,8 @@ from typing import Any
 from rclpy.subscription import Subscription
 
 from fog_temp_comp.core.compensator import STALE_SAMPLE_INTERVALS, Compensator
+from fog_temp_comp.core.stamp_offset import ArrivalOffsets
+from fog_temp_comp.ros.diagnostics import two_clocks_text
 from fog_temp_comp.ros.node_parameters import ParametersMixin
 
 
@@ -35,6 +37,7 @@ class ConsoleLogMixin(ParametersMixin):
     frame_mismatches: int
     _last_frame_mismatches: int
     _warm_up_start_s: float | None
+    _arrival: ArrivalOffsets
 
     def _log_config(self, what: str) -> None:
         cfg = self.config
@@ -94,6 +97,12 @@ class ConsoleLogMixin(ParametersMixin):
                 f'fallback to pass-through: temperature on {topic} stale, last sample '
                 f'{age_s:.1f} s before the gyro stamp ({_stale_rule(self.compensator)}, '
                 'stale_policy none): gyro not corrected',
+                throttle_duration_sec=every,
+            )
+        if self._arrival.two_clocks:
+            log.warning(
+                f'{topic}: {two_clocks_text(self._arrival.median_s)}: the correction is '
+                'misaligned by that much (and stale beyond the stale time)',
                 throttle_duration_sec=every,
             )
         if self._require_frame_match and self.frame_mismatches > self._last_frame_mismatches:

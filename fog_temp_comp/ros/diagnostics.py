@@ -65,6 +65,8 @@ def build_report(
     stale_after_s: float = math.nan,
     frame_mismatches: int = 0,
     unstamped: int = 0,
+    temperature_stamp_offset_s: float = math.nan,
+    two_clocks: bool = False,
     require_frame_match: bool = False,
     rest: RestStatus | None = None,
     rest_bias_file: tuple[str, str] | None = None,
@@ -73,7 +75,10 @@ def build_report(
 
     ``rest_bias_file`` is (path, what happened to it: loaded, refused and why, written, ...);
     ``stale_after_s`` the age (s) past which temperature is stale (the compensator's
-    :attr:`~fog_temp_comp.core.compensator.Compensator.stale_after_s`).
+    :attr:`~fog_temp_comp.core.compensator.Compensator.stale_after_s`);
+    ``temperature_stamp_offset_s`` the median of temperature stamps minus the gyro's latest
+    on arrival (s) and ``two_clocks`` whether it says two clocks
+    (:class:`~fog_temp_comp.core.stamp_offset.ArrivalOffsets`).
     """
     counters = status.counters
     reasons = _temperature_reasons(status, previous)
@@ -87,6 +92,8 @@ def build_report(
         reasons.append((level, f'gyro frame_id differs from calibrated one ({action})'))
     if unstamped:
         reasons.append((WARN, 'temperature without a header stamp: timed by the node clock'))
+    if two_clocks:
+        reasons.append((WARN, two_clocks_text(temperature_stamp_offset_s)))
     if rest is not None and rest.residual_over_limit:
         reasons.append(
             (WARN, 'rest residual above rest_residual_limit_deg_h: not applied (moving?)')
@@ -98,6 +105,7 @@ def build_report(
         ('imu_rate_hz', _num(imu_rate_hz)),
         ('temperature_rate_hz', _num(temperature_rate_hz)),
         ('temperature_stale_after_s', _num(stale_after_s)),
+        ('temperature_stamp_offset_s', _num(temperature_stamp_offset_s)),
         ('denoise', method),
         ('temperature_reading_model', reading_model),
         ('filter_ready', str(status.estimator_ready)),
@@ -116,6 +124,15 @@ def build_report(
             ('rest_bias_file_state', rest_bias_file[1]),
         ]
     return Report(level, message, values)
+
+
+def two_clocks_text(offset_s: float) -> str:
+    """The warning for temperature stamped ``offset_s`` s from the gyro on arrival."""
+    side = 'ahead of' if offset_s > 0 else 'behind'
+    return (
+        f'temperature stamps {abs(offset_s):.1f} s {side} the gyro stamps on arrival: two '
+        "clocks? (align the drivers' clocks)"
+    )
 
 
 def _temperature_reasons(

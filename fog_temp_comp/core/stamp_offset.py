@@ -1,0 +1,65 @@
+"""Temperature stamps against the gyro's on arrival: two clocks, seen live.
+
+Gyro and temperature are aligned by header stamp. Where their drivers stamp with two clocks (a
+device's GPS time against the computer's UTC, 18 s apart; a clock set wrong) the alignment is
+off by the difference, and nothing in either stream shows it: a temperature stamped behind the
+gyro reads as stale at every gyro stamp, one stamped ahead as fresh but misaligned. Messages
+arrive close to when they were stamped, though, so a temperature that arrives while the gyro
+flows should carry a stamp near the gyro's latest. :class:`ArrivalOffsets` keeps the last few
+differences (temperature stamp minus the latest gyro stamp at its arrival, s); their median
+beyond :data:`CLOCK_MISMATCH_S` is two clocks (``calibrate``'s readers make the same check
+against a bag's receive times: :mod:`fog_temp_comp.bag.unstamped`).
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from collections import deque
+
+__all__ = ['CLOCK_MISMATCH_S', 'ArrivalOffsets']
+
+#: stamps of two streams whose offsets differ by more than this (s) are taken for two clocks;
+#: a driver's latency (ms to a second) and a gyro sample interval stay well below it
+CLOCK_MISMATCH_S = 5.0
+
+
+class ArrivalOffsets:
+    """The recent offsets of temperature stamps from the gyro's latest, on arrival (s).
+
+    Parameters
+    ----------
+    size : int
+        How many of the latest offsets the median is taken over.
+    least : int
+        How many it needs before it calls two clocks (one late message is not a clock).
+
+    """
+
+    def __init__(self, size: int = 15, least: int = 5) -> None:
+        self._recent: deque[float] = deque(maxlen=size)
+        self.least = least
+
+    def add(self, temperature_stamp_s: float, gyro_stamp_s: float) -> None:
+        """Note one temperature's stamp (s) against the latest gyro stamp (s) at its arrival.
+
+        Call it only while the gyro flows (a gyro message since the previous temperature):
+        otherwise the latest gyro stamp is old and says nothing about the clocks.
+        """
+        offset = temperature_stamp_s - gyro_stamp_s
+        if math.isfinite(offset):
+            self._recent.append(offset)
+
+    def reset(self) -> None:
+        """Forget the offsets (a time jump, a new configuration)."""
+        self._recent.clear()
+
+    @property
+    def median_s(self) -> float:
+        """Median of the recent offsets, s (NaN before any): positive, temperature ahead."""
+        return statistics.median(self._recent) if self._recent else math.nan
+
+    @property
+    def two_clocks(self) -> bool:
+        """True when at least ``least`` offsets have a median beyond :data:`CLOCK_MISMATCH_S`."""
+        return len(self._recent) >= self.least and abs(self.median_s) > CLOCK_MISMATCH_S
