@@ -6,15 +6,16 @@ off by the difference, and nothing in either stream shows it: a temperature stam
 gyro reads as stale at every gyro stamp, one stamped ahead as fresh but misaligned. Messages
 arrive close to when they were stamped, though, so a temperature that arrives while the gyro
 flows should carry a stamp near the gyro's latest. :class:`ArrivalOffsets` keeps the last few
-differences (temperature stamp minus the latest gyro stamp at its arrival, s); their median
-beyond :data:`CLOCK_MISMATCH_S` is two clocks (``calibrate``'s readers make the same check
-against a bag's receive times: :mod:`fog_temp_comp.bag.unstamped`).
+differences (temperature stamp minus the latest gyro stamp at its arrival, s). A driver's
+latency or batching makes some of them late, never all: the one nearest zero (the promptest
+message) estimates the clocks' difference, and beyond :data:`CLOCK_MISMATCH_S` it is two clocks
+(``calibrate``'s readers make the same check against a bag's receive times:
+:mod:`fog_temp_comp.bag.unstamped`).
 """
 
 from __future__ import annotations
 
 import math
-import statistics
 from collections import deque
 
 __all__ = ['CLOCK_MISMATCH_S', 'ArrivalOffsets']
@@ -30,7 +31,7 @@ class ArrivalOffsets:
     Parameters
     ----------
     size : int
-        How many of the latest offsets the median is taken over.
+        How many of the latest offsets are kept.
     least : int
         How many it needs before it calls two clocks (one late message is not a clock).
 
@@ -55,11 +56,11 @@ class ArrivalOffsets:
         self._recent.clear()
 
     @property
-    def median_s(self) -> float:
-        """Median of the recent offsets, s (NaN before any): positive, temperature ahead."""
-        return statistics.median(self._recent) if self._recent else math.nan
+    def offset_s(self) -> float:
+        """The recent offset nearest zero, s (NaN before any): positive, temperature ahead."""
+        return min(self._recent, key=abs) if self._recent else math.nan
 
     @property
     def two_clocks(self) -> bool:
-        """True when at least ``least`` offsets have a median beyond :data:`CLOCK_MISMATCH_S`."""
-        return len(self._recent) >= self.least and abs(self.median_s) > CLOCK_MISMATCH_S
+        """True when ``least`` offsets or more are all beyond :data:`CLOCK_MISMATCH_S`."""
+        return len(self._recent) >= self.least and abs(self.offset_s) > CLOCK_MISMATCH_S

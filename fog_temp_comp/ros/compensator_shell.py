@@ -270,7 +270,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             stale_after_s=self.compensator.stale_after_s,
             frame_mismatches=self.frame_mismatches,
             unstamped=self.unstamped,
-            temperature_stamp_offset_s=self._arrival.median_s,
+            temperature_stamp_offset_s=self._arrival.offset_s,
             two_clocks=self._arrival.two_clocks,
             require_frame_match=self._require_frame_match,
             rest=None if self.compensator.rest is None else self.compensator.rest.finish(),

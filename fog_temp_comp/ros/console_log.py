@@ -101,7 +101,7 @@ class ConsoleLogMixin(ParametersMixin):
             )
         if self._arrival.two_clocks:
             log.warning(
-                f'{topic}: {two_clocks_text(self._arrival.median_s)}: the correction is '
+                f'{topic}: {two_clocks_text(self._arrival.offset_s)}: the correction is '
                 'misaligned by that much (and stale beyond the stale time)',
                 throttle_duration_sec=every,
             )

@@ -76,8 +76,8 @@ def build_report(
     ``rest_bias_file`` is (path, what happened to it: loaded, refused and why, written, ...);
     ``stale_after_s`` the age (s) past which temperature is stale (the compensator's
     :attr:`~fog_temp_comp.core.compensator.Compensator.stale_after_s`);
-    ``temperature_stamp_offset_s`` the median of temperature stamps minus the gyro's latest
-    on arrival (s) and ``two_clocks`` whether it says two clocks
+    ``temperature_stamp_offset_s`` the recent temperature stamp minus the gyro's latest on
+    arrival nearest zero (s) and ``two_clocks`` whether it says two clocks
     (:class:`~fog_temp_comp.core.stamp_offset.ArrivalOffsets`).
     """
     counters = status.counters
