@@ -983,6 +983,22 @@ def test_calibrate_shows_progress_on_stderr(
     assert last.endswith(' s of data')
 
 
+def test_simulate_cli_power_on_heating(tmp_path: Path) -> None:
+    """``--power-on-heating-degC``: the run starts at the air and its sensor warms by that much."""
+    runs = {}
+    for heating in (0.0, 3.0):
+        out = tmp_path / f'sim{heating:g}'
+        argv = ['simulate', str(out), '--runs', 'soak:20', '--imu-hz', '1', '--seed', '4']
+        assert cli.main([*argv, '--power-on-heating-degC', str(heating)]) == 0
+        manifest = yaml.safe_load((out / 'manifest.yaml').read_text())
+        assert manifest['power_on_heating_degC'] == heating
+        runs[heating] = read_record(out / manifest['runs'][0]['bag'])
+    cold, warm = runs[0.0], runs[3.0]
+    assert abs(warm.temperature_degC[0] - cold.temperature_degC[0]) < 0.2  # at the air
+    # 2 h later, settled about 3 degC above the unpowered unit's sensor
+    assert warm.temperature_degC[-60:].mean() - cold.temperature_degC[-60:].mean() > 2.7
+
+
 def test_simulate_cli_turn_on_shift_and_rest_motion_phases(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -136,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
             runs=args.runs,
             vehicle={
                 'turn_on_shift_deg_h': args.turn_on_shift_deg_h,
+                'power_on_heating_degC': args.power_on_heating_degC,
                 'motion_period_s': args.motion_period_s,
                 'motion_fraction': args.motion_fraction,
                 'motion_rate_deg_s': args.motion_rate_deg_s,

@@ -203,6 +203,15 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         'default 0,0,0)',
     )
     g.add_argument(
+        '--power-on-heating-degC',
+        type=float,
+        default=0.0,
+        metavar='DT',
+        dest='power_on_heating_degC',
+        help="every run starts at power-on and the unit's own dissipation warms its housing "
+        'DT degC above the chamber air (default 0: the unit on and settled before each run)',
+    )
+    g.add_argument(
         '--motion-period-s',
         type=float,
         default=0.0,

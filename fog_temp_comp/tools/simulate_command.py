@@ -46,8 +46,9 @@ def simulate_command(
     """Write the paper's chamber runs as bags plus ``<run>.truth.npz`` and ``manifest.yaml``.
 
     ``vehicle`` overrides :class:`SimulationConfig` fields of the vehicle (turn-on shift in
-    deg/h, rest/motion phases); the truth files then hold ``turn_on_shift_deg_h`` and
-    ``true_rotation_rad_s`` too (the oracle: rate minus drift, shift and rotation is noise).
+    deg/h, power-on self-heating in degC, rest/motion phases); the truth files then hold
+    ``turn_on_shift_deg_h`` and ``true_rotation_rad_s`` too (the oracle: rate minus drift,
+    shift and rotation is noise).
     """
     # here, not at the top: the simulator needs scipy.signal (~1 s), no other command does
     from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
@@ -110,6 +111,7 @@ def _simulation_manifest(cfg: SimulationConfig, fmt: str, seed: int) -> dict[str
         },
         'coil_lag_s': float(cfg.coil_lag_s),
         'turn_on_shift_deg_h': dict(zip(AXES, map(float, cfg.turn_on_shift_deg_h), strict=True)),
+        'power_on_heating_degC': float(cfg.power_on_heating_degC),
         'motion_period_s': float(cfg.motion_period_s),
         'motion_fraction': float(cfg.motion_fraction),
         'motion_rate_deg_s': float(cfg.motion_rate_deg_s),
