@@ -152,17 +152,9 @@ def short_cycle(base: SimulationConfig, hours: float) -> tuple[SimulationConfig,
 
 def cut_run(run: SimulatedRun, duration_s: float) -> SimulatedRun:
     """The first ``duration_s`` seconds of ``run`` (a chamber run stopped early)."""
-    imu = run.imu_stamps_s < run.imu_stamps_s[0] + duration_s
-    temp = run.temp_stamps_s < run.temp_stamps_s[0] + duration_s
-    return dataclasses.replace(
-        run,
-        imu_stamps_s=run.imu_stamps_s[imu],
-        rates_rad_s=run.rates_rad_s[imu],
-        temp_stamps_s=run.temp_stamps_s[temp],
-        temperature_degC=run.temperature_degC[temp],
-        true_temperature_degC=run.true_temperature_degC[imu],
-        true_tdot_degC_per_min=run.true_tdot_degC_per_min[imu],
-        true_drift_deg_h=run.true_drift_deg_h[imu],
+    return run.select(
+        run.imu_stamps_s < run.imu_stamps_s[0] + duration_s,
+        run.temp_stamps_s < run.temp_stamps_s[0] + duration_s,
     )
 
 

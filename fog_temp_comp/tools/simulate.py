@@ -27,6 +27,7 @@ Physics (all documented units):
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -259,6 +260,21 @@ class SimulatedRun:
         """Error of a corrected rate (rad/s, (N, 3)) against the oracle: the vehicle's rotation."""
         out = np.asarray(corrected_rad_s, dtype=np.float64)
         return out if self.true_rotation_rad_s is None else out - self.true_rotation_rad_s
+
+    def select(self, imu: NDArray[np.bool_], temp: NDArray[np.bool_]) -> SimulatedRun:
+        """The run's gyro messages where ``imu`` (N,) is true, temperatures where ``temp`` (M,)."""
+        rotation = self.true_rotation_rad_s
+        return dataclasses.replace(
+            self,
+            imu_stamps_s=self.imu_stamps_s[imu],
+            rates_rad_s=self.rates_rad_s[imu],
+            temp_stamps_s=self.temp_stamps_s[temp],
+            temperature_degC=self.temperature_degC[temp],
+            true_temperature_degC=self.true_temperature_degC[imu],
+            true_tdot_degC_per_min=self.true_tdot_degC_per_min[imu],
+            true_drift_deg_h=self.true_drift_deg_h[imu],
+            true_rotation_rad_s=None if rotation is None else rotation[imu],
+        )
 
     def as_record(self, frame_id: str = 'imu_link') -> ChamberRecord:
         """The run as if read back from a bag (topics ``/imu/data_raw``, ``/imu/temperature``)."""
