@@ -135,3 +135,39 @@ def test_calibrate_by_receive_time_undoes_two_clocks(
         assert ('look like two clocks' in capsys.readouterr().err) == (label == 'by header')
     assert coeffs['by receive'] == coeffs['aligned']
     assert coeffs['by header'] != coeffs['aligned']  # what the warning is about
+
+
+@pytest.mark.parametrize('fmt', ['mcap', 'sqlite3', 'ros1'])
+def test_compensate_warns_of_two_clocks_and_undoes_them_by_receive_time(
+    fmt: str, run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Both compensate paths (MCAP blocks; AnyReader chunks): the warning, and the remedy.
+
+    Temperature stamped 18 s behind the gyro: by header stamp each gyro sample meets the
+    temperature of 18 s later, and the warning says so; ``--time-source receive`` gives the
+    aligned bag's output, whose headers it keeps.
+    """
+    aligned = write(tmp_path / name(fmt, 'aligned'), fmt, run)
+    apart = write(tmp_path / name(fmt, 'apart'), fmt, run, temp_clock_s=-18.0)
+    coeffs = tmp_path / 'c.yaml'
+    args = ['calibrate', str(aligned), '-o', str(coeffs), '--terms', 'const,T,Tdot', '--quiet']
+    assert cli.main(args) == 0
+    capsys.readouterr()
+    out = {}
+    for label, bag, extra in (
+        ('aligned', aligned, []),
+        ('by header', apart, []),
+        ('by receive', apart, ['--time-source', 'receive']),
+    ):
+        target = tmp_path / name(fmt, 'out_' + label.replace(' ', '_'))
+        argv = ['compensate', str(bag), '--coeffs', str(coeffs), '-o', str(target), *extra]
+        assert cli.main(argv) == 0
+        err = capsys.readouterr().err
+        assert ('look like two clocks' in err) == (label == 'by header'), err
+        out[label] = read_record(target, gyro_topic='/imu/data', temp_topic=TEMP)
+        capsys.readouterr()  # reading the output back warns of its two clocks too
+    np.testing.assert_allclose(
+        out['by receive'].rates_rad_s, out['aligned'].rates_rad_s, rtol=0, atol=1e-12
+    )
+    np.testing.assert_array_equal(out['by receive'].imu_stamps_s, out['aligned'].imu_stamps_s)
+    assert not np.allclose(out['by header'].rates_rad_s, out['aligned'].rates_rad_s, atol=1e-9)

@@ -35,11 +35,13 @@ _OFFSET_SAMPLES = 256
 class UnsetStamps:
     """Replace unset header stamps by receive times and count them per topic."""
 
-    def __init__(self) -> None:
+    def __init__(self, by_receive: bool = False) -> None:
         #: topic -> messages whose header stamp was unset and took their receive time
         self.counts: dict[str, int] = {}
         #: topic -> each chunk's median of header stamp minus receive time, s
         self.offsets: dict[str, list[float]] = {}
+        #: time every message by its receive time, not its header (``--time-source receive``)
+        self.by_receive = by_receive
 
     def note_offsets(self, topic: str, stamps_s: ArrayLike, receive_ns: ArrayLike) -> None:
         """Note the median of header stamp (s) minus receive time (ns) over one chunk."""
@@ -82,6 +84,22 @@ class UnsetStamps:
             raise ValueError(f'{stamps.size} stamps but {receive.size} receive times')
         self.counts[topic] = self.counts.get(topic, 0) + int(unset.sum())
         return np.where(unset, receive / NS_PER_S, stamps)
+
+    def timed(
+        self, topic: str, stamps_s: ArrayLike, receive_ns: ArrayLike, *, fill_unset: bool = True
+    ) -> NDArray[np.float64]:
+        """The stamps (s) the compensator gets for these messages (shape (n,)).
+
+        Their receive times (ns) with :attr:`by_receive`; else the header stamps, their offset
+        from the receive times noted (:meth:`note_offsets`), an unset one (0) taking its
+        receive time with ``fill_unset`` (an unset gyro stamp goes to the core as it is).
+        """
+        if self.by_receive:
+            return np.asarray(receive_ns, dtype=np.int64) / NS_PER_S
+        self.note_offsets(topic, stamps_s, receive_ns)
+        if fill_unset:
+            return self.fill(topic, stamps_s, receive_ns)
+        return np.asarray(stamps_s, dtype=np.float64)
 
     def warn(
         self,

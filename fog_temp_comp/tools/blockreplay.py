@@ -106,7 +106,8 @@ def replay_mcap(
 ) -> int:
     """Compensate ``mcap`` into ``writer`` (topics registered already); corrected Imu written.
 
-    Unset header stamps (0) take the receive time, counted in ``unstamped``.
+    Unset header stamps (0) take the receive time, counted in ``unstamped`` (which also notes
+    the stamps' offsets from the receive times, or times every message by its receive time).
 
     Raises
     ------
@@ -208,7 +209,8 @@ def _compensate(
         imu = cdr.decode_imu_rates_cdr(spans[imu_topic])
         # an unset gyro stamp goes to the compensator as it is (the node does the same: the
         # core corrects it with the current correction and counts it)
-        stamps, rates = imu.stamps_s, imu.angular_velocity_rad_s
+        stamps = unstamped.timed(imu_topic, imu.stamps_s, logs[imu_topic], fill_unset=False)
+        rates = imu.angular_velocity_rad_s
     else:
         stamps, rates = np.empty(0), np.empty((0, 3))
     # Imu before each temperature, in the merged order
@@ -217,6 +219,6 @@ def _compensate(
     temp_stamps, temps = np.empty(0), np.empty(0)
     if before.size:
         temp = cdr.decode_temperature_cdr(spans[temp_topic])
-        temp_stamps = unstamped.fill(temp_topic, temp.stamps_s, logs[temp_topic])
+        temp_stamps = unstamped.timed(temp_topic, temp.stamps_s, logs[temp_topic])
         temps = temp.temperature_degC
     return compensator.correct_interleaved(stamps, rates, temp_stamps, temps, before)

@@ -72,12 +72,16 @@ class ChunkReplayer:
         accel = imu_batch.linear_acceleration if imu and self.with_accel else None
         # an unset temperature stamp takes the receive time (as the node takes its clock); an
         # unset gyro stamp goes to the compensator as it is (as on the node)
-        imu_stamps = imu_batch.stamps_s if imu else np.empty(0)
+        timed = self.unstamped.timed
+        imu_logs = [chunk[k][1] for k in imu]
+        imu_stamps = (
+            timed(self.imu_topic, imu_batch.stamps_s, imu_logs, fill_unset=False)
+            if imu
+            else np.empty(0)
+        )
         temp_logs = [chunk[k][1] for k in temp]
         temp_stamps = (
-            self.unstamped.fill(self.temp_topic, temp_batch.stamps_s, temp_logs)
-            if temp
-            else np.empty(0)
+            timed(self.temp_topic, temp_batch.stamps_s, temp_logs) if temp else np.empty(0)
         )
         temps = temp_batch.temperature_degC if temp else np.empty(0)
         # how many Imu (in chunk order) come before each temperature

@@ -162,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
             rest=_rest(args),
             rest_bias_in=args.rest_bias_in,
             rest_bias_out=args.rest_bias_out,
+            time_source=args.time_source,
         )
     if args.command == 'evaluate':
         return commands.evaluate_command(

@@ -284,12 +284,7 @@ def _add_calibrate_input(g: argparse._ArgumentGroup) -> None:
         help='read temperature (degC) from this field (a.b.c) of --temp-topic, '
         'a message of any type',
     )
-    g.add_argument(
-        '--time-source',
-        choices=TIME_SOURCES,
-        default='header',
-        help='align gyro and temperature by header stamp (default) or receive time',
-    )
+    _add_time_source(g)
     g.add_argument('--quiet', action='store_true', help='no progress line on stderr')
     _add_strict(g)
     g.add_argument(
@@ -401,6 +396,16 @@ def _add_calibrate_selection(g: argparse._ArgumentGroup) -> None:
     _add_guard(g)
 
 
+def _add_time_source(p: Any) -> None:
+    """``--time-source``: header stamps (default) or receive times (drivers on two clocks)."""
+    p.add_argument(
+        '--time-source',
+        choices=TIME_SOURCES,
+        default='header',
+        help='align gyro and temperature by header stamp (default) or receive time',
+    )
+
+
 def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The ``compensate`` command."""
     p = sub.add_parser('compensate', help='replay a bag through the compensator')
@@ -414,6 +419,7 @@ def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         metavar='T',
         help='topic of the corrected Imu (default /imu/data)',
     )
+    _add_time_source(p)
     _add_denoise(p, None)
     _add_guard(p)
     _add_strict(p)

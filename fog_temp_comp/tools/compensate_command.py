@@ -54,6 +54,7 @@ def compensate_command(
     rest: RestSettings | None = None,
     rest_bias_in: Path | None = None,
     rest_bias_out: Path | None = None,
+    time_source: str = 'header',
     stdout: TextIO | None = None,
     fast: bool = True,
 ) -> int:
@@ -67,7 +68,9 @@ def compensate_command(
     Imu's accelerometer (through ``AnyReader``: the MCAP block path decodes rates only); it
     starts from the learned-bias file ``rest_bias_in`` (refused with an error if learned with
     other coefficients) and writes what it learned to ``rest_bias_out``
-    (:mod:`~fog_temp_comp.core.restfile`, as the node's ``rest_bias_file``).
+    (:mod:`~fog_temp_comp.core.restfile`, as the node's ``rest_bias_file``). ``time_source``
+    ``'receive'`` times gyro and temperature by their receive times, not their header stamps
+    (drivers on two clocks, which the default warns about); the output keeps the headers.
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
@@ -92,6 +95,7 @@ def compensate_command(
         topics=(gyro_topic, temp_topic, output_topic),
         new_compensator=new_compensator,
         fast=fast,
+        by_receive=time_source == 'receive',
     )
     (n_out, counters), compensator = _replay_atomically(run, in_bag, out_bag, strict)
     print(
@@ -170,6 +174,8 @@ class _Compensate:
     topics: tuple[str | None, str | None, str]  # gyro, temperature, output
     new_compensator: Callable[[], Compensator]
     fast: bool
+    #: gyro and temperature timed by receive time (``--time-source receive``)
+    by_receive: bool = False
 
     def into(
         self, target: Path, source: Path, salvage: Salvage | None
@@ -204,7 +210,9 @@ class _Compensate:
                 ),
                 output_topic=output_topic,
                 compress=self.fmt == 'mcap' and _compressed_mcap(source),
+                unstamped=UnsetStamps(self.by_receive),
             )
+            topics = (job.imu_name, job.temp_name)
             if output_topic in reader.topics:
                 raise BagError(
                     f'--output-topic {output_topic}: already in {self.in_bag}; choose another'
@@ -216,15 +224,15 @@ class _Compensate:
             if mcap is not None:
                 try:
                     result = job.run(compensator, mcap=mcap)
-                    job.unstamped.warn(self.in_bag)
+                    job.unstamped.warn(self.in_bag, topics=topics)
                     return result, compensator
                 except (blockreplay.UnsupportedError, ValueError):
                     remove_bag(target)  # the per-message path decides (and words any error)
                     compensator = self.new_compensator()
                     compensator.mark_holes(holes)
-                    job.unstamped = UnsetStamps()
+                    job.unstamped = UnsetStamps(self.by_receive)
             result = job.run(compensator, batched=self.fast)
-            job.unstamped.warn(self.in_bag)
+            job.unstamped.warn(self.in_bag, topics=topics)
             return result, compensator
 
 
