@@ -171,3 +171,27 @@ def test_compensate_warns_of_two_clocks_and_undoes_them_by_receive_time(
     )
     np.testing.assert_array_equal(out['by receive'].imu_stamps_s, out['aligned'].imu_stamps_s)
     assert not np.allclose(out['by header'].rates_rad_s, out['aligned'].rates_rad_s, atol=1e-9)
+
+
+def test_evaluate_by_receive_time_undoes_two_clocks(
+    run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    aligned = write(tmp_path / 'aligned', 'mcap', run)
+    apart = write(tmp_path / 'apart', 'mcap', run, temp_clock_s=-18.0)
+    coeffs = tmp_path / 'c.yaml'
+    args = ['calibrate', str(aligned), '-o', str(coeffs), '--terms', 'const,T,Tdot', '--quiet']
+    assert cli.main(args) == 0
+    capsys.readouterr()
+    tables = {}
+    for label, bag, extra in (
+        ('aligned', aligned, []),
+        ('by header', apart, []),
+        ('by receive', apart, ['--time-source', 'receive']),
+    ):
+        assert cli.main(['evaluate', str(bag), '--coeffs', str(coeffs), *extra]) == 0
+        captured = capsys.readouterr()
+        assert ('look like two clocks' in captured.err) == (label == 'by header')
+        # the bag's name is in the table (and sets its column widths)
+        tables[label] = captured.out.replace('apart', 'aligned').split()
+    assert tables['by receive'] == tables['aligned']
+    assert tables['by header'] != tables['aligned']

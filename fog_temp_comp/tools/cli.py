@@ -173,6 +173,7 @@ def run(args: argparse.Namespace) -> int:
             denoise_method=args.denoise,
             guard=_guard(args),
             strict=args.strict,
+            time_source=args.time_source,
         )
     from fog_temp_comp.tools.demo import demo_command
 

@@ -432,6 +432,7 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
     p.add_argument('--coeffs', type=Path, required=True, metavar='COEFFS.yaml')
     _add_topics(p)
+    _add_time_source(p)
     _add_denoise(p, None)
     _add_guard(p)
     _add_strict(p)

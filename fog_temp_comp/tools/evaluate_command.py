@@ -29,9 +29,14 @@ def evaluate_command(
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
     strict: bool = False,
+    time_source: str = 'header',
     stdout: TextIO | None = None,
 ) -> int:
-    """Print stability and range before/after compensation for each bag and axis."""
+    """Print stability and range before/after compensation for each bag and axis.
+
+    ``time_source`` ``'receive'`` times gyro and temperature by the bag's receive times
+    (drivers on two clocks), as ``calibrate --time-source receive``.
+    """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
     scores = []
@@ -44,6 +49,7 @@ def evaluate_command(
             temp_topic=temp_topic,
             strict=strict,
             on_salvage=salvaged.add,
+            time_source=time_source,
         )
         corrected, status = replay_record(
             record, coeffs, effective_settings(coeffs, denoise_method), guard
