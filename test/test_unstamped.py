@@ -137,6 +137,26 @@ def test_calibrate_by_receive_time_undoes_two_clocks(
     assert coeffs['by header'] != coeffs['aligned']  # what the warning is about
 
 
+def two_clock_cases(
+    tmp_path: Path, fmt: str, run: SimulatedRun
+) -> tuple[Path, list[tuple[str, Path, list[str]]]]:
+    """Coefficients fitted on the aligned bag, and (label, bag, extra arguments) to replay.
+
+    The aligned bag; the same with the temperature stamped 18 s behind, by header; by receive.
+    """
+    aligned = write(tmp_path / name(fmt, 'aligned'), fmt, run)
+    apart = write(tmp_path / name(fmt, 'apart'), fmt, run, temp_clock_s=-18.0)
+    coeffs = tmp_path / 'c.yaml'
+    args = ['calibrate', str(aligned), '-o', str(coeffs), '--terms', 'const,T,Tdot', '--quiet']
+    assert cli.main(args) == 0
+    cases = [
+        ('aligned', aligned, []),
+        ('by header', apart, []),
+        ('by receive', apart, ['--time-source', 'receive']),
+    ]
+    return coeffs, cases
+
+
 @pytest.mark.parametrize('fmt', ['mcap', 'sqlite3', 'ros1'])
 def test_compensate_warns_of_two_clocks_and_undoes_them_by_receive_time(
     fmt: str, run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
@@ -147,18 +167,10 @@ def test_compensate_warns_of_two_clocks_and_undoes_them_by_receive_time(
     temperature of 18 s later, and the warning says so; ``--time-source receive`` gives the
     aligned bag's output, whose headers it keeps.
     """
-    aligned = write(tmp_path / name(fmt, 'aligned'), fmt, run)
-    apart = write(tmp_path / name(fmt, 'apart'), fmt, run, temp_clock_s=-18.0)
-    coeffs = tmp_path / 'c.yaml'
-    args = ['calibrate', str(aligned), '-o', str(coeffs), '--terms', 'const,T,Tdot', '--quiet']
-    assert cli.main(args) == 0
+    coeffs, cases = two_clock_cases(tmp_path, fmt, run)
     capsys.readouterr()
     out = {}
-    for label, bag, extra in (
-        ('aligned', aligned, []),
-        ('by header', apart, []),
-        ('by receive', apart, ['--time-source', 'receive']),
-    ):
+    for label, bag, extra in cases:
         target = tmp_path / name(fmt, 'out_' + label.replace(' ', '_'))
         argv = ['compensate', str(bag), '--coeffs', str(coeffs), '-o', str(target), *extra]
         assert cli.main(argv) == 0
@@ -176,18 +188,10 @@ def test_compensate_warns_of_two_clocks_and_undoes_them_by_receive_time(
 def test_evaluate_by_receive_time_undoes_two_clocks(
     run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    aligned = write(tmp_path / 'aligned', 'mcap', run)
-    apart = write(tmp_path / 'apart', 'mcap', run, temp_clock_s=-18.0)
-    coeffs = tmp_path / 'c.yaml'
-    args = ['calibrate', str(aligned), '-o', str(coeffs), '--terms', 'const,T,Tdot', '--quiet']
-    assert cli.main(args) == 0
+    coeffs, cases = two_clock_cases(tmp_path, 'mcap', run)
     capsys.readouterr()
     tables = {}
-    for label, bag, extra in (
-        ('aligned', aligned, []),
-        ('by header', apart, []),
-        ('by receive', apart, ['--time-source', 'receive']),
-    ):
+    for label, bag, extra in cases:
         assert cli.main(['evaluate', str(bag), '--coeffs', str(coeffs), *extra]) == 0
         captured = capsys.readouterr()
         assert ('look like two clocks' in captured.err) == (label == 'by header')
