@@ -156,8 +156,9 @@ def test_executor_parameter(ros_context: object, coeffs_file: Path, name: str) -
 
 def test_gyro_input_queue_is_deep_and_overridable(ros_context: object, coeffs_file: Path) -> None:
     """Best effort like sensor data, but 100 deep (a lost gyro sample is lost to the INS)."""
-    from rclpy.qos import ReliabilityPolicy
+    from rclpy.qos import ReliabilityPolicy, qos_profile_sensor_data
 
+    from fog_temp_comp.ros.compensator_shell import IMU_INPUT_QOS
     from fog_temp_comp.ros.node import IMU_INPUT_DEPTH
 
     overrides = [Parameter('coefficients_file', value=str(coeffs_file))]
@@ -173,6 +174,15 @@ def test_gyro_input_queue_is_deep_and_overridable(ros_context: object, coeffs_fi
     node = CompensatorNode(context=ros_context, parameter_overrides=overrides)
     try:
         assert node._imu_sub.qos_profile.depth == 1000
+    finally:
+        node.destroy_node()
+    # the override stays with that node: rclpy applies it to the profile it is given, in place,
+    # so a shared profile would carry it into the next node of the process (and rclpy's own
+    # qos_profile_sensor_data into everyone's)
+    node = CompensatorNode(context=ros_context, parameter_overrides=overrides[:1])
+    try:
+        assert node._imu_sub.qos_profile.depth == 100
+        assert qos_profile_sensor_data.depth == 5 and IMU_INPUT_QOS.depth == 100
     finally:
         node.destroy_node()
 

@@ -302,6 +302,27 @@ def test_temperature_stamped_by_another_clock_is_reported(
     assert float(values['temperature_stamp_offset_s']) == pytest.approx(offset_s + 0.5)
 
 
+def test_time_source_receive_times_both_by_the_node_clock(
+    ros_context: object, coeffs_file: Path, coefficients: Coefficients
+) -> None:
+    """``time_source: receive``: a temperature stamped 18 s behind is fresh, and one clock."""
+    h = Harness(ros_context, start(ros_context, coeffs_file, time_source='receive'))
+    try:
+        for k in range(8):
+            out = h.send_imu(T0 + k, RATE)
+            h.send_temperature(T0 + k + 0.5 - 18.0, 25.0)
+        out = h.send_imu(T0 + 8, RATE)
+        assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0))
+        assert stamp_of(out) == pytest.approx(T0 + 8, abs=1e-9)  # the header is kept
+        status = h.diagnose()
+        assert 'two clocks' not in status.message and 'stale' not in status.message
+        assert abs(float(diag_values(status)['temperature_stamp_offset_s'])) < 1.0
+    finally:
+        h.close()
+    with pytest.raises(Exception, match='time_source'):
+        start(ros_context, coeffs_file, time_source='gps')
+
+
 def test_temperature_on_the_gyros_clock_is_not_taken_for_two_clocks(harness: Harness) -> None:
     """A 1 Hz temperature among 10 Hz gyro messages, up to 0.9 s apart: one clock."""
     for k in range(100):

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Sequence
+from copy import copy
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -36,7 +37,10 @@ from fog_temp_comp.ros.node_parameters import FILTER_PARAMETERS, GUARD_PARAMETER
 from fog_temp_comp.ros.params import ParameterError, params_files, unknown_warnings
 from fog_temp_comp.ros.spin import EXECUTORS
 
-__all__ = ['IMU_INPUT_DEPTH', 'IMU_INPUT_QOS', 'CompensatorShell']
+__all__ = ['IMU_INPUT_DEPTH', 'IMU_INPUT_QOS', 'TIME_SOURCES', 'CompensatorShell']
+
+#: what the messages are timed by: their header stamps, or the node clock on arrival
+TIME_SOURCES = ('header', 'receive')
 
 #: history depth of the gyro subscription: 50 ms at 2 kHz. A dropped gyro sample is lost to the
 #: attitude integration downstream, so the queue rides out scheduling hiccups (a GC pause, a
@@ -68,6 +72,13 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             raise ParameterError(
                 f'parameter executor: expected one of {EXECUTORS}, got {executor!r}'
             )
+        time_source = self.get_parameter('time_source').value
+        if time_source not in TIME_SOURCES:
+            raise ParameterError(
+                f'parameter time_source: expected one of {TIME_SOURCES}, got {time_source!r}'
+            )
+        #: messages timed by the node clock on arrival, not their header stamps
+        self._by_receive = time_source == 'receive'
         for line in unknown_warnings(self._given_parameters(), self._parameters):
             self.get_logger().warning(line)
         self._forget_compensator()
@@ -115,21 +126,23 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         lifecycle node is inactive.
         """
         qos_options = QoSOverridingOptions.with_default_policies()
+        # copies: rclpy applies a qos_overrides parameter to the profile it is given, in place,
+        # which would carry one node's override into every later node of the process
         self._publisher = self._create_output(
-            Imu, 'imu/data', qos_profile_sensor_data, qos_overriding_options=qos_options
+            Imu, 'imu/data', copy(qos_profile_sensor_data), qos_overriding_options=qos_options
         )
         self._imu_sub = self.create_subscription(
             Imu,
             'imu/data_raw',
             self._on_imu,
-            IMU_INPUT_QOS,
+            copy(IMU_INPUT_QOS),
             qos_overriding_options=qos_options,
         )
         self._temp_sub = self.create_subscription(
             Temperature,
             'imu/temperature',
             self._on_temperature,
-            qos_profile_sensor_data,
+            copy(qos_profile_sensor_data),
             qos_overriding_options=qos_options,
         )
         self._rest_sub = None
@@ -199,8 +212,11 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_temperature(self, msg: Temperature) -> None:
-        stamp = msg.header.stamp
-        stamp_s = stamp.sec + stamp.nanosec * 1e-9 or self._unset_stamp_s()
+        if self._by_receive:
+            stamp_s = self.get_clock().now().nanoseconds * 1e-9
+        else:
+            stamp = msg.header.stamp
+            stamp_s = stamp.sec + stamp.nanosec * 1e-9 or self._unset_stamp_s()
         status = self.compensator.status
         was_ready = status.estimator_ready
         if self.compensator.add_temperature(stamp_s, msg.temperature):
@@ -227,7 +243,10 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
                 self._publisher.publish(msg)
                 return
         compensator = self.compensator
-        stamp_s = stamp.sec + stamp.nanosec * 1e-9  # 0: the core's current correction
+        if self._by_receive:
+            stamp_s = self.get_clock().now().nanoseconds * 1e-9
+        else:
+            stamp_s = stamp.sec + stamp.nanosec * 1e-9  # 0: the core's current correction
         if compensator.rest is None:
             rate = compensator.correct_xyz(stamp_s, w.x, w.y, w.z)
         else:

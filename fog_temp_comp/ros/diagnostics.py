@@ -131,7 +131,7 @@ def two_clocks_text(offset_s: float) -> str:
     side = 'ahead of' if offset_s > 0 else 'behind'
     return (
         f'temperature stamps {abs(offset_s):.1f} s {side} the gyro stamps on arrival: two '
-        "clocks? (align the drivers' clocks)"
+        "clocks? (align the drivers' clocks, or time_source receive)"
     )
 
 

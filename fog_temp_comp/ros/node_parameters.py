@@ -339,6 +339,16 @@ class ParametersMixin(_NodeBase):
             ),
         )
         self._declare(
+            'time_source',
+            'header',
+            ParameterDescriptor(
+                description="time gyro and temperature by their 'header' stamps, or by the "
+                "node clock on arrival ('receive': drivers stamping with two clocks)",
+                read_only=True,
+                additional_constraints="one of 'header', 'receive'",
+            ),
+        )
+        self._declare(
             'executor',
             'auto',
             ParameterDescriptor(
