@@ -52,7 +52,7 @@ class ArrivalOffsets:
             self._recent.append(offset)
 
     def reset(self) -> None:
-        """Forget the offsets (a time jump, a new configuration)."""
+        """Forget the offsets."""
         self._recent.clear()
 
     @property
