@@ -41,7 +41,6 @@ from fog_temp_comp.bag.bagio import (
 )
 from fog_temp_comp.bag.mcapbatches import ScanStats
 from fog_temp_comp.bag.mcapstream import _McapReading
-from fog_temp_comp.bag.names import TIME_SOURCES
 from fog_temp_comp.bag.progress import Progress
 from fog_temp_comp.bag.ros1scan import Ros1Bag
 from fog_temp_comp.bag.ros1stream import _Ros1Reading
@@ -52,6 +51,7 @@ from fog_temp_comp.bag.streamchunk import Chunk, FloatArray, StampOrder
 from fog_temp_comp.bag.streamdecode import _decoder, get_field
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.stamp_offset import TIME_SOURCES
 
 __all__ = [
     'BagStream',

@@ -2,7 +2,8 @@
 
 Plain numpy, scipy, PyWavelets and PyYAML; no ROS, no bag library.
 
-- units and data: ``units``, ``names``, ``record`` (a run as arrays), ``grid`` (10 s means);
+- units and data: ``units``, ``names``, ``record`` (a run as arrays), ``grid`` (10 s means),
+  ``stamp_offset`` (time sources; two clocks);
 - the drift model: ``model`` (terms), ``coefficients`` (the YAML), ``earth``;
 - Tdot estimation: ``tdot`` (``make_estimator``) on ``tdot_estimate`` (the interface),
   ``tdot_kalman``, ``tdot_grid`` and ``tdot_following`` (coil lag, shrinkage, ``Tdot_lag``),

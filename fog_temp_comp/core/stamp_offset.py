@@ -18,7 +18,11 @@ from __future__ import annotations
 import math
 from collections import deque
 
-__all__ = ['CLOCK_MISMATCH_S', 'ArrivalOffsets']
+__all__ = ['CLOCK_MISMATCH_S', 'TIME_SOURCES', 'ArrivalOffsets']
+
+#: what gyro and temperature are timed by: their header stamps, or when they were received (the
+#: bag's receive times offline, the node clock on arrival live)
+TIME_SOURCES: tuple[str, ...] = ('header', 'receive')
 
 #: stamps of two streams whose offsets differ by more than this (s) are taken for two clocks;
 #: a driver's latency (ms to a second) and a gyro sample interval stay well below it

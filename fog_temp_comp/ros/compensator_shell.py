@@ -28,7 +28,7 @@ from std_srvs.srv import Trigger
 
 from fog_temp_comp.core.coefficients import CoefficientsError
 from fog_temp_comp.core.compensator import Compensator
-from fog_temp_comp.core.stamp_offset import ArrivalOffsets
+from fog_temp_comp.core.stamp_offset import TIME_SOURCES, ArrivalOffsets
 from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.bias_learning import BiasLearningMixin
 from fog_temp_comp.ros.console_log import ConsoleLogMixin
@@ -37,10 +37,7 @@ from fog_temp_comp.ros.node_parameters import FILTER_PARAMETERS, GUARD_PARAMETER
 from fog_temp_comp.ros.params import ParameterError, params_files, unknown_warnings
 from fog_temp_comp.ros.spin import EXECUTORS
 
-__all__ = ['IMU_INPUT_DEPTH', 'IMU_INPUT_QOS', 'TIME_SOURCES', 'CompensatorShell']
-
-#: what the messages are timed by: their header stamps, or the node clock on arrival
-TIME_SOURCES = ('header', 'receive')
+__all__ = ['IMU_INPUT_DEPTH', 'IMU_INPUT_QOS', 'CompensatorShell']
 
 #: history depth of the gyro subscription: 50 ms at 2 kHz. A dropped gyro sample is lost to the
 #: attitude integration downstream, so the queue rides out scheduling hiccups (a GC pause, a
@@ -209,11 +206,15 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         and counts it.)
         """
         self.unstamped += 1
+        return self._now_s()
+
+    def _now_s(self) -> float:
+        """The node clock's time, s."""
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_temperature(self, msg: Temperature) -> None:
         if self._by_receive:
-            stamp_s = self.get_clock().now().nanoseconds * 1e-9
+            stamp_s = self._now_s()
         else:
             stamp = msg.header.stamp
             stamp_s = stamp.sec + stamp.nanosec * 1e-9 or self._unset_stamp_s()
@@ -243,10 +244,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
                 self._publisher.publish(msg)
                 return
         compensator = self.compensator
-        if self._by_receive:
-            stamp_s = self.get_clock().now().nanoseconds * 1e-9
-        else:
-            stamp_s = stamp.sec + stamp.nanosec * 1e-9  # 0: the core's current correction
+        # a header stamp of 0 gets the core's current correction
+        stamp_s = self._now_s() if self._by_receive else stamp.sec + stamp.nanosec * 1e-9
         if compensator.rest is None:
             rate = compensator.correct_xyz(stamp_s, w.x, w.y, w.z)
         else:

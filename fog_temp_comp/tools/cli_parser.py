@@ -14,8 +14,9 @@ from pathlib import Path
 from typing import Any
 
 from fog_temp_comp import __version__
-from fog_temp_comp.bag.names import FORMATS, TIME_SOURCES
+from fog_temp_comp.bag.names import FORMATS
 from fog_temp_comp.core.names import METHODS, TDOT_LIMIT_DEGC_PER_MIN, TERM_NAMES
+from fog_temp_comp.core.stamp_offset import TIME_SOURCES
 
 __all__ = ['build_parser']
 
