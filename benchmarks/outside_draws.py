@@ -27,6 +27,9 @@ changes one thing beyond those ranges:
 - ``power_on``: every run, the training run included, starts at power-on and the unit's own
   dissipation warms its housing 5 degC above the air through the housing lag
   (``power_on_heating_degC``); the study's runs start with the unit settled;
+- ``axis_lags``: three coils at three places, one sensor: x is the plant's coil, y and z
+  follow it through further lags of 150 and 400 s (``axis_coil_lags_s``), so a sensor behind
+  x's coil can be ahead of z's; the study's axes share one coil;
 
 three defects of recorded data (the simulated runs changed after the fact):
 
@@ -87,10 +90,14 @@ VARIANTS = (
     'held_slow',
     'on_change',
     'power_on',
+    'axis_lags',
 )
 
 #: the ``power_on`` variant's self-heating, degC above the chamber air
 POWER_ON_HEATING_DEGC = 5.0
+
+#: the ``axis_lags`` variant's further lag of each axis's coil behind the plant's coil, s
+AXIS_COIL_LAGS_S = (0.0, 150.0, 400.0)
 
 #: republished temperature: (the sensor's own rate, the rate its last value is published at), Hz
 HELD = {'held_temp': (1.0, 10.0), 'held_slow': (0.1, 1.0)}
@@ -113,6 +120,7 @@ def variant(name: str, cfg: SimulationConfig) -> SimulationConfig:
         'held_temp': {'temp_hz': HELD['held_temp'][0], 'imu_hz': 10.0},
         'held_slow': {'temp_hz': HELD['held_slow'][0]},
         'power_on': {'power_on_heating_degC': POWER_ON_HEATING_DEGC},
+        'axis_lags': {'axis_coil_lags_s': AXIS_COIL_LAGS_S},
     }.get(name, {})
     return dataclasses.replace(cfg, **changes)  # type: ignore[arg-type]
 

@@ -116,6 +116,34 @@ def test_power_on_heating_warms_the_housing_from_equilibrium() -> None:
     assert np.ptp(warm.true_drift_deg_h[:, 0]) > np.ptp(cold.true_drift_deg_h[:, 0]) + 0.5
 
 
+def test_each_axis_coil_follows_the_coil_through_its_own_lag() -> None:
+    """axis_coil_lags_s: axis x keeps the coil, y and z read it through their own lags."""
+    base = dataclasses.replace(SHORT_CHAMBER, lag_s=300.0, coil_lag_s=100.0)
+    lagged = dataclasses.replace(base, axis_coil_lags_s=(0.0, 150.0, 400.0))
+    plain = simulate_run('cycle', 1.0, base, seed=4)
+    run = simulate_run('cycle', 1.0, lagged, seed=4)
+    # the sensor, the reference coil, the noise and axis x are those of the plain plant
+    assert_array_equal(run.temperature_degC, plain.temperature_degC)
+    assert_array_equal(run.true_temperature_degC, plain.true_temperature_degC)
+    assert_array_equal(run.true_drift_deg_h[:, 0], plain.true_drift_deg_h[:, 0])
+    assert_array_equal(run.rates_rad_s[:, 0], plain.rates_rad_s[:, 0])
+    model = true_model(lagged)
+    grid = np.arange(0.0, run.imu_stamps_s[-1] - run.imu_stamps_s[0] + 2.0)
+    coil = np.interp(grid, run.imu_stamps_s - run.imu_stamps_s[0], run.true_temperature_degC)
+    for axis, tau in ((1, 150.0), (2, 400.0)):
+        axis_t, axis_tdot = first_order_lag(coil, 1.0, tau)
+        t = np.interp(run.imu_stamps_s - run.imu_stamps_s[0], grid, axis_t)
+        r = np.interp(run.imu_stamps_s - run.imu_stamps_s[0], grid, axis_tdot)
+        # the coil resampled from the gyro stamps: within 0.05 deg/h of the exact path
+        assert_allclose(run.true_drift_deg_h[:, axis], model.drift_deg_h(t, r)[:, axis], atol=0.05)
+        # and not the reference coil's drift (4x the tolerance above apart)
+        assert np.ptp(run.true_drift_deg_h[:, axis] - plain.true_drift_deg_h[:, axis]) > 0.2
+    with pytest.raises(ValueError, match='axis_coil_lags_s'):
+        dataclasses.replace(SHORT_CHAMBER, axis_coil_lags_s=(0.0, -1.0, 0.0))
+    with pytest.raises(ValueError, match='axis_coil_lags_s'):
+        dataclasses.replace(SHORT_CHAMBER, axis_coil_lags_s=(0.0, 1.0))
+
+
 def test_chamber_controller_overshoots_ramp_ends() -> None:
     cfg = dataclasses.replace(SHORT_CHAMBER, chamber_period_s=900.0, chamber_damping=0.4)
     bp_t, bp_x = chamber_profile('cycle', 1.0, cfg)

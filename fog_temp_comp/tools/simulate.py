@@ -112,6 +112,11 @@ class SimulationConfig:
         Differential nonlinearity of the temperature sensor's quantizer, in steps (0 to < 1):
         each boundary between two readings is displaced by a fixed amount, uniform within
         +-half this, the same on every run (an ADC's uneven codes); 0 means ideal steps.
+    axis_coil_lags_s : tuple of 3 float
+        Per axis (x, y, z), the time constant of a further first-order lag from the coil
+        above to that axis's own coil, s: three coils at three places, one temperature sensor
+        (0: the axis's coil is that coil). A sensor behind the coil can so be ahead of another
+        axis's coil.
 
     """
 
@@ -148,6 +153,7 @@ class SimulationConfig:
     temp_noise_correlation_s: float = 0.0
     temp_step_nonlinearity: float = 0.0
     power_on_heating_degC: float = 0.0
+    axis_coil_lags_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         for name in ('imu_hz', 'temp_hz', 'lag_s', 'soak_duration_s'):
@@ -175,11 +181,18 @@ class SimulationConfig:
             raise ValueError(f'chamber_damping must be > 0, got {self.chamber_damping}')
         if not 0.0 <= self.motion_fraction <= 1.0:
             raise ValueError(f'motion_fraction must be within [0, 1], got {self.motion_fraction}')
-        for name in ('t2_coefficients', 't_tdot_coefficients', 'turn_on_shift_deg_h'):
+        for name in (
+            't2_coefficients',
+            't_tdot_coefficients',
+            'turn_on_shift_deg_h',
+            'axis_coil_lags_s',
+        ):
             value = tuple(float(v) for v in getattr(self, name))
             if len(value) != 3 or not all(np.isfinite(value)):
                 raise ValueError(f'{name} must be 3 finite numbers (x, y, z), got {value}')
             object.__setattr__(self, name, value)
+        if min(self.axis_coil_lags_s) < 0:
+            raise ValueError(f'axis_coil_lags_s must be >= 0, got {self.axis_coil_lags_s}')
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -425,7 +438,7 @@ def simulate_run(
     t_imu = np.arange(n_imu) / cfg.imu_hz
     true_t = np.interp(t_imu, t_grid, coil_t)
     true_tdot = np.interp(t_imu, t_grid, coil_tdot)
-    drift = true_model(cfg).drift_deg_h(true_t, true_tdot)  # (N, 3) deg/h
+    drift = _drift_deg_h(cfg, t_imu, t_grid, coil_t, true_t, true_tdot)
 
     sigma_white = cfg.arw_10s_deg_h * np.sqrt(10.0 * cfg.imu_hz)  # per-sample std, deg/h
     white = rng.normal(0.0, sigma_white, size=(n_imu, 3))
@@ -466,6 +479,31 @@ def simulate_run(
         turn_on_shift_deg_h=shift,
         true_rotation_rad_s=rotation,
     )
+
+
+def _drift_deg_h(
+    cfg: SimulationConfig,
+    t_imu: FloatArray,
+    t_grid: FloatArray,
+    coil_t: FloatArray,
+    true_t: FloatArray,
+    true_tdot: FloatArray,
+) -> FloatArray:
+    """The temperature drift at the gyro stamps, (N, 3) deg/h.
+
+    Each axis's coil follows the reference coil (``coil_t`` on the 1 s grid, degC; ``true_t``
+    and ``true_tdot`` at the gyro stamps) through its own ``axis_coil_lags_s`` (0: the
+    reference coil itself).
+    """
+    model = true_model(cfg)
+    drift = model.drift_deg_h(true_t, true_tdot)
+    for axis, lag_s in enumerate(cfg.axis_coil_lags_s):
+        if lag_s > 0:
+            axis_t, axis_tdot = first_order_lag(coil_t, 1.0, lag_s)
+            drift[:, axis] = model.drift_deg_h(
+                np.interp(t_imu, t_grid, axis_t), np.interp(t_imu, t_grid, axis_tdot)
+            )[:, axis]
+    return drift
 
 
 def _thermal_path(
