@@ -27,6 +27,8 @@ changes one thing beyond those ranges:
 - ``power_on``: every run, the training run included, starts at power-on and the unit's own
   dissipation warms its housing 5 degC above the air through the housing lag
   (``power_on_heating_degC``); the study's runs start with the unit settled;
+- ``t3``: a cubic static drift (``T^3``; 2.5e-6, -2e-6 and 1.2e-6 deg/h/degC^3: an S-shaped
+  bias curve), which the study never draws;
 - ``axis_lags``: three coils at three places, one sensor: x is the plant's coil, y and z
   follow it through further lags of 150 and 400 s (``axis_coil_lags_s``), so a sensor behind
   x's coil can be ahead of z's; the study's axes share one coil;
@@ -91,10 +93,15 @@ VARIANTS = (
     'on_change',
     'power_on',
     'axis_lags',
+    't3',
 )
 
 #: the ``power_on`` variant's self-heating, degC above the chamber air
 POWER_ON_HEATING_DEGC = 5.0
+
+#: the ``t3`` variant's cubic drift, deg/h/degC^3 (x, y, z): 0.06-0.13 deg/h of it is beyond
+#: a quadratic over -40..60 degC
+T3_COEFFICIENTS = (2.5e-6, -2e-6, 1.2e-6)
 
 #: the ``axis_lags`` variant's further lag of each axis's coil behind the plant's coil, s
 AXIS_COIL_LAGS_S = (0.0, 150.0, 400.0)
@@ -121,6 +128,7 @@ def variant(name: str, cfg: SimulationConfig) -> SimulationConfig:
         'held_slow': {'temp_hz': HELD['held_slow'][0]},
         'power_on': {'power_on_heating_degC': POWER_ON_HEATING_DEGC},
         'axis_lags': {'axis_coil_lags_s': AXIS_COIL_LAGS_S},
+        't3': {'t3_coefficients': T3_COEFFICIENTS},
     }.get(name, {})
     return dataclasses.replace(cfg, **changes)  # type: ignore[arg-type]
 

@@ -62,10 +62,13 @@ def test_range_clamp_and_contains() -> None:
 
 def test_nonlinear_terms_have_unit_keys_and_values() -> None:
     assert coefficient_key('T2') == 'dt2_deg_h_per_degC2'
+    assert coefficient_key('T3') == 'dt3_deg_h_per_degC3'
     assert coefficient_key('T_Tdot') == 'dttdot_deg_h_per_degC2_per_min'
-    terms = (*PAPER_TERMS, 'T2', 'T_Tdot')
+    terms = (*PAPER_TERMS, 'T2', 'T3', 'T_Tdot')
     a = design_matrix([10.0, -20.0], [0.5, -0.1], terms)
-    assert_allclose(a, [[1.0, 10.0, 0.5, 100.0, 5.0], [1.0, -20.0, -0.1, 400.0, 2.0]])
+    assert_allclose(
+        a, [[1.0, 10.0, 0.5, 100.0, 1000.0, 5.0], [1.0, -20.0, -0.1, 400.0, -8000.0, 2.0]]
+    )
     assert all(t in TERMS for terms_ in CANDIDATE_TERMS for t in terms_)
     assert CANDIDATE_TERMS[0] == PAPER_TERMS
 
@@ -75,9 +78,9 @@ def test_compensator_evaluates_any_model_like_drift_deg_h() -> None:
     from fog_temp_comp.core.compensator import Compensator, GuardSettings
     from fog_temp_comp.core.denoise import DenoiseSettings
 
-    terms = (*PAPER_TERMS, 'T2', 'T_Tdot')
+    terms = (*PAPER_TERMS, 'T2', 'T3', 'T_Tdot')
     rng = np.random.default_rng(3)
-    coeffs = rng.normal(size=(5, 3)) * [[1.0], [1e-3], [1.0], [1e-5], [1e-3]]
+    coeffs = rng.normal(size=(6, 3)) * [[1.0], [1e-3], [1.0], [1e-5], [1e-6], [1e-3]]
     model = DriftModel(terms, coeffs, Range(-50, 80), Range(-2, 2))
     comp = Compensator(model, DenoiseSettings(method='kalman'), GuardSettings(clamp_tdot=False))
     t0 = 1.7e9

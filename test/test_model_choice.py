@@ -110,6 +110,7 @@ def test_the_paper_plant_gets_no_sensor_dynamics_and_no_t2() -> None:
     model = result.coefficients.model
     assert model.terms[:3] == PAPER_TERMS
     assert 'T2' not in model.terms
+    assert 'T3' not in model.terms
     assert 'T_Tdot' not in model.terms
     assert result.coefficients.denoise.coil_lag_s == 0.0
     if 'Tdot_lag' in model.terms:
@@ -132,6 +133,21 @@ def test_a_rate_sensitivity_that_changes_with_temperature_is_found() -> None:
     assert 'T_Tdot' in chosen.structure.terms
     np.testing.assert_allclose(model.coefficients[model.terms.index('T_Tdot')], truth, rtol=0.3)
     without = min(s.criterion for s in scores if 'T_Tdot' not in s.structure.terms)
+    assert chosen.criterion < 0.9 * without
+
+
+def test_an_s_shaped_static_drift_is_found() -> None:
+    """A cubic static drift: T^3 is chosen, and fitted.
+
+    Over 0..40 degC a quadratic leaves 0.1 deg/h of it, ten times the gyro's 10 s noise.
+    """
+    truth = (3e-5, -2.5e-5, 2e-5)  # deg/h/degC^3
+    cfg = dataclasses.replace(CHAMBER, t3_coefficients=truth)
+    result, scores, chosen = choose_and_calibrate([cycle(cfg).as_record()], RECOMMENDED_SETTINGS)
+    model = result.coefficients.model
+    assert {'T2', 'T3'} <= set(chosen.structure.terms)
+    np.testing.assert_allclose(model.coefficients[model.terms.index('T3')], truth, rtol=0.2)
+    without = min(s.criterion for s in scores if 'T3' not in s.structure.terms)
     assert chosen.criterion < 0.9 * without
 
 
@@ -253,7 +269,7 @@ def test_fold_score_equals_scoring_the_corrected_rows() -> None:
     tdot = np.gradient(t) * 6.0 + rng.normal(0, 0.01, n)
     rate = np.stack([0.3 * t + 2.0 * tdot + rng.normal(0, 0.05, n)] * 3, axis=1)
     table = GridTable(t, tdot, rate, None, np.arange(n))
-    terms = ('const', 'T', 'Tdot', 'T2')
+    terms = ('const', 'T', 'Tdot', 'T2', 'T3')
     parts = _parts([table], None)
     folds = [_Fold(train, tests, period) for train, tests in parts]
     got, got_logs = _score(folds, terms, period, 'ols')

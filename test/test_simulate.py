@@ -167,14 +167,22 @@ def test_first_order_lag_rate_is_exact() -> None:
 
 def test_nonlinear_terms_enter_the_drift() -> None:
     cfg = dataclasses.replace(
-        SHORT_CHAMBER, t2_coefficients=(1e-3, 0.0, -2e-3), t_tdot_coefficients=(0.0, 0.01, 0.0)
+        SHORT_CHAMBER,
+        t2_coefficients=(1e-3, 0.0, -2e-3),
+        t3_coefficients=(0.0, 3e-6, 0.0),
+        t_tdot_coefficients=(0.0, 0.01, 0.0),
     )
     run = simulate_run('cycle', 1.0, cfg, seed=2)
     model = true_model(cfg)
-    assert model.terms == (*PAPER_TERMS, 'T2', 'T_Tdot')
+    assert model.terms == (*PAPER_TERMS, 'T2', 'T3', 'T_Tdot')
     t, r = run.true_temperature_degC, run.true_tdot_degC_per_min
     linear = np.stack([np.ones_like(t), t, r], 1) @ TRUE_COEFFICIENTS
-    expected = linear + np.outer(t * t, [1e-3, 0.0, -2e-3]) + np.outer(t * r, [0.0, 0.01, 0.0])
+    expected = (
+        linear
+        + np.outer(t * t, [1e-3, 0.0, -2e-3])
+        + np.outer(t**3, [0.0, 3e-6, 0.0])
+        + np.outer(t * r, [0.0, 0.01, 0.0])
+    )
     assert_allclose(run.true_drift_deg_h, expected, rtol=1e-12, atol=1e-12)
     with pytest.raises(ValueError, match='t2_coefficients'):
         dataclasses.replace(SHORT_CHAMBER, t2_coefficients=(1.0, 2.0))

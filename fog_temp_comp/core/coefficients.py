@@ -57,6 +57,7 @@ def model_equation(terms: tuple[str, ...]) -> str:
         'T': '{k} * T [degC]',
         'Tdot': '{k} * Tdot [degC/min]',
         'T2': '{k} * T^2 [degC^2]',
+        'T3': '{k} * T^3 [degC^3]',
         'T_Tdot': '{k} * T [degC] * Tdot [degC/min]',
         'Tdot_lag': '{k} * lag(Tdot, tdot_lag_s) [degC/min]',
     }

@@ -39,6 +39,7 @@ NEEDS = {
     'const': (),
     'T': ('T',),
     'T2': ('T',),
+    'T3': ('T',),
     'Tdot': ('Tdot',),
     'Tdot_lag': ('Tdot',),
     'T_Tdot': ('T', 'Tdot'),

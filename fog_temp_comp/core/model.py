@@ -2,8 +2,9 @@
 
 The paper's model is ``D [deg/h] = D0 + DT * T [degC] + DTdot * Tdot [degC/min]``; every term has a
 named coefficient whose key carries its unit, so the YAML file and the code say the same thing.
-Beyond the paper, ``T2`` (``T^2``, a curvature of the static drift), ``T_Tdot`` (``T * Tdot``,
-a temperature-dependent rate sensitivity) and ``Tdot_lag`` are available; the YAML's ``terms``
+Beyond the paper, ``T2`` (``T^2``, a curvature of the static drift), ``T3`` (``T^3``, a static
+drift bent both ways: an S-shaped curve), ``T_Tdot`` (``T * Tdot``, a temperature-dependent
+rate sensitivity) and ``Tdot_lag`` are available; the YAML's ``terms``
 list says which terms a model has.
 
 ``Tdot_lag`` is Tdot through a first-order lag of time constant ``tdot_lag_s`` (the ``denoise``
@@ -33,6 +34,7 @@ TERMS: dict[str, tuple[str, Callable[[FloatArray, FloatArray, FloatArray], Float
     'T': ('dt_deg_h_per_degC', lambda t, r, rl: t),
     'Tdot': ('dtdot_deg_h_per_degC_per_min', lambda t, r, rl: r),
     'T2': ('dt2_deg_h_per_degC2', lambda t, r, rl: t * t),
+    'T3': ('dt3_deg_h_per_degC3', lambda t, r, rl: t * t * t),
     'T_Tdot': ('dttdot_deg_h_per_degC2_per_min', lambda t, r, rl: t * r),
     'Tdot_lag': ('dtdot_lag_deg_h_per_degC_per_min', lambda t, r, rl: rl),
 }
@@ -43,6 +45,7 @@ SCALAR_TERMS: dict[str, Callable[[float, float, float], float]] = {
     'T': lambda t, r, rl: t,
     'Tdot': lambda t, r, rl: r,
     'T2': lambda t, r, rl: t * t,
+    'T3': lambda t, r, rl: t * t * t,
     'T_Tdot': lambda t, r, rl: t * r,
     'Tdot_lag': lambda t, r, rl: rl,
 }
@@ -50,12 +53,15 @@ SCALAR_TERMS: dict[str, Callable[[float, float, float], float]] = {
 TDOT_TERMS = ('Tdot', 'T_Tdot', 'Tdot_lag')
 #: the paper's model, in order
 PAPER_TERMS = ('const', 'T', 'Tdot')
-#: candidate models beyond the paper's, simplest first (see :mod:`fog_temp_comp.core.selection`)
+#: candidate models beyond the paper's, simplest first (see :mod:`fog_temp_comp.core.selection`);
+#: ``T3`` only with ``T2`` (a cubic polynomial of T)
 CANDIDATE_TERMS: tuple[tuple[str, ...], ...] = (
     PAPER_TERMS,
     (*PAPER_TERMS, 'T2'),
     (*PAPER_TERMS, 'T_Tdot'),
     (*PAPER_TERMS, 'T2', 'T_Tdot'),
+    (*PAPER_TERMS, 'T2', 'T3'),
+    (*PAPER_TERMS, 'T2', 'T3', 'T_Tdot'),
 )
 
 

@@ -139,11 +139,12 @@ def default_structures(
 ) -> list[Structure]:
     """Every candidate: the paper's terms and extras; plain, with a lead-lag, or a coil lag.
 
-    The terms are the paper's, ``+T2``, ``+T_Tdot`` or both (:data:`CANDIDATE_TERMS`).
+    The terms are the paper's, ``+T2``, ``+T_Tdot`` or both, ``+T2+T3`` or that with ``T_Tdot``
+    (:data:`CANDIDATE_TERMS`).
 
     ``T_Tdot`` is a rate sensitivity that changes with temperature (the fibre's Shupe factor
-    does), ``T2`` a bent static drift; neither is in the paper, and either is kept only where
-    held-out data asks for it.
+    does), ``T2`` a bent static drift, ``T3`` one bent both ways (an S-shaped bias curve); none
+    is in the paper, and each is kept only where held-out data asks for it.
 
     The lead-lag ``Tdot_lag`` fits a sensor ahead of or behind the coil; the coil lag lags the
     estimated temperature and Tdot (a coil behind the sensor); the sensor lag is a Kalman filter

@@ -86,9 +86,9 @@ class SimulationConfig:
     cycle_oscillation_degC : float
         Amplitude of the controller oscillation during cycle runs, degC (period
         ``soak_oscillation_period_s``); ``soak_oscillation_degC`` is the one on soak runs.
-    t2_coefficients, t_tdot_coefficients : tuple of 3 float
-        Nonlinear drift terms per axis: deg/h/degC^2 times T^2 and deg/h/(degC degC/min) times
-        T * Tdot.
+    t2_coefficients, t3_coefficients, t_tdot_coefficients : tuple of 3 float
+        Nonlinear drift terms per axis: deg/h/degC^2 times T^2, deg/h/degC^3 times T^3 and
+        deg/h/(degC degC/min) times T * Tdot.
     bias_random_walk_deg_h_per_sqrt_h : float
         Rate random walk of the gyro bias (a slowly wandering bias), deg/h/sqrt(h).
     sensor_lag_s : float
@@ -144,6 +144,7 @@ class SimulationConfig:
     cycle_oscillation_degC: float = 0.0
     t2_coefficients: tuple[float, float, float] = (0.0, 0.0, 0.0)
     t_tdot_coefficients: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    t3_coefficients: tuple[float, float, float] = (0.0, 0.0, 0.0)
     bias_random_walk_deg_h_per_sqrt_h: float = 0.0
     sensor_lag_s: float = 0.0
     turn_on_shift_deg_h: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -183,6 +184,7 @@ class SimulationConfig:
             raise ValueError(f'motion_fraction must be within [0, 1], got {self.motion_fraction}')
         for name in (
             't2_coefficients',
+            't3_coefficients',
             't_tdot_coefficients',
             'turn_on_shift_deg_h',
             'axis_coil_lags_s',
@@ -201,6 +203,7 @@ class SimulationConfig:
             term
             for term, values in (
                 ('T2', self.t2_coefficients),
+                ('T3', self.t3_coefficients),
                 ('T_Tdot', self.t_tdot_coefficients),
             )
             if any(values)
@@ -213,6 +216,8 @@ class SimulationConfig:
         rows = [np.asarray(self.coefficients, dtype=np.float64)]
         if any(self.t2_coefficients):
             rows.append(np.array([self.t2_coefficients]))
+        if any(self.t3_coefficients):
+            rows.append(np.array([self.t3_coefficients]))
         if any(self.t_tdot_coefficients):
             rows.append(np.array([self.t_tdot_coefficients]))
         return np.concatenate(rows, axis=0)
