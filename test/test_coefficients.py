@@ -95,7 +95,7 @@ def del_key(path: str) -> Callable[[dict], None]:
         (set_key('axes.x.extra_deg_h', 1.0), 'axes.x'),
         (set_key('schema_version', 2), 'schema_version'),
         (del_key('schema_version'), 'schema_version'),
-        (set_key('terms', ['const', 'T3']), 'terms'),
+        (set_key('terms', ['const', 'T4']), 'terms'),
         (del_key('calibrated_range'), 'calibrated_range'),
         (set_key('calibrated_range.temperature_degC', [60.0, -40.0]), 'temperature_degC'),
         (set_key('calibrated_range.tdot_degC_per_min', [0.1]), 'tdot_degC_per_min'),

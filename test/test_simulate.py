@@ -11,12 +11,11 @@ from scipy import signal
 
 from fog_temp_comp.core.model import PAPER_TERMS
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H
+from fog_temp_comp.tools.sim_noise import correlated, quantize
 from fog_temp_comp.tools.simulate import (
     REALISTIC,
     TRUE_COEFFICIENTS,
     SimulationConfig,
-    _correlated,
-    _quantize,
     chamber_air,
     chamber_profile,
     first_order_lag,
@@ -218,7 +217,7 @@ def test_correlated_sensor_noise_is_a_stationary_ar1_of_the_same_std() -> None:
     """``temp_noise_correlation_s``: the same draws through an AR(1) of the same std."""
     w = np.random.default_rng(0).normal(size=200_000)
     a = np.exp(-1.0 / 10.0)
-    e = _correlated(w, a)
+    e = correlated(w, a)
     assert e[0] == w[0]  # stationary from the first reading
     assert e.std() == pytest.approx(1.0, rel=0.03)
     assert np.corrcoef(e[1:], e[:-1])[0, 1] == pytest.approx(a, abs=0.01)
@@ -234,8 +233,8 @@ def test_correlated_sensor_noise_is_a_stationary_ar1_of_the_same_std() -> None:
 def test_uneven_steps_keep_the_grid_and_move_the_boundaries() -> None:
     """``temp_step_nonlinearity``: readings stay on the step grid; codes get uneven widths."""
     x = np.linspace(0.0, 10.0, 200_001)
-    assert_array_equal(_quantize(x, 0.05, 0.0), np.round(x / 0.05) * 0.05)
-    y = _quantize(x, 0.05, 0.6)
+    assert_array_equal(quantize(x, 0.05, 0.0), np.round(x / 0.05) * 0.05)
+    y = quantize(x, 0.05, 0.6)
     assert_allclose(y / 0.05, np.round(y / 0.05), atol=1e-9)
     assert np.all(np.abs(y - x) <= 0.05 * (0.5 + 0.3) + 1e-12)
     assert np.all(np.diff(y) >= 0)  # monotonic

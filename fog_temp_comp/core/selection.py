@@ -352,7 +352,8 @@ def select_and_calibrate(
 def default_candidates(settings: DenoiseSettings) -> list[Candidate]:
     """The model candidates for one estimator, simplest first.
 
-    Paper model; with a fitted coil lag; plus ``T2``; plus ``T_Tdot``; plus both.
+    Paper model; with a fitted coil lag; plus ``T2``; plus ``T_Tdot``; plus both; plus ``T2``
+    and ``T3``.
     """
     lag = 'fitted coil lag'
     return [
@@ -363,6 +364,7 @@ def default_candidates(settings: DenoiseSettings) -> list[Candidate]:
         Candidate(
             f'T2 + T_Tdot + {lag}', settings, (*PAPER_TERMS, 'T2', 'T_Tdot'), fit_coil_lag=True
         ),
+        Candidate(f'T2 + T3 + {lag}', settings, (*PAPER_TERMS, 'T2', 'T3'), fit_coil_lag=True),
     ]
 
 

@@ -15,8 +15,9 @@ Physics (all documented units):
   air, and the housing rises through the same lag);
 - fibre coil: first-order lag of the housing, time constant ``coil_lag_s`` (0: the sensor reads
   the coil, as in the paper); the coil temperature and its exact rate drive the drift;
-- drift per axis: ``D = d0 + dt*T + dtdot*Tdot + t2*T^2 + t_tdot*T*Tdot`` (deg/h), x near the
-  paper's Table 1 (the last two terms are zero by default);
+- drift per axis: ``D = d0 + dt*T + dtdot*Tdot + t2*T^2 + t3*T^3 + t_tdot*T*Tdot`` (deg/h), x
+  near the paper's Table 1 (the last three terms are zero by default), of the coil's
+  temperature, or of each axis's own coil (``axis_coil_lags_s``);
 - gyro noise: angle random walk (white rate), a Gauss-Markov bias instability and a slowly
   wandering bias (rate random walk);
 - temperature sensor: white noise, then quantization (1/16 degC).
@@ -38,6 +39,7 @@ from scipy import signal
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H, S_PER_H, S_PER_MIN
+from fog_temp_comp.tools.sim_noise import correlated, gauss_markov, quantize
 
 FloatArray = NDArray[np.float64]
 
@@ -395,35 +397,6 @@ def chamber_air(setpoint_degC: FloatArray, dt_s: float, cfg: SimulationConfig) -
     return np.asarray(air, dtype=np.float64) + start
 
 
-#: the fixed pattern of :func:`_quantize`'s boundary displacements (uniform in -0.5..0.5)
-_DNL_PATTERN = np.random.default_rng(20261125).uniform(-0.5, 0.5, 4096)
-
-
-def _quantize(values: FloatArray, quantum: float, nonlinearity: float) -> FloatArray:
-    """Readings of ``values`` in steps of ``quantum``, boundaries displaced by ``nonlinearity``.
-
-    The boundary above code ``k`` sits at ``(k + 0.5 + nonlinearity * d_k) * quantum``, with
-    ``d_k`` a fixed pattern uniform in -0.5..0.5 (code ``k`` modulo 4096).
-    """
-    code = np.round(values / quantum)
-    if nonlinearity > 0:
-
-        def boundary(k: FloatArray) -> FloatArray:
-            d = _DNL_PATTERN[np.mod(k, _DNL_PATTERN.size).astype(np.intp)]
-            return (k + 0.5 + nonlinearity * d) * quantum
-
-        code = code + (values >= boundary(code)) - (values < boundary(code - 1.0))
-    return code * quantum
-
-
-def _correlated(white: FloatArray, a: float) -> FloatArray:
-    """AR(1) of coefficient ``a`` driven by ``white``, with the same std (stationary start)."""
-    from scipy import signal  # here: only correlated sensor noise needs it
-
-    b = np.sqrt(1.0 - a * a)
-    return signal.lfilter([b], [1.0, -a], white, zi=[(1.0 - b) * white[0]])[0]
-
-
 def simulate_run(
     kind: str, setpoint: float, cfg: SimulationConfig | None = None, *, seed: int = 0
 ) -> SimulatedRun:
@@ -447,7 +420,7 @@ def simulate_run(
 
     sigma_white = cfg.arw_10s_deg_h * np.sqrt(10.0 * cfg.imu_hz)  # per-sample std, deg/h
     white = rng.normal(0.0, sigma_white, size=(n_imu, 3))
-    bias = _gauss_markov(
+    bias = gauss_markov(
         rng, n_imu, 1.0 / cfg.imu_hz, cfg.bias_instability_deg_h, cfg.bias_correlation_s
     )
     rates = drift + white + bias
@@ -466,10 +439,10 @@ def simulate_run(
     t_temp = np.arange(n_temp) / cfg.temp_hz
     noise = rng.normal(0.0, cfg.temp_noise_degC, n_temp)
     if cfg.temp_noise_correlation_s > 0 and n_temp:
-        noise = _correlated(noise, np.exp(-1.0 / (cfg.temp_hz * cfg.temp_noise_correlation_s)))
+        noise = correlated(noise, np.exp(-1.0 / (cfg.temp_hz * cfg.temp_noise_correlation_s)))
     temp = np.interp(t_temp, t_grid, sensor_t) + noise
     if cfg.temp_quantum_degC > 0:
-        temp = _quantize(temp, cfg.temp_quantum_degC, cfg.temp_step_nonlinearity)
+        temp = quantize(temp, cfg.temp_quantum_degC, cfg.temp_step_nonlinearity)
     return SimulatedRun(
         name=run_name(kind, setpoint),
         kind=kind,
@@ -591,17 +564,4 @@ def simulate_plan(
     for k, (kind, setpoint) in enumerate(plan):
         run = simulate_run(kind, setpoint, cfg, seed=seed * 1000 + k)
         out[run.name] = run
-    return out
-
-
-def _gauss_markov(
-    rng: np.random.Generator, n: int, dt_s: float, sigma: float, tau_s: float
-) -> FloatArray:
-    """First-order Gauss-Markov process, shape (n, 3), stationary std ``sigma``."""
-    if sigma <= 0 or n == 0:
-        return np.zeros((n, 3))
-    phi = np.exp(-dt_s / tau_s)
-    drive = rng.normal(0.0, sigma * np.sqrt(1 - phi**2), size=(n, 3))
-    drive[0] = rng.normal(0.0, sigma, size=3)
-    out, _ = signal.lfilter([1.0], [1.0, -phi], drive, axis=0, zi=np.zeros((1, 3)))
     return out
