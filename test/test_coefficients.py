@@ -172,3 +172,20 @@ def test_a_file_written_before_the_hold_loads_as_a_periodic_sensor(tmp_path: Pat
     held.write_text(yaml.safe_dump(data), encoding='utf-8')
     with pytest.raises(CoefficientsError, match='temperature_hold_s must be >= 0'):
         load(held)
+
+
+def test_a_bias_table_round_trips_with_its_knots_in_the_keys(tmp_path: Path) -> None:
+    """Hinge terms: the YAML names each corner's knot in its key and loads back the same model."""
+    terms = (*PAPER_TERMS, 'T_above_-15', 'T_above_10', 'T_above_35')
+    rng = np.random.default_rng(5)
+    model = DriftModel(terms, rng.normal(0, 0.01, (6, 3)), Range(-40.0, 60.0), Range(-1.0, 1.0))
+    path = tmp_path / 'table.yaml'
+    save(Coefficients(model=model, denoise=DenoiseSettings(method='kalman')), path)
+    data = yaml.safe_load(path.read_text())
+    assert data['terms'] == list(terms)
+    assert 'dt_above_m15_deg_h_per_degC' in data['axes']['x']
+    assert 'dt_above_m15_deg_h_per_degC * max(T + 15, 0) [degC]' in data['model']
+    assert 'dt_above_35_deg_h_per_degC * max(T - 35, 0) [degC]' in data['model']
+    back = load(path)
+    assert back.model.terms == terms
+    assert_array_equal(back.model.coefficients, model.coefficients)

@@ -24,7 +24,7 @@ from fog_temp_comp.core.fitstats import (
     identifiability,
     newey_west_lag,
 )
-from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.model import PAPER_TERMS, design_matrix
 from fog_temp_comp.tools.simulate import TRUE_COEFFICIENTS, SimulatedRun
 
 
@@ -201,6 +201,19 @@ def test_identifiability_warns_on_an_ill_conditioned_design() -> None:
     assert check_identifiability(t, r, PAPER_TERMS)[0].startswith('ill-conditioned fit')
     # refusals only (what the cross-validation asks): no condition number, no warning
     assert identifiability(t, r, PAPER_TERMS, max_condition=math.inf) == []
+
+
+def test_a_bias_table_is_not_called_ill_conditioned_but_needs_data_past_each_knot() -> None:
+    """Hinges trade off with T by construction (31x on this cycle): no warning for that."""
+    t = np.r_[np.linspace(-40.0, 60.0, 500), np.linspace(60.0, -40.0, 500)]
+    r = np.r_[np.full(500, 0.2), np.full(500, -0.2)]
+    table = (*PAPER_TERMS, 'T_above_-15', 'T_above_10', 'T_above_35')
+    assert condition_number(design_matrix(t, r, table)) > 30.0
+    assert identifiability(t, r, table) == []
+    problems = identifiability(t, r, (*PAPER_TERMS, 'T_above_60'))
+    assert [p.severity for p in problems] == ['error']
+    assert 'T_above_60' in problems[0].message and 'both sides of its knot' in problems[0].message
+    assert identifiability(t, r, (*PAPER_TERMS, 'T_above_59')) == []  # 10 rows above
 
 
 @pytest.mark.parametrize('max_condition', [1e6, math.inf])

@@ -95,17 +95,41 @@ def test_compensator_evaluates_any_model_like_drift_deg_h() -> None:
 
 def test_scalar_terms_equal_the_vectorised_ones() -> None:
     """The hot path's float functions give what the array functions give, term by term."""
-    from fog_temp_comp.core.model import SCALAR_TERMS
+    from fog_temp_comp.core.model import SCALAR_TERMS, scalar_term_function, term_function
 
     assert set(SCALAR_TERMS) == set(TERMS)
     t = np.array([-40.0, 0.0, 12.5, 60.0])
     r = np.array([-1.0, 0.0, 0.3, 0.05])
     rl = np.array([-0.5, 0.1, 0.2, 0.0])
-    for name, (_, vectorised) in TERMS.items():
-        expected = np.broadcast_to(vectorised(t, r, rl), t.shape)
+    for name in [*TERMS, 'T_above_-15', 'T_above_12']:
+        expected = np.broadcast_to(term_function(name)(t, r, rl), t.shape)
         got = [
-            SCALAR_TERMS[name](float(a), float(b), float(c))
+            scalar_term_function(name)(float(a), float(b), float(c))
             for a, b, c in zip(t, r, rl, strict=True)
         ]
         assert all(type(v) is float for v in got), name
         np.testing.assert_array_equal(got, expected, err_msg=name)
+
+
+def test_a_hinge_is_max_of_t_minus_its_knot_with_its_knot_in_the_key() -> None:
+    """``T_above_<K>``: a corner at K degC; with const and T a piecewise-linear static drift."""
+    from fog_temp_comp.core.model import hinge_knot_degC, hinge_term
+
+    assert hinge_term(-15) == 'T_above_-15' and hinge_knot_degC('T_above_-15') == -15
+    assert hinge_knot_degC('T2') is None and hinge_knot_degC('T_above_x') is None
+    assert coefficient_key('T_above_-15') == 'dt_above_m15_deg_h_per_degC'
+    assert coefficient_key('T_above_35') == 'dt_above_35_deg_h_per_degC'
+    terms = ('const', 'T', 'T_above_-15', 'T_above_35')
+    a = design_matrix([-40.0, 0.0, 50.0], [0.0, 0.0, 0.0], terms)
+    assert_allclose(a, [[1, -40, 0, 0], [1, 0, 15, 0], [1, 50, 65, 15]])
+    # a table of slopes: -0.01 below -15 degC, +0.01 from -15 to 35, 0 above
+    model = DriftModel(
+        terms,
+        np.array([[1.0] * 3, [-0.01] * 3, [0.02] * 3, [-0.01] * 3]),
+        Range(-40, 60),
+        Range(-1, 1),
+    )
+    drift = model.drift_deg_h(np.array([-40.0, -15.0, 35.0, 60.0]), np.zeros(4))[:, 0]
+    assert_allclose(drift, [1.4, 1.15, 1.65, 1.65])
+    with pytest.raises(ValueError, match='T_above_<degC>'):
+        coefficient_key('T_above_1.5')

@@ -112,6 +112,7 @@ def test_the_paper_plant_gets_no_sensor_dynamics_and_no_t2() -> None:
     assert 'T2' not in model.terms
     assert 'T3' not in model.terms
     assert 'T_Tdot' not in model.terms
+    assert not any(t.startswith('T_above_') for t in model.terms)
     assert result.coefficients.denoise.coil_lag_s == 0.0
     if 'Tdot_lag' in model.terms:
         lead = effective_lead_s(model.terms, model.coefficients, chosen.structure.tdot_lag_s)
@@ -149,6 +150,41 @@ def test_an_s_shaped_static_drift_is_found() -> None:
     np.testing.assert_allclose(model.coefficients[model.terms.index('T3')], truth, rtol=0.2)
     without = min(s.criterion for s in scores if 'T3' not in s.structure.terms)
     assert chosen.criterion < 0.9 * without
+
+
+def test_a_change_of_slope_in_the_static_drift_gets_the_bias_table() -> None:
+    """A corner at 20 degC (no polynomial of low degree has one): the hinges are chosen.
+
+    The cycle spans 0..40 degC, so the knots sit at 10, 20 and 30 degC; the fitted slope change
+    at 20 is the true one, and the other two corners are small.
+    """
+    from fog_temp_comp.core.units import RAD_S_PER_DEG_H
+
+    run = cycle(CHAMBER)
+    corner = np.array([0.03, -0.025, 0.02])  # deg/h/degC above 20 degC
+    extra = np.outer(np.maximum(run.true_temperature_degC - 20.0, 0.0), corner)
+    run = dataclasses.replace(run, rates_rad_s=run.rates_rad_s + extra * RAD_S_PER_DEG_H)
+    result, scores, chosen = choose_and_calibrate([run.as_record()], RECOMMENDED_SETTINGS)
+    model = result.coefficients.model
+    assert {'T_above_10', 'T_above_20', 'T_above_30'} <= set(model.terms)
+    np.testing.assert_allclose(model.coefficient('T_above_20'), corner, rtol=0.25)
+    for other in ('T_above_10', 'T_above_30'):
+        assert np.all(np.abs(model.coefficient(other)) < 0.25 * np.abs(corner))
+    without = min(s.criterion for s in scores if 'T_above_20' not in s.structure.terms)
+    assert chosen.criterion < 0.9 * without
+
+
+def test_hinge_knots_sit_at_the_quarters_of_the_temperature_span() -> None:
+    from fog_temp_comp.core.model_candidates import hinge_terms
+
+    record = cycle(CHAMBER).as_record()
+    low, high = np.percentile(record.temperature_degC, [1.0, 99.0])
+    assert hinge_terms([record]) == (
+        *PAPER_TERMS,
+        *(f'T_above_{round(low + f * (high - low))}' for f in (0.25, 0.5, 0.75)),
+    )
+    narrow = dataclasses.replace(CHAMBER, low_degC=10.0, high_degC=25.0)
+    assert hinge_terms([cycle(narrow).as_record()]) == ()  # too narrow for three corners
 
 
 def effective_lead_s(terms: tuple[str, ...], coefficients: np.ndarray, tau_s: float) -> np.ndarray:

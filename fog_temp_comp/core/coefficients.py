@@ -29,7 +29,7 @@ import numpy as np
 import yaml
 
 from fog_temp_comp.core.denoise import DenoiseSettings
-from fog_temp_comp.core.model import DriftModel, Range, coefficient_key
+from fog_temp_comp.core.model import DriftModel, Range, coefficient_key, hinge_knot_degC
 from fog_temp_comp.core.units import AXES
 
 SCHEMA_VERSION = 1
@@ -50,6 +50,14 @@ class Coefficients:
     provenance: dict[str, Any] = field(default_factory=dict)
 
 
+def _hinge_text(term: str) -> str:
+    """``'{k} * max(T + 15, 0) [degC]'`` for ``T_above_-15`` (``'{k} * <term>'`` otherwise)."""
+    knot = hinge_knot_degC(term)
+    if knot is None:
+        return '{k} * ' + term
+    return f'{{k}} * max(T {"+" if knot < 0 else "-"} {abs(knot)}, 0) [degC]'
+
+
 def model_equation(terms: tuple[str, ...]) -> str:
     """Human-readable model equation for the YAML header."""
     names = {
@@ -61,7 +69,7 @@ def model_equation(terms: tuple[str, ...]) -> str:
         'T_Tdot': '{k} * T [degC] * Tdot [degC/min]',
         'Tdot_lag': '{k} * lag(Tdot, tdot_lag_s) [degC/min]',
     }
-    parts = [names.get(t, '{k} * ' + t).format(k=coefficient_key(t)) for t in terms]
+    parts = [names.get(t, _hinge_text(t)).format(k=coefficient_key(t)) for t in terms]
     return 'D [deg/h] = ' + ' + '.join(parts)
 
 

@@ -33,7 +33,7 @@ from fog_temp_comp.core.compensator_types import (
 )
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.held_readings import HeldReadings
-from fog_temp_comp.core.model import SCALAR_TERMS, DriftModel
+from fog_temp_comp.core.model import DriftModel, scalar_term_function
 from fog_temp_comp.core.rest import RestLearner, RestSettings
 from fog_temp_comp.core.tdot import make_estimator
 from fog_temp_comp.core.tdot_estimate import TdotEstimate, TdotEstimator
@@ -93,7 +93,7 @@ class Compensator(_BlockCorrection):
         self._last_temperature = math.nan
         # scalar evaluation of the model (the per-message hot path; no small numpy arrays)
         self._term_functions: list[Callable[[float, float, float], float]] = [
-            SCALAR_TERMS[term] for term in model.terms
+            scalar_term_function(term) for term in model.terms
         ]
         self._coefficient_rows = model.coefficients.tolist()
         self._set_stale_rule()

@@ -23,6 +23,7 @@ from fog_temp_comp.core.calibration import (
 from fog_temp_comp.core.cv_folds import _Fold, _parts, _score
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.model_candidates import Structure, StructureScore
+from fog_temp_comp.core.names import TERM_NAMES
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.tdot import offline_estimates, shaped_as
 from fog_temp_comp.core.tdot_estimate import EstimateSeries
@@ -159,6 +160,8 @@ def cross_validate(
 
     """
     period = base.tdot_period_s
+    # every term the candidates use: the fixed ones, then the hinges at their knots
+    names = (*TERM_NAMES, *sorted({t for s in structures for t in s.terms} - set(TERM_NAMES)))
     cache: dict[tuple[float, float], tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
     # the series through each coil lag, and the grid tables and folds of each estimator
     # setting, are shared by the structures that differ only in their terms or fit
@@ -190,7 +193,7 @@ def cross_validate(
                     structure, (train_series, test_series), gained, lagged
                 )
                 folds_cache[key] = _folds(
-                    records, heldout, train_lagged, test_lagged, shrink, lag, period
+                    records, heldout, train_lagged, test_lagged, (shrink, lag, period), names
                 )
             whole, folds = folds_cache[key]
             # a structure the final fit would refuse (e.g. a coil lag so long that the lagged
@@ -239,11 +242,14 @@ def _folds(
     heldout: Sequence[ChamberRecord],
     train_series: Sequence[EstimateSeries],
     test_series: Sequence[EstimateSeries],
-    shrink_sigmas: float,
-    tdot_lag_s: float,
-    period_s: float,
+    shaping: tuple[float, float, float],
+    names: Sequence[str],
 ) -> tuple[GridTable, list[_Fold]]:
-    """The training rows of one estimator setting (shrinkage, Tdot lag in s), and its folds."""
+    """The training rows of one estimator setting, and its folds with the design of ``names``.
+
+    ``shaping``: (shrinkage in posterior standard deviations, Tdot lag in s, grid period in s).
+    """
+    shrink_sigmas, tdot_lag_s, period_s = shaping
     tables = [
         table_of(r, s.shaped(shrink_sigmas, tdot_lag_s), period_s)
         for r, s in zip(records, train_series, strict=True)
@@ -252,7 +258,7 @@ def _folds(
         table_of(r, s.shaped(shrink_sigmas, tdot_lag_s), period_s)
         for r, s in zip(heldout, test_series, strict=True)
     ]
-    folds = [_Fold(train, parts, period_s) for train, parts in _parts(tables, tests)]
+    folds = [_Fold(train, parts, period_s, names) for train, parts in _parts(tables, tests)]
     return GridTable.concatenate(tables), folds
 
 

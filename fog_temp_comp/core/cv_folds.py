@@ -152,22 +152,30 @@ def ols_coefficients(
 class _Fold:
     """A fold's training rows and held-out parts, with what every candidate's score shares.
 
-    The design of all :data:`TERM_NAMES` is built once; a candidate takes its columns. Its
+    The design of all ``names`` (:data:`TERM_NAMES`, and the hinges in use) is built once; a
+    candidate takes its columns. Its
     normal equations, and each held-out part's means over each score tau of the rate and of
     the design, are computed once too: the corrected rate's means are then
     ``rate means - design means @ coef`` (the mean is linear), a few small products per
     candidate instead of passes over the rows.
     """
 
-    def __init__(self, train: GridTable, tests: Sequence[GridTable], period_s: float) -> None:
+    def __init__(
+        self,
+        train: GridTable,
+        tests: Sequence[GridTable],
+        period_s: float,
+        names: Sequence[str] = TERM_NAMES,
+    ) -> None:
         self.train = train
-        self.design = train.design(TERM_NAMES)
+        self.names = list(names)
+        self.design = train.design(self.names)
         self.normal = (self.design.T @ self.design, self.design.T @ train.rate_deg_h)
         # per held-out part, per score tau with >= 3 means: (rate means (m, 3), design means
         # (m, P), the rate's variance over the means (3,) times m - 1)
         self.means: list[list[tuple[FloatArray, FloatArray, FloatArray]]] = []
         for test in tests:
-            design = test.design(TERM_NAMES)
+            design = test.design(self.names)
             per_tau = []
             for tau in SCORE_TAUS_S:
                 k = max(1, round(tau / period_s))
@@ -220,9 +228,9 @@ def _score(
     period_s: float,
     fit: str = 'gls',
 ) -> tuple[float, list[float]]:
-    columns = [TERM_NAMES.index(term) for term in terms]
     logs: list[float] = []
     for fold in folds:
+        columns = [fold.names.index(term) for term in terms]
         logs += fold.log_ratios(columns, fold.fit(columns, terms, fit))
     if not logs:
         raise CalibrationError('held-out parts too short to score')

@@ -31,7 +31,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fog_temp_comp.core.model import coefficient_key, design_matrix
+from fog_temp_comp.core.model import coefficient_key, design_matrix, hinge_knot_degC
 from fog_temp_comp.core.units import AXES
 
 FloatArray = NDArray[np.float64]
@@ -412,8 +412,24 @@ def identifiability(
     if problems:
         return problems
     # the lead-lag pair Tdot / Tdot_lag is collinear by construction (its combination is what
-    # is fitted, and cross-validation judges it); the condition number is that of the rest
-    design = design_matrix(t, r, [term for term in terms if term != 'Tdot_lag'])
+    # is fitted, and cross-validation judges it), and so are the hinges of a bias table with T
+    # (the curve is what is fitted); the condition number is that of the rest, and a hinge
+    # needs rows on both sides of its knot
+    hinges = {term: hinge_knot_degC(term) for term in terms}
+    for term, knot in hinges.items():
+        if knot is not None and min(np.count_nonzero(t > knot), np.count_nonzero(t < knot)) < 2:
+            problems.append(
+                Problem(
+                    'error',
+                    f'term {term}: the temperatures ({t.min():.2f}..{t.max():.2f} degC) do not '
+                    f'reach both sides of its knot, {knot} degC',
+                )
+            )
+    if problems:
+        return problems
+    design = design_matrix(
+        t, r, [term for term in terms if term != 'Tdot_lag' and hinges[term] is None]
+    )
     if math.isinf(max_condition):  # no warning to give: only a zero column refuses (no SVD)
         cond = math.inf if np.any(np.linalg.norm(design, axis=0) == 0) else 0.0
     else:

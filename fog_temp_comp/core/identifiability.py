@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from fog_temp_comp.core.model import hinge_knot_degC
 from fog_temp_comp.core.units import S_PER_MIN
 
 __all__ = [
@@ -143,7 +144,7 @@ def unidentifiable_terms(
     per_record = '; '.join(s.describe() for s in spans)
     found = []
     for term in terms:
-        for need in NEEDS.get(term, ()):
+        for need in NEEDS.get(term, ('T',) if hinge_knot_degC(term) is not None else ()):
             span = float(combined[need])
             if not span >= limits[need]:
                 found.append(

@@ -7,6 +7,12 @@ drift bent both ways: an S-shaped curve), ``T_Tdot`` (``T * Tdot``, a temperatur
 rate sensitivity) and ``Tdot_lag`` are available; the YAML's ``terms``
 list says which terms a model has.
 
+``T_above_<K>`` (``max(T - K, 0)``, K an integer in degC, e.g. ``T_above_-15``) is a hinge: with
+``const`` and ``T``, a few of them make the static drift a continuous piecewise-linear curve
+with corners at their knots, a bias table in T, for a curve no polynomial of low degree
+follows (a step, a change of slope). ``calibrate`` places three at the quarters of the
+calibrated range.
+
 ``Tdot_lag`` is Tdot through a first-order lag of time constant ``tdot_lag_s`` (the ``denoise``
 block). With ``Tdot`` beside it, the pair is a lead-lag from the sensor's Tdot to the coil's:
 ``b0 * Tdot + b1 * lag(Tdot)`` is ``(b0 + b1 + b0 * tau * s) / (1 + tau * s)`` times Tdot, a
@@ -17,6 +23,7 @@ coils at different places get their own.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -65,12 +72,59 @@ CANDIDATE_TERMS: tuple[tuple[str, ...], ...] = (
 )
 
 
+#: a hinge term's name: ``T_above_`` and its knot, an integer in degC
+HINGE_PATTERN = re.compile(r'T_above_(-?[0-9]+)')
+
+
+def hinge_term(knot_degC: int) -> str:
+    """The name of the hinge ``max(T - knot, 0)``, e.g. ``hinge_term(-15) -> 'T_above_-15'``."""
+    return f'T_above_{int(knot_degC)}'
+
+
+def hinge_knot_degC(term: str) -> int | None:
+    """The knot (degC) of a hinge term's name, None for any other term."""
+    match = HINGE_PATTERN.fullmatch(term)
+    return int(match.group(1)) if match else None
+
+
+def _hinge(knot: float) -> Callable[[FloatArray, FloatArray, FloatArray], FloatArray]:
+    """``max(T - knot, 0)`` on floats and on arrays alike (the hot path calls it with both)."""
+    return lambda t, r, rl: (t - knot) * (t > knot)
+
+
+def term_function(term: str) -> Callable[[FloatArray, FloatArray, FloatArray], FloatArray]:
+    """The array function of a term, of (T degC, Tdot degC/min, lagged Tdot degC/min)."""
+    knot = hinge_knot_degC(term)
+    if knot is not None:
+        return _hinge(float(knot))
+    coefficient_key(term)
+    return TERMS[term][1]
+
+
+def scalar_term_function(term: str) -> Callable[[float, float, float], float]:
+    """The float function of a term, for the per-message hot path."""
+    knot = hinge_knot_degC(term)
+    if knot is not None:
+        return _hinge(float(knot))  # type: ignore[return-value]
+    coefficient_key(term)
+    return SCALAR_TERMS[term]
+
+
 def coefficient_key(term: str) -> str:
-    """YAML key (with unit) of a model term's coefficient, e.g. ``'T' -> 'dt_deg_h_per_degC'``."""
+    """YAML key (with unit) of a model term's coefficient, e.g. ``'T' -> 'dt_deg_h_per_degC'``.
+
+    A hinge's key names its knot, ``m`` for minus: ``'T_above_-15' ->
+    'dt_above_m15_deg_h_per_degC'``.
+    """
+    knot = hinge_knot_degC(term)
+    if knot is not None:
+        return f'dt_above_{"m" if knot < 0 else ""}{abs(knot)}_deg_h_per_degC'
     try:
         return TERMS[term][0]
     except KeyError:
-        raise ValueError(f'unknown model term {term!r}; allowed: {sorted(TERMS)}') from None
+        raise ValueError(
+            f'unknown model term {term!r}; allowed: {sorted(TERMS)} and T_above_<degC>'
+        ) from None
 
 
 def design_matrix(
@@ -108,9 +162,8 @@ def design_matrix(
     )
     if rl.shape != r.shape:
         raise ValueError(f'lagged Tdot must have the shape of Tdot, got {rl.shape}, {r.shape}')
-    for term in terms:
-        coefficient_key(term)
-    return np.stack([TERMS[term][1](t, r, rl) for term in terms], axis=-1)
+    functions = [term_function(term) for term in terms]
+    return np.stack([f(t, r, rl) for f in functions], axis=-1)
 
 
 @dataclass(frozen=True)

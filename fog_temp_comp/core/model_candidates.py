@@ -12,8 +12,11 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
-from fog_temp_comp.core.model import CANDIDATE_TERMS
+from fog_temp_comp.core.model import CANDIDATE_TERMS, PAPER_TERMS, hinge_term
+from fog_temp_comp.core.record import ChamberRecord
 
 __all__ = [
     'KALMAN_WALKS',
@@ -25,6 +28,7 @@ __all__ = [
     'Structure',
     'StructureScore',
     'default_structures',
+    'hinge_terms',
 ]
 
 #: Kalman Tdot random-walk intensities tried, degC/min per sqrt(s)
@@ -43,6 +47,27 @@ TDOT_LAGS_S = (30.0, 60.0, 120.0, 240.0, 480.0, 960.0)
 SENSOR_LAGS_S = (120.0, 240.0, 480.0, 960.0)
 #: Kalman random walks tried with a sensor lag, degC/min per sqrt(s)
 SENSOR_LAG_WALKS = (0.001, 0.003)
+#: where the hinge candidate puts its knots, as fractions of the training temperature span
+HINGE_FRACTIONS = (0.25, 0.5, 0.75)
+#: the smallest training temperature span (1st to 99th percentile, degC) with a hinge candidate
+MIN_HINGE_SPAN_DEGC = 20.0
+
+
+def hinge_terms(records: Sequence[ChamberRecord]) -> tuple[str, ...]:
+    """The paper's terms and hinges at the quarters of the records' temperature span.
+
+    A bias table in T (:mod:`fog_temp_comp.core.model`): knots at :data:`HINGE_FRACTIONS` of the
+    1st-99th percentile span, to the nearest degC; empty below :data:`MIN_HINGE_SPAN_DEGC`.
+    """
+    temps = [r.temperature_degC[np.isfinite(r.temperature_degC)] for r in records]
+    temps = [t for t in temps if t.size]
+    if not temps:
+        return ()
+    low, high = np.percentile(np.concatenate(temps), [1.0, 99.0])
+    if not high - low >= MIN_HINGE_SPAN_DEGC:
+        return ()
+    knots = [round(float(low + f * (high - low))) for f in HINGE_FRACTIONS]
+    return (*PAPER_TERMS, *(hinge_term(k) for k in knots))
 
 
 @dataclass(frozen=True)
@@ -131,6 +156,7 @@ class Structure:
 
 
 def default_structures(
+    term_sets: Sequence[tuple[str, ...]] = CANDIDATE_TERMS,
     walks: Sequence[float] = KALMAN_WALKS,
     shrinks: Sequence[float] = SHRINK_SIGMAS,
     lags_s: Sequence[float] = TDOT_LAGS_S,
@@ -139,8 +165,9 @@ def default_structures(
 ) -> list[Structure]:
     """Every candidate: the paper's terms and extras; plain, with a lead-lag, or a coil lag.
 
-    The terms are the paper's, ``+T2``, ``+T_Tdot`` or both, ``+T2+T3`` or that with ``T_Tdot``
-    (:data:`CANDIDATE_TERMS`).
+    The terms are ``term_sets``: by default the paper's, ``+T2``, ``+T_Tdot`` or both,
+    ``+T2+T3`` or that with ``T_Tdot`` (:data:`CANDIDATE_TERMS`); ``calibrate`` adds the hinges
+    of :func:`hinge_terms`.
 
     ``T_Tdot`` is a rate sensitivity that changes with temperature (the fibre's Shupe factor
     does), ``T2`` a bent static drift, ``T3`` one bent both ways (an S-shaped bias curve); none
@@ -156,7 +183,7 @@ def default_structures(
     out = []
     for walk in walks:
         for shrink in shrinks:
-            for terms in CANDIDATE_TERMS:
+            for terms in term_sets:
                 out.append(Structure(terms, walk, shrink))
                 out += [Structure((*terms, 'Tdot_lag'), walk, shrink, lag) for lag in lags_s]
                 out += [Structure(terms, walk, shrink, coil_lag_s=lag) for lag in lags_s]

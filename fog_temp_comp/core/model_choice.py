@@ -66,7 +66,7 @@ from fog_temp_comp.core.cv_folds import _Fold as _Fold
 from fog_temp_comp.core.cv_folds import _parts as _parts
 from fog_temp_comp.core.cv_folds import _score as _score
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
-from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.model import CANDIDATE_TERMS, PAPER_TERMS
 from fog_temp_comp.core.model_candidates import (
     KALMAN_WALKS,
     SENSOR_LAGS_S,
@@ -75,6 +75,7 @@ from fog_temp_comp.core.model_candidates import (
     Structure,
     StructureScore,
     default_structures,
+    hinge_terms,
 )
 from fog_temp_comp.core.model_choice_record import _selection, format_scores
 from fog_temp_comp.core.publishing import held_records, prepared
@@ -342,7 +343,10 @@ def _choose_and_calibrate(
     heldout = held_records(heldout, base)
     noise = sensor_noise(records)
     base = noise.apply(dataclasses.replace(base, method='kalman', coil_lag_s=0.0))
-    candidates = list(structures) if structures is not None else default_structures()
+    if structures is None:
+        hinges = hinge_terms(records)  # a bias table in T, at this run's temperatures
+        structures = default_structures((*CANDIDATE_TERMS, *([hinges] if hinges else [])))
+    candidates = list(structures)
     # data that cannot identify even the paper's model is refused with the reason (a soak has
     # no temperature swing, a constant temperature no Tdot spread), before any candidate
     paper = [s for s in candidates if s.terms == PAPER_TERMS] or candidates[:1]

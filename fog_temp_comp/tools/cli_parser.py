@@ -308,7 +308,8 @@ def _add_calibrate_model(g: argparse._ArgumentGroup) -> None:
         '--terms',
         default=None,
         metavar='LIST',
-        help=f'model terms, comma separated, from {sorted(TERM_NAMES)}. Default: calibrate '
+        help=f'model terms, comma separated, from {sorted(TERM_NAMES)} and hinges '
+        'T_above_<degC> (max(T - degC, 0): a bias table in T). Default: calibrate '
         'chooses the terms, the sensor-to-coil lead-lag and the Kalman settings by '
         'cross-validation on the bags (any of --terms, --denoise, --fit-coil-lag, '
         '--online-tdot or --leave-one-run-out fits what is asked instead; --terms '
