@@ -29,6 +29,9 @@ changes one thing beyond those ranges:
   (``power_on_heating_degC``); the study's runs start with the unit settled;
 - ``t3``: a cubic static drift (``T^3``; 2.5e-6, -2e-6 and 1.2e-6 deg/h/degC^3: an S-shaped
   bias curve), which the study never draws;
+- ``bias_step`` and ``bias_kink``: a static drift no low polynomial follows, added to every run:
+  0.3, -0.2 and 0.15 deg/h times tanh((T - 20) / 15) (a smooth step), or 0.01, -0.008 and
+  0.006 deg/h/degC times max(T - 25, 0) (a change of slope);
 - ``axis_lags``: three coils at three places, one sensor: x is the plant's coil, y and z
   follow it through further lags of 150 and 400 s (``axis_coil_lags_s``), so a sensor behind
   x's coil can be ahead of z's; the study's axes share one coil;
@@ -59,7 +62,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from accuracy import TRAINING_RUN, add_pipeline_options, metrics, pipeline_settings
@@ -94,6 +97,8 @@ VARIANTS = (
     'power_on',
     'axis_lags',
     't3',
+    'bias_step',
+    'bias_kink',
 )
 
 #: the ``power_on`` variant's self-heating, degC above the chamber air
@@ -102,6 +107,13 @@ POWER_ON_HEATING_DEGC = 5.0
 #: the ``t3`` variant's cubic drift, deg/h/degC^3 (x, y, z): 0.06-0.13 deg/h of it is beyond
 #: a quadratic over -40..60 degC
 T3_COEFFICIENTS = (2.5e-6, -2e-6, 1.2e-6)
+
+#: static drifts no polynomial of low degree follows, deg/h of the coil's temperature T (degC):
+#: (x, y, z) scale and shape
+STATIC_SHAPES = {
+    'bias_step': ((0.3, -0.2, 0.15), lambda t: np.tanh((t - 20.0) / 15.0)),
+    'bias_kink': ((0.01, -0.008, 0.006), lambda t: np.maximum(t - 25.0, 0.0)),
+}
 
 #: the ``axis_lags`` variant's further lag of each axis's coil behind the plant's coil, s
 AXIS_COIL_LAGS_S = (0.0, 150.0, 400.0)
@@ -143,6 +155,8 @@ def with_defect(name: str, runs: dict[str, SimulatedRun]) -> dict[str, Simulated
         return {n: _republished(r, HELD[name][1]) for n, r in runs.items()}
     if name == 'on_change':
         return {n: _on_change(r) for n, r in runs.items()}
+    if name in STATIC_SHAPES:
+        return {n: _with_static_drift(r, *STATIC_SHAPES[name]) for n, r in runs.items()}
     train = runs[TRAINING_RUN]
     if name == 'gyro_bump':
         rates = train.rates_rad_s.copy()
@@ -155,6 +169,18 @@ def with_defect(name: str, runs: dict[str, SimulatedRun]) -> dict[str, Simulated
         temps[np.random.default_rng(3).choice(temps.size, 3, replace=False)] = -128.0
         return {**runs, TRAINING_RUN: dataclasses.replace(train, temperature_degC=temps)}
     return runs
+
+
+def _with_static_drift(
+    run: SimulatedRun, scale_deg_h: tuple[float, float, float], shape: Callable[..., np.ndarray]
+) -> SimulatedRun:
+    """``run`` with ``scale * shape(T)`` (deg/h, T the coil's degC) in its rate and true drift."""
+    extra = np.outer(shape(run.true_temperature_degC), scale_deg_h)
+    return dataclasses.replace(
+        run,
+        rates_rad_s=run.rates_rad_s + extra * RAD_S_PER_DEG_H,
+        true_drift_deg_h=run.true_drift_deg_h + extra,
+    )
 
 
 def _republished(run: SimulatedRun, rate_hz: float) -> SimulatedRun:
