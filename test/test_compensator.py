@@ -496,6 +496,7 @@ def _assert_same_state(a: Compensator, b: Compensator) -> None:
         ('kalman', (*PAPER_TERMS, 'T2', 'T_Tdot', 'Tdot_lag'), {'clamp_tdot': True}),
         ('kalman', PAPER_TERMS, {'clamp_temperature': False, 'tdot_limit_degC_per_min': 1.0}),
         ('iir', (*PAPER_TERMS, 'T2', 'T3'), {}),
+        ('kalman', (*PAPER_TERMS, 'T_above_18', 'T_above_22'), {}),
         ('none', PAPER_TERMS, {'stale_policy': 'none', 'temperature_timeout_s': 2.0}),
         ('wavelet', PAPER_TERMS, {}),
         ('llr', ('const', 'T', 'T_Tdot'), {}),

@@ -411,24 +411,16 @@ def identifiability(
         )
     if problems:
         return problems
-    # the lead-lag pair Tdot / Tdot_lag is collinear by construction (its combination is what
-    # is fitted, and cross-validation judges it), and so are the hinges of a bias table with T
-    # (the curve is what is fitted); the condition number is that of the rest, and a hinge
-    # needs rows on both sides of its knot
-    hinges = {term: hinge_knot_degC(term) for term in terms}
-    for term, knot in hinges.items():
-        if knot is not None and min(np.count_nonzero(t > knot), np.count_nonzero(t < knot)) < 2:
-            problems.append(
-                Problem(
-                    'error',
-                    f'term {term}: the temperatures ({t.min():.2f}..{t.max():.2f} degC) do not '
-                    f'reach both sides of its knot, {knot} degC',
-                )
-            )
+    problems += _hinge_problems(t, terms)
     if problems:
         return problems
+    # the lead-lag pair Tdot / Tdot_lag is collinear by construction (its combination is what
+    # is fitted, and cross-validation judges it), and so are the hinges of a bias table with T
+    # (the curve is what is fitted); the condition number is that of the rest
     design = design_matrix(
-        t, r, [term for term in terms if term != 'Tdot_lag' and hinges[term] is None]
+        t,
+        r,
+        [term for term in terms if term != 'Tdot_lag' and hinge_knot_degC(term) is None],
     )
     if math.isinf(max_condition):  # no warning to give: only a zero column refuses (no SVD)
         cond = math.inf if np.any(np.linalg.norm(design, axis=0) == 0) else 0.0
@@ -447,6 +439,23 @@ def identifiability(
                 'standard errors; widen the temperature range or add a cycle)',
             )
         )
+    return problems
+
+
+def _hinge_problems(temperature_degC: FloatArray, terms: Sequence[str]) -> list[Problem]:
+    """An error for each hinge term without two rows on each side of its knot (degC)."""
+    t = temperature_degC
+    problems = []
+    for term in terms:
+        knot = hinge_knot_degC(term)
+        if knot is not None and min(np.count_nonzero(t > knot), np.count_nonzero(t < knot)) < 2:
+            problems.append(
+                Problem(
+                    'error',
+                    f'term {term}: the temperatures ({t.min():.2f}..{t.max():.2f} degC) do not '
+                    f'reach both sides of its knot, {knot} degC',
+                )
+            )
     return problems
 
 
