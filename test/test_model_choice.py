@@ -352,6 +352,44 @@ def test_the_final_fit_from_the_cross_validations_series_equals_a_fresh_fit(lag:
         calibrate_detailed(records, settings, series=given * 2)
 
 
+def test_batched_scores_equal_one_score_per_term_set() -> None:
+    """_score_many (the cross-validation's OLS, batched per fold) gives each set's _score.
+
+    Also for a set whose design is singular (a term twice) or has an empty column (a hinge
+    above every temperature): those fail alone, with _score's error.
+    """
+    from fog_temp_comp.core.cv_folds import _Fold, _score, _score_many
+
+    rng = np.random.default_rng(12)
+    n, period = 700, 10.0
+    t = 20.0 + 10.0 * np.sin(np.arange(n) / 60.0)
+    tdot = np.gradient(t) * 6.0 + rng.normal(0, 0.01, n)
+    rate = np.stack([0.3 * t + 2.0 * tdot + 1e-3 * t**2 + rng.normal(0, 0.05, n)] * 3, axis=1)
+    table = GridTable(t, tdot, rate, None, np.arange(n))
+    names = ('const', 'T', 'Tdot', 'T2', 'T3', 'T_Tdot', 'Tdot_lag', 'T_above_20', 'T_above_90')
+    folds = [_Fold(train, tests, period, names) for train, tests in _parts([table], None)]
+    sets = [
+        PAPER_TERMS,
+        (*PAPER_TERMS, 'T2'),
+        (*PAPER_TERMS, 'T2', 'T3', 'T_Tdot'),
+        (*PAPER_TERMS, 'T_above_20'),
+        ('const', 'T', 'T'),
+        (*PAPER_TERMS, 'T_above_90'),
+    ]
+    batched = _score_many(folds, sets)
+    for terms, got in zip(sets, batched, strict=True):
+        try:
+            expected = _score(folds, terms, period, 'ols')
+        except CalibrationError as err:
+            assert isinstance(got, CalibrationError) and str(got) == str(err), terms
+            continue
+        assert not isinstance(got, CalibrationError), terms
+        # the same to rounding (a better fit cancels more: 1e-12 of a log-ratio of -4.6)
+        np.testing.assert_allclose(got[1], expected[1], rtol=1e-10, atol=0)
+        assert got[0] == pytest.approx(expected[0], rel=1e-10)
+    assert sum(isinstance(b, CalibrationError) for b in batched) == 2
+
+
 def test_reading_interval_is_the_sensor_rate_not_its_jitter_or_a_lost_reading() -> None:
     from fog_temp_comp.core.sensor_noise import reading_interval_s
 

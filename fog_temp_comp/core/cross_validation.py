@@ -20,7 +20,7 @@ from fog_temp_comp.core.calibration import (
     check_identifiable,
     table_of,
 )
-from fog_temp_comp.core.cv_folds import _Fold, _parts, _score
+from fog_temp_comp.core.cv_folds import _Fold, _parts, _score, _score_many
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.model_candidates import Structure, StructureScore
 from fog_temp_comp.core.names import TERM_NAMES
@@ -170,6 +170,7 @@ def cross_validate(
     gained: dict[tuple[Any, ...], _Pair] = {}
     thresholds: dict[tuple[Any, float], tuple[float, float]] = {}
     identifiable: dict[tuple[Any, ...], CalibrationError | None] = {}
+    pending: dict[tuple[Any, ...], list[StructureScore]] = {}  # OLS, per fold key: batched
     scores = []
     for structure in structures:
         result = StructureScore(structure)
@@ -202,13 +203,27 @@ def cross_validate(
             checked = (structure.estimator, shrink, coil, wiener, tuple(structure.terms))
             if checked not in identifiable:
                 identifiable[checked] = _refusal(whole, structure.terms)
-            refused = identifiable[checked]
-            if refused is not None:
-                raise refused
-            result.criterion, result.parts = _score(folds, structure.terms, period, structure.fit)
+            if identifiable[checked] is not None:
+                raise identifiable[checked]  # type: ignore[misc]
+            if structure.fit == 'ols':
+                pending.setdefault(key, []).append(result)
+            else:
+                result.criterion, result.parts = _score(folds, structure.terms, period, 'gls')
         except CalibrationError as err:
             result.error = str(err)
+    for key, results in pending.items():
+        _score_together(folds_cache[key][1], results)
     return scores
+
+
+def _score_together(folds: Sequence[_Fold], results: Sequence[StructureScore]) -> None:
+    """Score OLS structures that share ``folds`` in one batch (:func:`_score_many`)."""
+    scored = _score_many(folds, [r.structure.terms for r in results])
+    for result, outcome in zip(results, scored, strict=True):
+        if isinstance(outcome, CalibrationError):
+            result.error = str(outcome)
+        else:
+            result.criterion, result.parts = outcome
 
 
 def _through_coil(

@@ -209,6 +209,69 @@ class _Fold:
             const=list(terms).index('const') if 'const' in terms else None,
         )[0]
 
+    def fit_many(self, columns: Sequence[list[int]]) -> list[FloatArray | CalibrationError]:
+        """OLS of several column sets at once: each (P, 3), zero off its columns, or the error.
+
+        Each set's normal equations on unit-norm columns are put in an identity of the full
+        design's size and all are solved together. The identity adds eigenvalues of 1, between
+        the extremes of a unit-diagonal matrix's, so the conditioning test is the one
+        :func:`ols_coefficients` makes; a set that fails it, or has an empty or a repeated
+        column, is solved by :func:`ols_coefficients` alone.
+        """
+        gram, rhs = self.normal
+        size, rows = gram.shape[0], self.design.shape[0]
+        norms = np.sqrt(np.diagonal(gram))
+        with np.errstate(divide='ignore', invalid='ignore'):
+            scaled, target = gram / np.outer(norms, norms), rhs / norms[:, None]
+        out: list[FloatArray | CalibrationError] = [np.zeros(rhs.shape) for _ in columns]
+        batch, alone, systems, targets = [], [], [], []
+        for j, c in enumerate(columns):
+            if rows <= len(c):
+                out[j] = CalibrationError('too few rows or a rank-deficient fold')
+            elif np.all(norms[c] > 0) and len(set(c)) == len(c):
+                system, right = np.eye(size), np.zeros(rhs.shape)
+                system[np.ix_(c, c)], right[c] = scaled[np.ix_(c, c)], target[c]
+                batch.append(j)
+                systems.append(system)
+                targets.append(right)
+            else:
+                alone.append(j)
+        if batch:
+            a, b = np.array(systems), np.array(targets)
+            eigen = np.linalg.eigvalsh(a)
+            good = eigen[:, 0] * MAX_NORMAL_CONDITION > eigen[:, -1]
+            solved = np.linalg.solve(a[good], b[good])
+            for j, solution in zip(np.asarray(batch)[good], solved, strict=True):
+                c = columns[j]
+                out[j][c] = solution[c] / norms[c, None]  # type: ignore[index]
+            alone += [j for j, ok in zip(batch, good, strict=True) if not ok]
+        for j in alone:  # ill-conditioned, an empty or a repeated column: one by one
+            c = columns[j]
+            try:
+                out[j][c] = ols_coefficients(  # type: ignore[index]
+                    self.design[:, c], self.train.rate_deg_h, (gram[np.ix_(c, c)], rhs[c])
+                )
+            except CalibrationError as err:
+                out[j] = err
+        return out
+
+    def log_ratios_many(self, coefs: Sequence[FloatArray]) -> list[list[float]]:
+        """:meth:`log_ratios` of several full-size (P, 3) coefficient sets, in one product."""
+        k = len(coefs)
+        stacked = np.concatenate(coefs, axis=1)  # (P, 3k): set j in columns 3j..3j+2
+        out: list[list[float]] = [[] for _ in range(k)]
+        for per_tau in self.means:
+            for rate, design, before in per_tau:
+                after = np.tile(rate, k) - design @ stacked
+                deviation = after - after.mean(axis=0)
+                var = np.einsum('mj,mj->j', deviation, deviation).reshape(k, -1)
+                ok = (var > 0) & (before > 0)
+                with np.errstate(divide='ignore', invalid='ignore'):
+                    logs = 0.5 * np.log(var / before)
+                for j in range(k):
+                    out[j] += logs[j][ok[j]].tolist()
+        return out
+
     def log_ratios(self, columns: list[int], coef: FloatArray) -> list[float]:
         """log(stability after / before) per held-out part, score tau and axis."""
         out: list[float] = []
@@ -220,6 +283,36 @@ class _Fold:
                 ok = (var > 0) & (before > 0)
                 out += (0.5 * np.log(var[ok] / before[ok])).tolist()  # log of the std ratio
         return out
+
+
+def _score_many(
+    folds: Sequence[_Fold], term_sets: Sequence[Sequence[str]]
+) -> list[tuple[float, list[float]] | CalibrationError]:
+    """:func:`_score` by OLS of each of ``term_sets`` on the same folds, batched per fold.
+
+    The same scores as one :func:`_score` each, to rounding (:meth:`_Fold.fit_many`).
+    """
+    logs: list[list[float]] = [[] for _ in term_sets]
+    failed: list[CalibrationError | None] = [None] * len(term_sets)
+    for fold in folds:
+        columns = [[fold.names.index(term) for term in terms] for terms in term_sets]
+        fits = fold.fit_many(columns)
+        for j, f in enumerate(fits):
+            if isinstance(f, CalibrationError) and failed[j] is None:
+                failed[j] = f
+        live = [j for j in range(len(fits)) if failed[j] is None]
+        if live:
+            for j, part in zip(live, fold.log_ratios_many([fits[j] for j in live]), strict=True):
+                logs[j] += part
+    out: list[tuple[float, list[float]] | CalibrationError] = []
+    for j in range(len(term_sets)):
+        if failed[j] is not None:
+            out.append(failed[j])  # type: ignore[arg-type]
+        elif not logs[j]:
+            out.append(CalibrationError('held-out parts too short to score'))
+        else:
+            out.append((float(np.exp(np.mean(logs[j]))), logs[j]))
+    return out
 
 
 def _score(
