@@ -209,8 +209,10 @@ class _Fold:
             const=list(terms).index('const') if 'const' in terms else None,
         )[0]
 
-    def fit_many(self, columns: Sequence[list[int]]) -> list[FloatArray | CalibrationError]:
-        """OLS of several column sets at once: each (P, 3), zero off its columns, or the error.
+    def fit_many(
+        self, columns: Sequence[list[int]]
+    ) -> tuple[FloatArray, list[CalibrationError | None]]:
+        """OLS of several column sets at once: (n, P, 3), zero off each set's columns, and errors.
 
         Each set's normal equations on unit-norm columns are put in an identity of the full
         design's size and all are solved together. The identity adds eigenvalues of 1, between
@@ -223,11 +225,12 @@ class _Fold:
         norms = np.sqrt(np.diagonal(gram))
         with np.errstate(divide='ignore', invalid='ignore'):
             scaled, target = gram / np.outer(norms, norms), rhs / norms[:, None]
-        out: list[FloatArray | CalibrationError] = [np.zeros(rhs.shape) for _ in columns]
+        coefs = np.zeros((len(columns), *rhs.shape))
+        errors: list[CalibrationError | None] = [None] * len(columns)
         batch, alone, systems, targets = [], [], [], []
         for j, c in enumerate(columns):
             if rows <= len(c):
-                out[j] = CalibrationError('too few rows or a rank-deficient fold')
+                errors[j] = CalibrationError('too few rows or a rank-deficient fold')
             elif np.all(norms[c] > 0) and len(set(c)) == len(c):
                 system, right = np.eye(size), np.zeros(rhs.shape)
                 system[np.ix_(c, c)], right[c] = scaled[np.ix_(c, c)], target[c]
@@ -243,22 +246,22 @@ class _Fold:
             solved = np.linalg.solve(a[good], b[good])
             for j, solution in zip(np.asarray(batch)[good], solved, strict=True):
                 c = columns[j]
-                out[j][c] = solution[c] / norms[c, None]  # type: ignore[index]
+                coefs[j][c] = solution[c] / norms[c, None]
             alone += [j for j, ok in zip(batch, good, strict=True) if not ok]
         for j in alone:  # ill-conditioned, an empty or a repeated column: one by one
             c = columns[j]
             try:
-                out[j][c] = ols_coefficients(  # type: ignore[index]
+                coefs[j][c] = ols_coefficients(
                     self.design[:, c], self.train.rate_deg_h, (gram[np.ix_(c, c)], rhs[c])
                 )
             except CalibrationError as err:
-                out[j] = err
-        return out
+                errors[j] = err
+        return coefs, errors
 
-    def log_ratios_many(self, coefs: Sequence[FloatArray]) -> list[list[float]]:
-        """:meth:`log_ratios` of several full-size (P, 3) coefficient sets, in one product."""
-        k = len(coefs)
-        stacked = np.concatenate(coefs, axis=1)  # (P, 3k): set j in columns 3j..3j+2
+    def log_ratios_many(self, coefs: FloatArray) -> list[list[float]]:
+        """:meth:`log_ratios` of several full-size coefficient sets (k, P, 3), in one product."""
+        k = coefs.shape[0]
+        stacked = np.concatenate(list(coefs), axis=1)  # (P, 3k): set j in columns 3j..3j+2
         out: list[list[float]] = [[] for _ in range(k)]
         for per_tau in self.means:
             for rate, design, before in per_tau:
@@ -296,18 +299,16 @@ def _score_many(
     failed: list[CalibrationError | None] = [None] * len(term_sets)
     for fold in folds:
         columns = [[fold.names.index(term) for term in terms] for terms in term_sets]
-        fits = fold.fit_many(columns)
-        for j, f in enumerate(fits):
-            if isinstance(f, CalibrationError) and failed[j] is None:
-                failed[j] = f
-        live = [j for j in range(len(fits)) if failed[j] is None]
+        coefs, errors = fold.fit_many(columns)
+        failed = [f if f is not None else e for f, e in zip(failed, errors, strict=True)]
+        live = [j for j, f in enumerate(failed) if f is None]
         if live:
-            for j, part in zip(live, fold.log_ratios_many([fits[j] for j in live]), strict=True):
+            for j, part in zip(live, fold.log_ratios_many(coefs[live]), strict=True):
                 logs[j] += part
     out: list[tuple[float, list[float]] | CalibrationError] = []
-    for j in range(len(term_sets)):
-        if failed[j] is not None:
-            out.append(failed[j])  # type: ignore[arg-type]
+    for j, error in enumerate(failed):
+        if error is not None:
+            out.append(error)
         elif not logs[j]:
             out.append(CalibrationError('held-out parts too short to score'))
         else:
