@@ -174,17 +174,23 @@ def test_a_change_of_slope_in_the_static_drift_gets_the_bias_table() -> None:
     assert chosen.criterion < 0.9 * without
 
 
-def test_hinge_knots_sit_at_the_quarters_of_the_temperature_span() -> None:
-    from fog_temp_comp.core.model_candidates import hinge_terms
+def test_bias_tables_put_their_knots_evenly_inside_the_temperature_span() -> None:
+    """Three knots at the quarters, five at the sixths, none closer than 5 degC."""
+    from fog_temp_comp.core.model_candidates import bias_tables
 
-    record = cycle(CHAMBER).as_record()
+    wide = dataclasses.replace(CHAMBER, low_degC=-20.0, high_degC=60.0)
+    record = cycle(wide).as_record()
     low, high = np.percentile(record.temperature_degC, [1.0, 99.0])
-    assert hinge_terms([record]) == (
-        *PAPER_TERMS,
-        *(f'T_above_{round(low + f * (high - low))}' for f in (0.25, 0.5, 0.75)),
-    )
+    assert bias_tables([record]) == [
+        (*PAPER_TERMS, *(f'T_above_{round(low + k * (high - low) / 4)}' for k in (1, 2, 3))),
+        (*PAPER_TERMS, *(f'T_above_{round(low + k * (high - low) / 6)}' for k in range(1, 6))),
+    ]
+    # 0..40 degC: five knots would be 6.7 degC apart, three 10
+    assert [len(t) - 3 for t in bias_tables([cycle(CHAMBER).as_record()])] == [3, 5]
+    tight = dataclasses.replace(CHAMBER, low_degC=0.0, high_degC=25.0)
+    assert [len(t) - 3 for t in bias_tables([cycle(tight).as_record()])] == [3]
     narrow = dataclasses.replace(CHAMBER, low_degC=10.0, high_degC=25.0)
-    assert hinge_terms([cycle(narrow).as_record()]) == ()  # too narrow for three corners
+    assert bias_tables([cycle(narrow).as_record()]) == []  # too narrow for three corners
 
 
 def effective_lead_s(terms: tuple[str, ...], coefficients: np.ndarray, tau_s: float) -> np.ndarray:

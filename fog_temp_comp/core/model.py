@@ -10,9 +10,9 @@ list says which terms a model has.
 ``T_above_<K>`` (``max(T - K, 0)``, K an integer in degC, e.g. ``T_above_-15``) is a hinge: with
 ``const`` and ``T``, a few of them make the static drift a continuous piecewise-linear curve
 with corners at their knots, a bias table in T, for a curve no polynomial of low degree
-follows (a step, a change of slope). ``calibrate``'s candidates place three at the quarters
-of the training run's temperature span
-(:func:`~fog_temp_comp.core.model_candidates.hinge_terms`).
+follows (a step, a change of slope). ``calibrate``'s candidates place three, or five, evenly
+inside the training run's temperature span
+(:func:`~fog_temp_comp.core.model_candidates.bias_tables`).
 
 ``Tdot_lag`` is Tdot through a first-order lag of time constant ``tdot_lag_s`` (the ``denoise``
 block). With ``Tdot`` beside it, the pair is a lead-lag from the sensor's Tdot to the coil's:

@@ -27,8 +27,8 @@ __all__ = [
     'WIENER_WINDOW_S',
     'Structure',
     'StructureScore',
+    'bias_tables',
     'default_structures',
-    'hinge_terms',
 ]
 
 #: Kalman Tdot random-walk intensities tried, degC/min per sqrt(s)
@@ -47,27 +47,30 @@ TDOT_LAGS_S = (30.0, 60.0, 120.0, 240.0, 480.0, 960.0)
 SENSOR_LAGS_S = (120.0, 240.0, 480.0, 960.0)
 #: Kalman random walks tried with a sensor lag, degC/min per sqrt(s)
 SENSOR_LAG_WALKS = (0.001, 0.003)
-#: where the hinge candidate puts its knots, as fractions of the training temperature span
-HINGE_FRACTIONS = (0.25, 0.5, 0.75)
-#: the smallest training temperature span (1st to 99th percentile, degC) with a hinge candidate
-MIN_HINGE_SPAN_DEGC = 20.0
+#: the bias tables tried: their numbers of knots, evenly inside the training temperature span
+TABLE_KNOTS = (3, 5)
+#: the least spacing of a table's knots (degC): a table whose knots would be closer is not tried
+MIN_KNOT_SPACING_DEGC = 5.0
 
 
-def hinge_terms(records: Sequence[ChamberRecord]) -> tuple[str, ...]:
-    """The paper's terms and hinges at the quarters of the records' temperature span.
+def bias_tables(records: Sequence[ChamberRecord]) -> list[tuple[str, ...]]:
+    """The paper's terms with the hinges of each bias table that fits the records' span.
 
-    A bias table in T (:mod:`fog_temp_comp.core.model`): knots at :data:`HINGE_FRACTIONS` of the
-    1st-99th percentile span, to the nearest degC; empty below :data:`MIN_HINGE_SPAN_DEGC`.
+    A bias table in T (:mod:`fog_temp_comp.core.model`): for each of :data:`TABLE_KNOTS`, that
+    many knots evenly inside the 1st-99th percentile temperature span (at its quarters, its
+    sixths), to the nearest degC, when they are at least :data:`MIN_KNOT_SPACING_DEGC` apart.
     """
     temps = [r.temperature_degC[np.isfinite(r.temperature_degC)] for r in records]
     temps = [t for t in temps if t.size]
     if not temps:
-        return ()
-    low, high = np.percentile(np.concatenate(temps), [1.0, 99.0])
-    if not high - low >= MIN_HINGE_SPAN_DEGC:
-        return ()
-    knots = [round(float(low + f * (high - low))) for f in HINGE_FRACTIONS]
-    return (*PAPER_TERMS, *(hinge_term(k) for k in knots))
+        return []
+    low, high = (float(v) for v in np.percentile(np.concatenate(temps), [1.0, 99.0]))
+    tables = []
+    for n in TABLE_KNOTS:
+        if (high - low) / (n + 1) >= MIN_KNOT_SPACING_DEGC:
+            knots = [round(low + k * (high - low) / (n + 1)) for k in range(1, n + 1)]
+            tables.append((*PAPER_TERMS, *(hinge_term(knot) for knot in knots)))
+    return tables
 
 
 @dataclass(frozen=True)
@@ -167,7 +170,7 @@ def default_structures(
 
     The terms are ``term_sets``: by default the paper's, ``+T2``, ``+T_Tdot`` or both,
     ``+T2+T3`` or that with ``T_Tdot`` (:data:`CANDIDATE_TERMS`); ``calibrate`` adds the hinges
-    of :func:`hinge_terms`.
+    of :func:`bias_tables`.
 
     ``T_Tdot`` is a rate sensitivity that changes with temperature (the fibre's Shupe factor
     does), ``T2`` a bent static drift, ``T3`` one bent both ways (an S-shaped bias curve); none

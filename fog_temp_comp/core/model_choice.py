@@ -74,8 +74,8 @@ from fog_temp_comp.core.model_candidates import (
     TDOT_LAGS_S,
     Structure,
     StructureScore,
+    bias_tables,
     default_structures,
-    hinge_terms,
 )
 from fog_temp_comp.core.model_choice_record import _selection, format_scores
 from fog_temp_comp.core.publishing import held_records, prepared
@@ -344,8 +344,8 @@ def _choose_and_calibrate(
     noise = sensor_noise(records)
     base = noise.apply(dataclasses.replace(base, method='kalman', coil_lag_s=0.0))
     if structures is None:
-        hinges = hinge_terms(records)  # a bias table in T, at this run's temperatures
-        structures = default_structures((*CANDIDATE_TERMS, *([hinges] if hinges else [])))
+        # and bias tables in T, at this run's temperatures
+        structures = default_structures((*CANDIDATE_TERMS, *bias_tables(records)))
     candidates = list(structures)
     # data that cannot identify even the paper's model is refused with the reason (a soak has
     # no temperature swing, a constant temperature no Tdot spread), before any candidate
