@@ -261,7 +261,7 @@ class _Fold:
     def log_ratios_many(self, coefs: FloatArray) -> list[list[float]]:
         """:meth:`log_ratios` of several full-size coefficient sets (k, P, 3), in one product."""
         k = coefs.shape[0]
-        stacked = np.concatenate(list(coefs), axis=1)  # (P, 3k): set j in columns 3j..3j+2
+        stacked = coefs.transpose(1, 0, 2).reshape(coefs.shape[1], -1)  # set j: columns 3j..3j+2
         out: list[list[float]] = [[] for _ in range(k)]
         for per_tau in self.means:
             for rate, design, before in per_tau:
@@ -277,15 +277,9 @@ class _Fold:
 
     def log_ratios(self, columns: list[int], coef: FloatArray) -> list[float]:
         """log(stability after / before) per held-out part, score tau and axis."""
-        out: list[float] = []
-        for per_tau in self.means:
-            for rate, design, before in per_tau:
-                after = rate - design[:, columns] @ coef
-                deviation = after - after.mean(axis=0)
-                var = np.einsum('mj,mj->j', deviation, deviation)
-                ok = (var > 0) & (before > 0)
-                out += (0.5 * np.log(var[ok] / before[ok])).tolist()  # log of the std ratio
-        return out
+        full = np.zeros((len(self.names), coef.shape[1]))
+        full[columns] = coef
+        return self.log_ratios_many(full[None])[0]
 
 
 def _score_many(

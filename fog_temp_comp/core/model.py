@@ -27,6 +27,7 @@ from __future__ import annotations
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -95,20 +96,21 @@ def _hinge(knot: float) -> Callable[[FloatArray, FloatArray, FloatArray], FloatA
 
 def term_function(term: str) -> Callable[[FloatArray, FloatArray, FloatArray], FloatArray]:
     """The array function of a term, of (T degC, Tdot degC/min, lagged Tdot degC/min)."""
-    knot = hinge_knot_degC(term)
-    if knot is not None:
-        return _hinge(float(knot))
-    coefficient_key(term)
-    return TERMS[term][1]
+    return _function(term, scalar=False)
 
 
 def scalar_term_function(term: str) -> Callable[[float, float, float], float]:
     """The float function of a term, for the per-message hot path."""
+    return _function(term, scalar=True)
+
+
+def _function(term: str, *, scalar: bool) -> Callable[..., Any]:
+    """A hinge's function (floats and arrays alike), else the term's own of either table."""
     knot = hinge_knot_degC(term)
     if knot is not None:
-        return _hinge(float(knot))  # type: ignore[return-value]
-    coefficient_key(term)
-    return SCALAR_TERMS[term]
+        return _hinge(float(knot))
+    coefficient_key(term)  # the error for an unknown term
+    return SCALAR_TERMS[term] if scalar else TERMS[term][1]
 
 
 def coefficient_key(term: str) -> str:
