@@ -180,10 +180,9 @@ def test_bias_tables_put_their_knots_evenly_inside_the_temperature_span() -> Non
 
     wide = dataclasses.replace(CHAMBER, low_degC=-20.0, high_degC=60.0)
     record = cycle(wide).as_record()
-    low, high = np.percentile(record.temperature_degC, [1.0, 99.0])
     assert bias_tables([record]) == [
-        (*PAPER_TERMS, *(f'T_above_{round(low + k * (high - low) / 4)}' for k in (1, 2, 3))),
-        (*PAPER_TERMS, *(f'T_above_{round(low + k * (high - low) / 6)}' for k in range(1, 6))),
+        (*PAPER_TERMS, 'T_above_0', 'T_above_20', 'T_above_40'),
+        (*PAPER_TERMS, 'T_above_-7', 'T_above_7', 'T_above_20', 'T_above_33', 'T_above_47'),
     ]
     # 0..40 degC: five knots would be 6.7 degC apart, three 10
     assert [len(t) - 3 for t in bias_tables([cycle(CHAMBER).as_record()])] == [3, 5]
@@ -191,6 +190,20 @@ def test_bias_tables_put_their_knots_evenly_inside_the_temperature_span() -> Non
     assert [len(t) - 3 for t in bias_tables([cycle(tight).as_record()])] == [3]
     narrow = dataclasses.replace(CHAMBER, low_degC=10.0, high_degC=25.0)
     assert bias_tables([cycle(narrow).as_record()]) == []  # too narrow for three corners
+
+
+def test_bias_tables_of_units_a_degree_apart_share_their_knots() -> None:
+    """Two sensors that read the chamber's setpoints 1.6 degC apart get the same term names."""
+    from fog_temp_comp.core.model_candidates import bias_tables
+
+    cold, warm = (
+        cycle(dataclasses.replace(CHAMBER, low_degC=-20.0 + shift, high_degC=60.0 + shift))
+        for shift in (-0.8, 0.8)
+    )
+    spans = [np.percentile(r.temperature_degC, [1.0, 99.0]) for r in (cold, warm)]
+    sixths = [[round(lo + k * (hi - lo) / 6) for k in range(1, 6)] for lo, hi in spans]
+    assert sixths[0] != sixths[1]  # knots placed on the raw spans would differ
+    assert bias_tables([cold.as_record()]) == bias_tables([warm.as_record()])
 
 
 def effective_lead_s(terms: tuple[str, ...], coefficients: np.ndarray, tau_s: float) -> np.ndarray:

@@ -51,6 +51,10 @@ SENSOR_LAG_WALKS = (0.001, 0.003)
 TABLE_KNOTS = (3, 5)
 #: the least spacing of a table's knots (degC): a table whose knots would be closer is not tried
 MIN_KNOT_SPACING_DEGC = 5.0
+#: the grid (degC) that the training span's ends are rounded to before the knots are placed:
+#: units of one model run through one chamber profile get the same knots (the same term names,
+#: which ``fleet prior`` needs) though their sensors read the setpoints a degree apart
+SPAN_GRID_DEGC = 5.0
 
 
 def bias_tables(records: Sequence[ChamberRecord]) -> list[tuple[str, ...]]:
@@ -59,12 +63,15 @@ def bias_tables(records: Sequence[ChamberRecord]) -> list[tuple[str, ...]]:
     A bias table in T (:mod:`fog_temp_comp.core.model`): for each of :data:`TABLE_KNOTS`, that
     many knots evenly inside the 1st-99th percentile temperature span (at its quarters, its
     sixths), to the nearest degC, when they are at least :data:`MIN_KNOT_SPACING_DEGC` apart.
+    The span's ends are first rounded to the nearest :data:`SPAN_GRID_DEGC`, so that a degree's
+    difference between two units' sensors does not move their knots.
     """
     temps = [r.temperature_degC[np.isfinite(r.temperature_degC)] for r in records]
     temps = [t for t in temps if t.size]
     if not temps:
         return []
-    low, high = (float(v) for v in np.percentile(np.concatenate(temps), [1.0, 99.0]))
+    ends_degC = np.percentile(np.concatenate(temps), [1.0, 99.0])
+    low, high = (float(v) for v in SPAN_GRID_DEGC * np.round(ends_degC / SPAN_GRID_DEGC))
     tables = []
     for n in TABLE_KNOTS:
         if (high - low) / (n + 1) >= MIN_KNOT_SPACING_DEGC:
