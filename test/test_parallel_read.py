@@ -1,7 +1,7 @@
 """Reading a big MCAP bag in two processes gives what one process reads.
 
 ``reduce_bag`` splits an intact single-file MCAP bag at a chunk near its middle and reduces the
-second half in a forked child (:mod:`fog_temp_comp.bag.forked`). Each case reads the same
+second half in a forked child (:mod:`fog_temp_comp.core.forked`). Each case reads the same
 real bag both ways (``PARALLEL_MIN_BYTES`` 0 and unreachable) and compares everything the
 caller sees: bins, temperature samples, counts, frame_id, order counts, unset stamps, damage.
 """
@@ -68,7 +68,7 @@ def write_bag(
 READS = """
 import multiprocessing, pickle, sys, threading
 from fog_temp_comp.bag import reduce
-from fog_temp_comp.bag.forked import fork_available
+from fog_temp_comp.core.forked import fork_available
 bag, out, mode = sys.argv[1:]
 results = []
 if mode == 'both':

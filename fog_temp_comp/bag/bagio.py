@@ -11,22 +11,20 @@ from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from functools import cache
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from rosbags.highlevel import AnyReader
-from rosbags.interfaces import Connection, ConnectionExtRosbag2
-from rosbags.rosbag1 import Writer as Writer1
-from rosbags.rosbag2 import Writer as Writer2
-from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
-from rosbags.typesys import Stores, get_typestore
-from rosbags.typesys.store import Typestore
 
 from fog_temp_comp.bag import mcapwrite, ros1write, sqlitewrite
 from fog_temp_comp.bag.cdr import Spans
 from fog_temp_comp.bag.names import FORMATS
 from fog_temp_comp.core.units import NS_PER_S
+
+if TYPE_CHECKING:  # rosbags is imported where it is used: the package's own readers need none
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import Connection
+    from rosbags.typesys.store import Typestore
 
 FloatArray = NDArray[np.float64]
 IMU_TYPE = 'sensor_msgs/msg/Imu'
@@ -40,6 +38,8 @@ class BagError(Exception):
 @cache
 def typestore() -> Typestore:
     """ROS 2 Jazzy message types (also used for ROS 1 bags of the same types)."""
+    from rosbags.typesys import Stores, get_typestore
+
     return get_typestore(Stores.ROS2_JAZZY)
 
 
@@ -84,6 +84,8 @@ def _opened_reader(path: Path) -> AnyReader:
     before Iron, some sqlite3 bags); building that store costs ~0.2 s of start-up (hundreds of
     types), so it is built only when opening without it fails.
     """
+    from rosbags.highlevel import AnyReader
+
     reader = AnyReader([path])
     try:
         reader.open()
@@ -176,6 +178,10 @@ class BagWriter:
     def __init__(self, path: str | Path, fmt: str, *, compress: bool = False) -> None:
         if fmt not in FORMATS:
             raise ValueError(f'format must be one of {FORMATS}, got {fmt!r}')
+        from rosbags.rosbag1 import Writer as Writer1
+        from rosbags.rosbag2 import Writer as Writer2
+        from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
+
         self.path = Path(path)
         if self.path.exists():
             raise BagError(f'{self.path}: exists already, not overwriting')
@@ -216,6 +222,8 @@ class BagWriter:
 
         ``definition`` is a ROS 1 (message definition, MD5 sum) to write as it is.
         """
+        from rosbags.interfaces import ConnectionExtRosbag2
+
         ts = typestore()
         kwargs: dict[str, Any] = {}
         if definition is not None and self._ros1:

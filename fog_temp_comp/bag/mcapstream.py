@@ -10,9 +10,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
-
-from rosbags.highlevel import AnyReader
+from typing import TYPE_CHECKING, Any
 
 from fog_temp_comp.bag.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagError, resolve_topic_in
 from fog_temp_comp.bag.mcapbatches import ScanStats, check_counts
@@ -23,6 +21,9 @@ from fog_temp_comp.bag.salvage import RecoveryError
 from fog_temp_comp.bag.sqlitescan import metadata_counts
 from fog_temp_comp.bag.streamchunk import Chunk
 from fog_temp_comp.bag.streamdecode import _decoder, _StreamDecoding
+
+if TYPE_CHECKING:
+    from rosbags.highlevel import AnyReader
 
 
 class _McapReading(_StreamDecoding):

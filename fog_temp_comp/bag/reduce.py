@@ -10,11 +10,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fog_temp_comp.bag.bagio import BagError
-from fog_temp_comp.bag.forked import ForkedCall, fork_available
 from fog_temp_comp.bag.mcapscan import ScanStats
 from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.stream import BagStream, Chunk, Progress, StampOrder
 from fog_temp_comp.bag.unstamped import UnsetStamps
+from fog_temp_comp.core.forked import ForkedCall, fork_available
 from fog_temp_comp.core.grid import GridAccumulator, bin_means
 from fog_temp_comp.core.record import ChamberRecord
 
@@ -171,7 +171,7 @@ def reduce_bag(
     With ``keep_temperature`` the temperature samples are kept too (sorted by stamp).
     ``strict`` refuses a damaged bag; else ``on_salvage`` is called with what was skipped.
     A bag that is one intact MCAP file of :data:`PARALLEL_MIN_BYTES` or more is read in two
-    processes (its second half in a fork; :mod:`fog_temp_comp.bag.forked`).
+    processes (its second half in a fork; :mod:`fog_temp_comp.core.forked`).
     """
     path = Path(path)
     reduction = _Reduction(period_s, keep_temperature)

@@ -24,11 +24,10 @@ import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import TracebackType
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import apsw
 import numpy as np
-from rosbags.highlevel import AnyReader
 
 from fog_temp_comp.bag import cdr
 from fog_temp_comp.bag.bagio import (
@@ -52,6 +51,9 @@ from fog_temp_comp.bag.streamdecode import _decoder, get_field
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.stamp_offset import TIME_SOURCES
+
+if TYPE_CHECKING:
+    from rosbags.highlevel import AnyReader
 
 __all__ = [
     'BagStream',

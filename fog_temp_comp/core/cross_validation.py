@@ -7,8 +7,6 @@ an estimator setting share its grid tables and folds (:mod:`fog_temp_comp.core.c
 
 from __future__ import annotations
 
-import contextvars
-import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
@@ -22,10 +20,10 @@ from fog_temp_comp.core.calibration import (
 )
 from fog_temp_comp.core.cv_folds import _Fold, _parts, _score, _score_many
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.kalman_series import estimator_series, shaped_series
 from fog_temp_comp.core.model_candidates import Structure, StructureScore
 from fog_temp_comp.core.names import TERM_NAMES
 from fog_temp_comp.core.record import ChamberRecord
-from fog_temp_comp.core.tdot import offline_estimates, shaped_as
 from fog_temp_comp.core.tdot_estimate import EstimateSeries
 
 __all__ = ['MAX_SHRINK_FRACTION', 'cross_validate', 'shaped_series']
@@ -38,66 +36,6 @@ MAX_SHRINK_FRACTION = 0.1
 
 #: training and held-out series
 _Pair = tuple[list[EstimateSeries], list[EstimateSeries]]
-
-#: the Kalman series of :func:`_series` while :func:`choose_and_calibrate` runs (it asks for
-#: the same records and walk several times); keyed by the records' ids, which it keeps alive
-_SERIES_CACHE: contextvars.ContextVar[dict[Any, Any] | None] = contextvars.ContextVar(
-    '_SERIES_CACHE', default=None
-)
-
-
-def _series(
-    records: Sequence[ChamberRecord], base: DenoiseSettings, estimator: tuple[float, float]
-) -> list[EstimateSeries]:
-    """The Kalman series of ``estimator`` = (walk, sensor lag s) on each record (cached)."""
-    walk, sensor_lag_s = estimator
-    settings = dataclasses.replace(
-        base,
-        method='kalman',
-        kalman_rate_walk_degC_per_min_per_sqrt_s=walk,
-        sensor_lag_s=sensor_lag_s,
-    )
-    return _unshaped_series(records, settings)
-
-
-def _unshaped_series(
-    records: Sequence[ChamberRecord], settings: DenoiseSettings
-) -> list[EstimateSeries]:
-    """The Kalman filter's own series of ``settings`` on each record, without any shaping.
-
-    Cached by the records' ids and the filter's settings (the shaping ones set to 0), so the
-    final fit reuses the series its cross-validation computed.
-    """
-    settings = dataclasses.replace(
-        settings,
-        tdot_shrink_sigmas=0.0,
-        tdot_wiener_window_s=0.0,
-        tdot_lag_s=0.0,
-        coil_lag_s=0.0,
-    )
-    cache = _SERIES_CACHE.get()
-    key = (tuple(id(r) for r in records), settings)
-    if cache is not None and key in cache:
-        return list(cache[key][1])
-    series = [
-        offline_estimates(settings, r.temp_stamps_s, r.temperature_degC, coil_lag=False)
-        for r in records
-    ]
-    if cache is not None:
-        cache[key] = (list(records), series)
-    return list(series)
-
-
-def shaped_series(
-    records: Sequence[ChamberRecord], settings: DenoiseSettings
-) -> list[EstimateSeries]:
-    """Each record's Kalman series through ``settings``' Wiener gain, coil lag and shaping.
-
-    What :func:`~fog_temp_comp.core.calibration.grid_table` computes for method ``'kalman'``
-    (bit for bit), from the series cache while
-    :func:`~fog_temp_comp.core.model_choice.choose_and_calibrate` runs.
-    """
-    return [shaped_as(s, settings) for s in _unshaped_series(records, settings)]
 
 
 def _shrink_threshold(series: Sequence[EstimateSeries], sigmas: float) -> tuple[float, float]:
@@ -177,8 +115,8 @@ def cross_validate(
         scores.append(result)
         if structure.estimator not in cache:
             cache[structure.estimator] = (
-                _series(records, base, structure.estimator),
-                _series(heldout, base, structure.estimator),
+                estimator_series(records, base, structure.estimator),
+                estimator_series(heldout, base, structure.estimator),
             )
         train_series, test_series = cache[structure.estimator]
         lag = structure.tdot_lag_s if 'Tdot_lag' in structure.terms else 0.0

@@ -24,6 +24,7 @@ coils at different places get their own.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -83,8 +84,12 @@ def hinge_term(knot_degC: int) -> str:
     return f'T_above_{int(knot_degC)}'
 
 
+@functools.lru_cache(maxsize=1024)
 def hinge_knot_degC(term: str) -> int | None:
-    """The knot (degC) of a hinge term's name, None for any other term."""
+    """The knot (degC) of a hinge term's name, None for any other term.
+
+    Cached: the model choice asks it of every term of every candidate.
+    """
     match = HINGE_PATTERN.fullmatch(term)
     return int(match.group(1)) if match else None
 

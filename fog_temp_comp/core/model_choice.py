@@ -48,13 +48,7 @@ from fog_temp_comp.core.calibration import (
     check_identifiable,
     table_of,
 )
-from fog_temp_comp.core.cross_validation import (
-    _SERIES_CACHE,
-    MAX_SHRINK_FRACTION,
-    _series,
-    cross_validate,
-    shaped_series,
-)
+from fog_temp_comp.core.cross_validation import MAX_SHRINK_FRACTION, cross_validate
 from fog_temp_comp.core.cv_folds import (
     BLOCKS_PER_RUN,
     MAX_NORMAL_CONDITION,
@@ -66,6 +60,12 @@ from fog_temp_comp.core.cv_folds import _Fold as _Fold
 from fog_temp_comp.core.cv_folds import _parts as _parts
 from fog_temp_comp.core.cv_folds import _score as _score
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.kalman_series import (
+    estimator_series,
+    prefetch_series,
+    series_cache,
+    shaped_series,
+)
 from fog_temp_comp.core.model import CANDIDATE_TERMS, PAPER_TERMS
 from fog_temp_comp.core.model_candidates import (
     KALMAN_WALKS,
@@ -308,8 +308,7 @@ def choose_and_calibrate(
     """
     if not records:
         raise CalibrationError('no records to calibrate on')
-    token = _SERIES_CACHE.set({})
-    try:
+    with series_cache():
         return _choose_and_calibrate(
             records,
             base,
@@ -320,8 +319,6 @@ def choose_and_calibrate(
             provenance,
             quantized_likelihood,
         )
-    finally:
-        _SERIES_CACHE.reset(token)
 
 
 def _choose_and_calibrate(
@@ -347,6 +344,9 @@ def _choose_and_calibrate(
         # and bias tables in T, at this run's temperatures
         structures = default_structures((*CANDIDATE_TERMS, *bias_tables(records)))
     candidates = list(structures)
+    # every candidate's filter series at once, on two cores where there are two
+    prefetch_series(records, base, [s.estimator for s in candidates])
+    prefetch_series(heldout, base, [s.estimator for s in candidates])
     # data that cannot identify even the paper's model is refused with the reason (a soak has
     # no temperature swing, a constant temperature no Tdot spread), before any candidate
     paper = [s for s in candidates if s.terms == PAPER_TERMS] or candidates[:1]
@@ -354,7 +354,9 @@ def _choose_and_calibrate(
         GridTable.concatenate(
             [
                 table_of(r, s, base.tdot_period_s)
-                for r, s in zip(records, _series(records, base, paper[0].estimator), strict=True)
+                for r, s in zip(
+                    records, estimator_series(records, base, paper[0].estimator), strict=True
+                )
             ]
         ),
         PAPER_TERMS,
@@ -372,11 +374,11 @@ def _choose_and_calibrate(
     mode = fold_mode(
         [
             table_of(r, s, period)
-            for r, s in zip(records, _series(records, base, walk), strict=True)
+            for r, s in zip(records, estimator_series(records, base, walk), strict=True)
         ],
         [
             table_of(r, s, period)
-            for r, s in zip(heldout, _series(heldout, base, walk), strict=True)
+            for r, s in zip(heldout, estimator_series(heldout, base, walk), strict=True)
         ],
     )
     selection = _selection(scores, chosen, mode, tolerance, noise)

@@ -1,0 +1,128 @@
+"""The model choice's Kalman series, half of them computed in a forked child.
+
+:func:`~fog_temp_comp.core.kalman_series.prefetch_series` must give the same bits as one
+process, and ``choose_and_calibrate`` the same scores and coefficients either way. A fork needs
+a process with no other thread, and the test process may hold some from earlier tests, so the
+two-process cases run in a fresh interpreter.
+"""
+
+from __future__ import annotations
+
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.kalman_series import estimator_series, prefetch_series, series_cache
+from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
+
+FIELDS = ('stamp_s', 'temperature_degC', 'tdot_degC_per_min', 'tdot_std_degC_per_min', 'ready')
+
+SCRIPT = """
+import pickle, sys
+from fog_temp_comp.core import kalman_series
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.model_choice import choose_and_calibrate
+from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
+
+cfg = SimulationConfig(imu_hz=0.5, temp_hz=1.0, low_degC=0.0, high_degC=40.0,
+                       start_degC=20.0, cycle_soak_s=1800.0, lag_s=400.0)
+records = [simulate_run('cycle', 0.2, cfg, seed=3).as_record()]
+estimators = [(0.001, 0.0), (0.003, 0.0), (0.001, 240.0), (0.003, 480.0), (0.001, 0.0)]
+out = {}
+with kalman_series.series_cache():
+    out['child'] = kalman_series.prefetch_series(
+        records, RECOMMENDED_SETTINGS, estimators, min_readings=0
+    )
+    out['series'] = [
+        kalman_series.estimator_series(records, RECOMMENDED_SETTINGS, e) for e in estimators
+    ]
+    out['again'] = kalman_series.prefetch_series(
+        records, RECOMMENDED_SETTINGS, estimators, min_readings=0
+    )
+with kalman_series.series_cache():
+    out['short'] = kalman_series.prefetch_series(
+        records, RECOMMENDED_SETTINGS, estimators, min_readings=10**6
+    )
+out['outside'] = kalman_series.prefetch_series(
+    records, RECOMMENDED_SETTINGS, estimators, min_readings=0
+)
+forks = []
+real_fork = kalman_series.ForkedCall
+kalman_series.ForkedCall = lambda *args: forks.append(args[0]) or real_fork(*args)
+for name, min_readings in (('two', 0), ('one', 1 << 62)):
+    kalman_series.PARALLEL_MIN_READINGS = min_readings
+    forks.clear()
+    result, scores, chosen = choose_and_calibrate(records, RECOMMENDED_SETTINGS)
+    out[name + '_forks'] = len(forks)
+    out[name] = (
+        result.coefficients.model.coefficients,
+        [s.criterion for s in scores],
+        chosen.structure,
+    )
+with open(sys.argv[1], 'wb') as file:
+    pickle.dump(out, file)
+"""
+
+
+def run_script(tmp_path: Path) -> dict[str, Any]:
+    """:data:`SCRIPT`'s results, from a fresh interpreter."""
+    out = tmp_path / 'series.pickle'
+    done = subprocess.run(
+        [sys.executable, '-c', SCRIPT, str(out)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    with out.open('rb') as file:
+        result: dict[str, Any] = pickle.load(file)
+    return result
+
+
+def test_series_from_two_processes_are_one_process_bits(tmp_path: Path) -> None:
+    """The child's half and the parent's equal the serial series; the choice is the same."""
+    out = run_script(tmp_path)
+    # four distinct estimators (one given twice): the child takes every other one
+    assert out['child'] == 2
+    assert out['again'] == 0  # all cached already
+    assert out['short'] == 0  # 8 h at 1 Hz is under a million readings
+    assert out['outside'] == 0  # no cache to fill outside series_cache()
+    cfg = SimulationConfig(
+        imu_hz=0.5,
+        temp_hz=1.0,
+        low_degC=0.0,
+        high_degC=40.0,
+        start_degC=20.0,
+        cycle_soak_s=1800.0,
+        lag_s=400.0,
+    )
+    records = [simulate_run('cycle', 0.2, cfg, seed=3).as_record()]
+    estimators = [(0.001, 0.0), (0.003, 0.0), (0.001, 240.0), (0.003, 480.0), (0.001, 0.0)]
+    for estimator, (forked,) in zip(estimators, out['series'], strict=True):
+        (serial,) = estimator_series(records, RECOMMENDED_SETTINGS, estimator)
+        for name in FIELDS:
+            np.testing.assert_array_equal(getattr(forked, name), getattr(serial, name))
+    assert (out['two_forks'], out['one_forks']) == (1, 0)  # the choice ran on two processes
+    two, one = out['two'], out['one']
+    np.testing.assert_array_equal(two[0], one[0])
+    assert two[1] == one[1]
+    assert two[2] == one[2]
+
+
+def test_prefetch_does_nothing_for_one_estimator() -> None:
+    """One estimator (or the same one twice) is not worth a fork; the cache fills on demand."""
+    cfg = SimulationConfig(imu_hz=0.5, temp_hz=1.0, cycle_soak_s=600.0)
+    records = [simulate_run('cycle', 1.0, cfg, seed=1).as_record()]
+    with series_cache():
+        assert (
+            prefetch_series(records, RECOMMENDED_SETTINGS, [(0.001, 0.0)] * 2, min_readings=0) == 0
+        )
+        first = estimator_series(records, RECOMMENDED_SETTINGS, (0.001, 0.0))
+        again = estimator_series(records, RECOMMENDED_SETTINGS, (0.001, 0.0))
+    assert first[0] is again[0]  # cached
