@@ -1,7 +1,9 @@
-"""The model choice's Kalman series, half of them computed in a forked child.
+"""The model choice on two processes: half the Kalman series and half the scores in a fork.
 
 :func:`~fog_temp_comp.core.kalman_series.prefetch_series` must give the same bits as one
-process, and ``choose_and_calibrate`` the same scores and coefficients either way. A fork needs
+process, and ``choose_and_calibrate`` (with
+:func:`~fog_temp_comp.core.cross_validation.cross_validate_on_two`) the same scores and
+coefficients either way. A fork needs
 a process with no other thread, and the test process may hold some from earlier tests, so the
 two-process cases run in a fresh interpreter.
 """
@@ -24,7 +26,7 @@ FIELDS = ('stamp_s', 'temperature_degC', 'tdot_degC_per_min', 'tdot_std_degC_per
 
 SCRIPT = """
 import pickle, sys
-from fog_temp_comp.core import kalman_series
+from fog_temp_comp.core import cross_validation, kalman_series
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.model_choice import choose_and_calibrate
 from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
@@ -53,15 +55,16 @@ out['outside'] = kalman_series.prefetch_series(
 )
 forks = []
 real_fork = kalman_series.ForkedCall
-kalman_series.ForkedCall = lambda *args: forks.append(args[0]) or real_fork(*args)
+for module in (kalman_series, cross_validation):
+    module.ForkedCall = lambda *args: forks.append(args[0].__name__) or real_fork(*args)
 for name, min_readings in (('two', 0), ('one', 1 << 62)):
     kalman_series.PARALLEL_MIN_READINGS = min_readings
     forks.clear()
     result, scores, chosen = choose_and_calibrate(records, RECOMMENDED_SETTINGS)
-    out[name + '_forks'] = len(forks)
+    out[name + '_forks'] = list(forks)
     out[name] = (
         result.coefficients.model.coefficients,
-        [s.criterion for s in scores],
+        [(s.structure, s.criterion, s.error, s.parts) for s in scores],
         chosen.structure,
     )
 with open(sys.argv[1], 'wb') as file:
@@ -108,7 +111,9 @@ def test_series_from_two_processes_are_one_process_bits(tmp_path: Path) -> None:
         (serial,) = estimator_series(records, RECOMMENDED_SETTINGS, estimator)
         for name in FIELDS:
             np.testing.assert_array_equal(getattr(forked, name), getattr(serial, name))
-    assert (out['two_forks'], out['one_forks']) == (1, 0)  # the choice ran on two processes
+    # the filters, then the scores, on two processes
+    assert out['two_forks'] == ['_computed', 'cross_validate']
+    assert out['one_forks'] == []
     two, one = out['two'], out['one']
     np.testing.assert_array_equal(two[0], one[0])
     assert two[1] == one[1]

@@ -20,13 +20,14 @@ from fog_temp_comp.core.calibration import (
 )
 from fog_temp_comp.core.cv_folds import _Fold, _parts, _score, _score_many
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
-from fog_temp_comp.core.kalman_series import estimator_series, shaped_series
+from fog_temp_comp.core.forked import ForkedCall
+from fog_temp_comp.core.kalman_series import estimator_series, shaped_series, two_processes
 from fog_temp_comp.core.model_candidates import Structure, StructureScore
 from fog_temp_comp.core.names import TERM_NAMES
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.tdot_estimate import EstimateSeries
 
-__all__ = ['MAX_SHRINK_FRACTION', 'cross_validate', 'shaped_series']
+__all__ = ['MAX_SHRINK_FRACTION', 'cross_validate', 'cross_validate_on_two', 'shaped_series']
 
 #: the shrinkage threshold may reach at most this fraction of the training run's typical
 #: |Tdot| (90th percentile): the garrote must be nearly linear over the calibrated range, or a
@@ -72,11 +73,69 @@ def _shrinkage_refusal(
     return ''
 
 
+def cross_validate_on_two(
+    records: Sequence[ChamberRecord],
+    base: DenoiseSettings,
+    structures: Sequence[Structure],
+    heldout: Sequence[ChamberRecord] = (),
+) -> list[StructureScore]:
+    """:func:`cross_validate`, half of the structures scored in a forked child.
+
+    The structures are split by Kalman estimator (those that share one share its tables,
+    folds and batched scores, so each half computes them as one process would), about evenly
+    by their fold settings. The child inherits the series cache
+    (:func:`~fog_temp_comp.core.kalman_series.prefetch_series` fills it first). The same
+    scores, bit for bit, as :func:`cross_validate`; that is what runs where there is no second
+    core, another thread, or too short a record
+    (:data:`~fog_temp_comp.core.kalman_series.PARALLEL_MIN_READINGS`), or if the child fails.
+    """
+    names = _design_names(structures)
+    halves: tuple[list[int], list[int]] = ([], [])
+    if two_processes(records):
+        by_estimator: dict[Any, list[int]] = {}
+        for index, structure in enumerate(structures):
+            by_estimator.setdefault(structure.estimator, []).append(index)
+        loads = [0, 0]
+        for group in sorted(by_estimator.values(), key=lambda g: -_fold_settings(structures, g)):
+            half = int(loads[1] < loads[0])
+            halves[half].extend(group)
+            loads[half] += _fold_settings(structures, group)
+    if not halves[0] or not halves[1]:
+        return cross_validate(records, base, structures, heldout, names=names)
+    theirs = [structures[i] for i in sorted(halves[1])]
+    with ForkedCall(cross_validate, records, base, theirs, heldout, names) as child:
+        ours = cross_validate(
+            records, base, [structures[i] for i in sorted(halves[0])], heldout, names=names
+        )
+        scored = child.result()
+    if scored is None:
+        scored = cross_validate(records, base, theirs, heldout, names=names)
+    by_index = dict(zip(sorted(halves[0]), ours, strict=True))
+    by_index.update(zip(sorted(halves[1]), scored, strict=True))
+    return [by_index[i] for i in range(len(structures))]
+
+
+def _fold_settings(structures: Sequence[Structure], indices: Sequence[int]) -> int:
+    """How many distinct fold settings (tables and folds to build) the structures need."""
+    return len(
+        {
+            (s.estimator, s.shrink_sigmas, s.tdot_lag_s, s.coil_lag_s, s.wiener_window_s)
+            for s in (structures[i] for i in indices)
+        }
+    )
+
+
+def _design_names(structures: Sequence[Structure]) -> tuple[str, ...]:
+    """Every term the candidates use: the fixed ones, then the hinges at their knots."""
+    return (*TERM_NAMES, *sorted({t for s in structures for t in s.terms} - set(TERM_NAMES)))
+
+
 def cross_validate(
     records: Sequence[ChamberRecord],
     base: DenoiseSettings,
     structures: Sequence[Structure],
     heldout: Sequence[ChamberRecord] = (),
+    names: Sequence[str] | None = None,
 ) -> list[StructureScore]:
     """Held-out score of every structure (see the module docstring for the folds).
 
@@ -90,6 +149,8 @@ def cross_validate(
         The candidates.
     heldout : sequence of ChamberRecord
         Runs to score on instead of folds of the training runs.
+    names : sequence of str, optional
+        The terms of the folds' design matrix (default: every term of ``structures``).
 
     Returns
     -------
@@ -98,8 +159,7 @@ def cross_validate(
 
     """
     period = base.tdot_period_s
-    # every term the candidates use: the fixed ones, then the hinges at their knots
-    names = (*TERM_NAMES, *sorted({t for s in structures for t in s.terms} - set(TERM_NAMES)))
+    names = _design_names(structures) if names is None else tuple(names)
     cache: dict[tuple[float, float], tuple[list[EstimateSeries], list[EstimateSeries]]] = {}
     # the series through each coil lag, and the grid tables and folds of each estimator
     # setting, are shared by the structures that differ only in their terms or fit

@@ -30,6 +30,7 @@ __all__ = [
     'prefetch_series',
     'series_cache',
     'shaped_series',
+    'two_processes',
 ]
 
 #: below this many temperature readings (over the records) the estimators run in one process:
@@ -90,9 +91,7 @@ def prefetch_series(
     """
     cache = _CACHE.get()
     todo = [e for e in dict.fromkeys(estimators) if _key(records, base, e) not in (cache or {})]
-    readings = sum(r.temp_stamps_s.size for r in records)
-    least = PARALLEL_MIN_READINGS if min_readings is None else min_readings
-    if cache is None or len(todo) < 2 or readings < max(least, 1) or not fork_available():
+    if cache is None or len(todo) < 2 or not two_processes(records, min_readings):
         return 0
     theirs = todo[1::2]
     with ForkedCall(_computed, records, base, theirs) as child:
@@ -104,6 +103,17 @@ def prefetch_series(
     for estimator, series in zip(theirs, computed, strict=True):
         cache[_key(records, base, estimator)] = (list(records), series)
     return len(theirs)
+
+
+def two_processes(records: Sequence[ChamberRecord], min_readings: int | None = None) -> bool:
+    """Whether work on ``records`` is worth a second process, and one may be forked.
+
+    At least ``min_readings`` temperature readings (default :data:`PARALLEL_MIN_READINGS`),
+    and :func:`~fog_temp_comp.core.forked.fork_available`.
+    """
+    readings = sum(r.temp_stamps_s.size for r in records)
+    least = PARALLEL_MIN_READINGS if min_readings is None else min_readings
+    return readings >= max(least, 1) and fork_available()
 
 
 def _computed(

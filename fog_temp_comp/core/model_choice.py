@@ -48,7 +48,11 @@ from fog_temp_comp.core.calibration import (
     check_identifiable,
     table_of,
 )
-from fog_temp_comp.core.cross_validation import MAX_SHRINK_FRACTION, cross_validate
+from fog_temp_comp.core.cross_validation import (
+    MAX_SHRINK_FRACTION,
+    cross_validate,
+    cross_validate_on_two,
+)
 from fog_temp_comp.core.cv_folds import (
     BLOCKS_PER_RUN,
     MAX_NORMAL_CONDITION,
@@ -361,7 +365,7 @@ def _choose_and_calibrate(
         ),
         PAPER_TERMS,
     )
-    scores = cross_validate(records, base, candidates, heldout)
+    scores = cross_validate_on_two(records, base, candidates, heldout)
     chosen = choose_fit(
         refine_time_constant(choose(scores, tolerance), records, base, heldout),
         records,
