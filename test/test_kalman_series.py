@@ -25,7 +25,7 @@ from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
 FIELDS = ('stamp_s', 'temperature_degC', 'tdot_degC_per_min', 'tdot_std_degC_per_min', 'ready')
 
 SCRIPT = """
-import pickle, sys
+import multiprocessing, pickle, sys
 from fog_temp_comp.core import cross_validation, kalman_series
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.model_choice import choose_and_calibrate
@@ -67,6 +67,17 @@ for name, min_readings in (('two', 0), ('one', 1 << 62)):
         [(s.structure, s.criterion, s.error, s.parts) for s in scores],
         chosen.structure,
     )
+
+
+def in_pool_worker():
+    from fog_temp_comp.core.forked import fork_available
+    result, _, _ = choose_and_calibrate(records, RECOMMENDED_SETTINGS)
+    return fork_available(), result.coefficients.model.coefficients
+
+
+kalman_series.PARALLEL_MIN_READINGS = 0
+with multiprocessing.get_context('fork').Pool(1) as pool:  # daemonic: may not fork again
+    out['pool'] = pool.apply(in_pool_worker)
 with open(sys.argv[1], 'wb') as file:
     pickle.dump(out, file)
 """
@@ -118,6 +129,9 @@ def test_series_from_two_processes_are_one_process_bits(tmp_path: Path) -> None:
     np.testing.assert_array_equal(two[0], one[0])
     assert two[1] == one[1]
     assert two[2] == one[2]
+    # a multiprocessing Pool's worker (as the benchmarks run calibrate) works in one process
+    assert out['pool'][0] is False
+    np.testing.assert_array_equal(out['pool'][1], one[0])
 
 
 def test_prefetch_does_nothing_for_one_estimator() -> None:

@@ -1,10 +1,11 @@
 """Run one function in a forked child process while the parent goes on, and get its result.
 
-Reading a long bag is CPU work in Python and numpy that holds the GIL (chunk decompression
-too), so a second core helps only from a second process. A fork starts at once (no imports,
-the open bag's state is copied) and sends back a small pickled result. Linux only; elsewhere,
-with one core or with other threads running, :func:`fork_available` is false and the caller
-reads serially.
+Reading a long bag, and the Kalman filters and scores of ``calibrate``'s model choice, are CPU
+work in Python and numpy that holds the GIL (chunk decompression too), so a second core helps
+only from a second process. A fork starts at once (no imports, the open bag's state and the
+records are copied) and sends back a small pickled result. Linux only; elsewhere, with one
+core, with other threads running or in a daemonic worker, :func:`fork_available` is false and
+the caller works serially.
 """
 
 from __future__ import annotations
@@ -22,11 +23,23 @@ __all__ = ['ForkedCall', 'fork_available']
 def fork_available() -> bool:
     """Whether :class:`ForkedCall` may be used here.
 
-    Linux, more than one CPU, and no other Python thread (a fork copies only the calling
-    thread; a lock another one held would stay locked in the child, e.g. in a Dask worker).
+    Linux, more than one CPU, no other Python thread (a fork copies only the calling
+    thread; a lock another one held would stay locked in the child, e.g. in a Dask worker),
+    and not a daemonic ``multiprocessing`` worker (a ``Pool``'s: it may not have children).
     """
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()
-    return sys.platform.startswith('linux') and (cpus or 1) > 1 and threading.active_count() == 1
+    return (
+        sys.platform.startswith('linux')
+        and (cpus or 1) > 1
+        and threading.active_count() == 1
+        and not _daemonic()
+    )
+
+
+def _daemonic() -> bool:
+    """Whether this process is a daemonic ``multiprocessing`` child (which imported it)."""
+    multiprocessing = sys.modules.get('multiprocessing')
+    return multiprocessing is not None and bool(multiprocessing.current_process().daemon)
 
 
 class ForkedCall:
