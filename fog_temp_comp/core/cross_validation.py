@@ -137,7 +137,7 @@ def cross_validate(
     heldout: Sequence[ChamberRecord] = (),
     names: Sequence[str] | None = None,
 ) -> list[StructureScore]:
-    """Held-out score of every structure (see the module docstring for the folds).
+    """Held-out score of every structure, in their order (the folds: the module docstring).
 
     Parameters
     ----------
@@ -151,11 +151,6 @@ def cross_validate(
         Runs to score on instead of folds of the training runs.
     names : sequence of str, optional
         The terms of the folds' design matrix (default: every term of ``structures``).
-
-    Returns
-    -------
-    list of StructureScore
-        In the order of ``structures``.
 
     """
     period = base.tdot_period_s
