@@ -10,30 +10,31 @@ two-process cases run in a fresh interpreter.
 
 from __future__ import annotations
 
-import pickle
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from fresh_interpreter import run_pickling
 
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.kalman_series import estimator_series, prefetch_series, series_cache
 from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
 
+from simdata import EIGHT_HOUR_CYCLE
+
 FIELDS = ('stamp_s', 'temperature_degC', 'tdot_degC_per_min', 'tdot_std_degC_per_min', 'ready')
 
 SCRIPT = """
 import multiprocessing, pickle, sys
+sys.path.insert(0, sys.argv[2])
 from fog_temp_comp.core import cross_validation, kalman_series
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.model_choice import choose_and_calibrate
-from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
+from fog_temp_comp.tools.simulate import simulate_run
+from fresh_interpreter import run_pickling
+from simdata import EIGHT_HOUR_CYCLE
 
-cfg = SimulationConfig(imu_hz=0.5, temp_hz=1.0, low_degC=0.0, high_degC=40.0,
-                       start_degC=20.0, cycle_soak_s=1800.0, lag_s=400.0)
-records = [simulate_run('cycle', 0.2, cfg, seed=3).as_record()]
+records = [simulate_run('cycle', 0.2, EIGHT_HOUR_CYCLE, seed=3).as_record()]
 estimators = [(0.001, 0.0), (0.003, 0.0), (0.001, 240.0), (0.003, 480.0), (0.001, 0.0)]
 out = {}
 with kalman_series.series_cache():
@@ -86,17 +87,8 @@ with open(sys.argv[1], 'wb') as file:
 def run_script(tmp_path: Path) -> dict[str, Any]:
     """:data:`SCRIPT`'s results, from a fresh interpreter."""
     out = tmp_path / 'series.pickle'
-    done = subprocess.run(
-        [sys.executable, '-c', SCRIPT, str(out)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
-    assert done.returncode == 0, done.stderr
-    with out.open('rb') as file:
-        result: dict[str, Any] = pickle.load(file)
-    return result
+    result, _ = run_pickling(SCRIPT, out, str(Path(__file__).parent), timeout_s=300.0)
+    return dict(result)
 
 
 def test_series_from_two_processes_are_one_process_bits(tmp_path: Path) -> None:
@@ -107,16 +99,7 @@ def test_series_from_two_processes_are_one_process_bits(tmp_path: Path) -> None:
     assert out['again'] == 0  # all cached already
     assert out['short'] == 0  # 8 h at 1 Hz is under a million readings
     assert out['outside'] == 0  # no cache to fill outside series_cache()
-    cfg = SimulationConfig(
-        imu_hz=0.5,
-        temp_hz=1.0,
-        low_degC=0.0,
-        high_degC=40.0,
-        start_degC=20.0,
-        cycle_soak_s=1800.0,
-        lag_s=400.0,
-    )
-    records = [simulate_run('cycle', 0.2, cfg, seed=3).as_record()]
+    records = [simulate_run('cycle', 0.2, EIGHT_HOUR_CYCLE, seed=3).as_record()]
     estimators = [(0.001, 0.0), (0.003, 0.0), (0.001, 240.0), (0.003, 480.0), (0.001, 0.0)]
     for estimator, (forked,) in zip(estimators, out['series'], strict=True):
         (serial,) = estimator_series(records, RECOMMENDED_SETTINGS, estimator)

@@ -23,17 +23,10 @@ from fog_temp_comp.core.model_choice import (
 )
 from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig, simulate_run
 
+from simdata import EIGHT_HOUR_CYCLE
+
 #: a 0.2 degC/min cycle over 0..40 degC with 30 min holds (about 8 h), gyro 0.5 Hz
-CHAMBER = SimulationConfig(
-    imu_hz=0.5,
-    temp_hz=1.0,
-    low_degC=0.0,
-    high_degC=40.0,
-    start_degC=20.0,
-    cycle_soak_s=1800.0,
-    lag_s=400.0,
-    arw_10s_deg_h=0.01,
-)
+CHAMBER = EIGHT_HOUR_CYCLE
 
 
 def cycle(cfg: SimulationConfig, seed: int = 3) -> SimulatedRun:

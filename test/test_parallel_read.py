@@ -9,15 +9,14 @@ caller sees: bins, temperature samples, counts, frame_id, order counts, unset st
 from __future__ import annotations
 
 import os
-import pickle
 import struct
-import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from fresh_interpreter import run_pickling
 
 from fog_temp_comp.bag import bagio
 from fog_temp_comp.bag.mcapscan import chunk_offsets
@@ -69,7 +68,7 @@ READS = """
 import multiprocessing, pickle, sys, threading
 from fog_temp_comp.bag import reduce
 from fog_temp_comp.core.forked import fork_available
-bag, out, mode = sys.argv[1:]
+out, bag, mode = sys.argv[1:]
 results = []
 if mode == 'both':
     for min_bytes in (0, 1 << 62):
@@ -93,17 +92,8 @@ with open(out, 'wb') as file:
 
 def run_reads(bag: Path, mode: str) -> tuple[list[Any], str]:
     """Run :data:`READS` on ``bag`` in a fresh interpreter: (its results, its stderr)."""
-    out = bag.parent / f'reads_{mode}.pickle'
-    done = subprocess.run(
-        [sys.executable, '-c', READS, str(bag), str(out), mode],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-    )
-    assert done.returncode == 0, done.stderr
-    with out.open('rb') as file:
-        return pickle.load(file), done.stderr
+    results, stderr = run_pickling(READS, bag.parent / f'reads_{mode}.pickle', str(bag), mode)
+    return list(results), stderr
 
 
 def read_both(bag: Path) -> tuple[BinnedRecord, list[Salvage], BinnedRecord, list[Salvage], str]:
