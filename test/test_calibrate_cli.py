@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from html.parser import HTMLParser
 from pathlib import Path
@@ -29,6 +30,7 @@ from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.earth import earth_rate_body_deg_h, earth_rate_body_rad_s
 from fog_temp_comp.core.evaluate import TAUS_S
 from fog_temp_comp.core.model import coefficient_key
+from fog_temp_comp.core.model_choice import choose_and_calibrate
 from fog_temp_comp.core.selection import default_candidates
 from fog_temp_comp.core.units import AXES, DEG_H_PER_RAD_S
 from fog_temp_comp.tools import cli
@@ -633,3 +635,23 @@ def test_a_bump_in_the_training_bag_is_dropped_and_reported(
         errors = clean['fit'][axis]['standard_errors']
         for key, value in clean['axes'][axis].items():
             assert abs(data['axes'][axis][key] - value) < 0.5 * errors[key], (axis, key)
+
+
+def test_the_default_calibration_of_a_bag_is_the_cores_of_its_run(
+    train_run: SimulatedRun, default_yaml: Path
+) -> None:
+    """``calibrate BAG`` chooses and fits as the core does on the run in memory.
+
+    The bag is read and its gyro reduced to grid means on the way: what
+    ``benchmarks/accuracy.py`` measures (on runs in memory) is what a user's command gets.
+    """
+    result, _, chosen = choose_and_calibrate([train_run.as_record()], RECOMMENDED_SETTINGS)
+    from_bag = load(default_yaml)
+    assert from_bag.model.terms == chosen.structure.terms
+    # the same settings; a refined time constant to rounding (the grid means' sums differ)
+    for name, value in dataclasses.asdict(result.coefficients.denoise).items():
+        expected = pytest.approx(value, rel=1e-9) if isinstance(value, float) else value
+        assert getattr(from_bag.denoise, name) == expected, name
+    assert_allclose(
+        from_bag.model.coefficients, result.coefficients.model.coefficients, rtol=1e-9, atol=1e-12
+    )
