@@ -31,7 +31,6 @@ from fog_temp_comp.core import cross_validation, kalman_series
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.model_choice import choose_and_calibrate
 from fog_temp_comp.tools.simulate import simulate_run
-from fresh_interpreter import run_pickling
 from simdata import EIGHT_HOUR_CYCLE
 
 records = [simulate_run('cycle', 0.2, EIGHT_HOUR_CYCLE, seed=3).as_record()]
@@ -58,10 +57,20 @@ forks = []
 real_fork = kalman_series.ForkedCall
 for module in (kalman_series, cross_validation):
     module.ForkedCall = lambda *args: forks.append(args[0].__name__) or real_fork(*args)
-for name, min_readings in (('two', 0), ('one', 1 << 62)):
+# one training run, then two runs (folds by run) with a held-out run to choose by
+several = [simulate_run('cycle', 0.2, EIGHT_HOUR_CYCLE, seed=s).as_record() for s in (4, 5)]
+heldout = [simulate_run('cycle', 0.4, EIGHT_HOUR_CYCLE, seed=6).as_record()]
+for name, min_readings, training, chosen_by in (
+    ('two', 0, records, []),
+    ('one', 1 << 62, records, []),
+    ('two_heldout', 0, several, heldout),
+    ('one_heldout', 1 << 62, several, heldout),
+):
     kalman_series.PARALLEL_MIN_READINGS = min_readings
     forks.clear()
-    result, scores, chosen = choose_and_calibrate(records, RECOMMENDED_SETTINGS)
+    result, scores, chosen = choose_and_calibrate(
+        training, RECOMMENDED_SETTINGS, heldout=chosen_by
+    )
     out[name + '_forks'] = list(forks)
     out[name] = (
         result.coefficients.model.coefficients,
@@ -108,13 +117,16 @@ def test_series_from_two_processes_are_one_process_bits(tmp_path: Path) -> None:
     # the filters, then the scores, on two processes
     assert out['two_forks'] == ['_computed', 'cross_validate']
     assert out['one_forks'] == []
-    two, one = out['two'], out['one']
-    np.testing.assert_array_equal(two[0], one[0])
-    assert two[1] == one[1]
-    assert two[2] == one[2]
+    # with held-out runs, their series too
+    assert out['two_heldout_forks'] == ['_computed', '_computed', 'cross_validate']
+    assert out['one_heldout_forks'] == []
+    for two, one in ((out['two'], out['one']), (out['two_heldout'], out['one_heldout'])):
+        np.testing.assert_array_equal(two[0], one[0])
+        assert two[1] == one[1]
+        assert two[2] == one[2]
     # a multiprocessing Pool's worker (as the benchmarks run calibrate) works in one process
     assert out['pool'][0] is False
-    np.testing.assert_array_equal(out['pool'][1], one[0])
+    np.testing.assert_array_equal(out['pool'][1], out['one'][0])
 
 
 def test_prefetch_does_nothing_for_one_estimator() -> None:
