@@ -90,29 +90,32 @@ def cross_validate_on_two(
     (:data:`~fog_temp_comp.core.kalman_series.PARALLEL_MIN_READINGS`), or if the child fails.
     """
     names = _design_names(structures)
-    halves: tuple[list[int], list[int]] = ([], [])
-    if two_processes(records):
-        by_estimator: dict[Any, list[int]] = {}
-        for index, structure in enumerate(structures):
-            by_estimator.setdefault(structure.estimator, []).append(index)
-        loads = [0, 0]
-        for group in sorted(by_estimator.values(), key=lambda g: -_fold_settings(structures, g)):
-            half = int(loads[1] < loads[0])
-            halves[half].extend(group)
-            loads[half] += _fold_settings(structures, group)
-    if not halves[0] or not halves[1]:
+    mine, theirs = _halves(structures) if two_processes(records) else ([], [])
+    if not mine or not theirs:
         return cross_validate(records, base, structures, heldout, names=names)
-    theirs = [structures[i] for i in sorted(halves[1])]
-    with ForkedCall(cross_validate, records, base, theirs, heldout, names) as child:
-        ours = cross_validate(
-            records, base, [structures[i] for i in sorted(halves[0])], heldout, names=names
-        )
+    their_structures = [structures[i] for i in theirs]
+    with ForkedCall(cross_validate, records, base, their_structures, heldout, names) as child:
+        ours = cross_validate(records, base, [structures[i] for i in mine], heldout, names=names)
         scored = child.result()
     if scored is None:
-        scored = cross_validate(records, base, theirs, heldout, names=names)
-    by_index = dict(zip(sorted(halves[0]), ours, strict=True))
-    by_index.update(zip(sorted(halves[1]), scored, strict=True))
+        scored = cross_validate(records, base, their_structures, heldout, names=names)
+    by_index = dict(zip(mine, ours, strict=True)) | dict(zip(theirs, scored, strict=True))
     return [by_index[i] for i in range(len(structures))]
+
+
+def _halves(structures: Sequence[Structure]) -> tuple[list[int], list[int]]:
+    """The structures' indices in two halves, whole estimator groups, even in fold settings."""
+    by_estimator: dict[Any, list[int]] = {}
+    for index, structure in enumerate(structures):
+        by_estimator.setdefault(structure.estimator, []).append(index)
+    weighted = [(_fold_settings(structures, g), g) for g in by_estimator.values()]
+    halves: tuple[list[int], list[int]] = ([], [])
+    totals = [0, 0]
+    for load, group in sorted(weighted, key=lambda pair: -pair[0]):
+        half = int(totals[1] < totals[0])
+        halves[half].extend(group)
+        totals[half] += load
+    return sorted(halves[0]), sorted(halves[1])
 
 
 def _fold_settings(structures: Sequence[Structure], indices: Sequence[int]) -> int:
