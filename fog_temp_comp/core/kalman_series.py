@@ -120,7 +120,7 @@ def _computed(
     records: Sequence[ChamberRecord], base: DenoiseSettings, estimators: Sequence[Estimator]
 ) -> list[list[EstimateSeries]]:
     """The child's half of :func:`prefetch_series`: each estimator's series."""
-    return [_filtered(records, _filter_settings(_estimator_settings(base, e))) for e in estimators]
+    return [_filtered(records, _filter_of(base, e)) for e in estimators]
 
 
 def _estimator_settings(base: DenoiseSettings, estimator: Estimator) -> DenoiseSettings:
@@ -144,10 +144,15 @@ def _filter_settings(settings: DenoiseSettings) -> DenoiseSettings:
     )
 
 
+def _filter_of(base: DenoiseSettings, estimator: Estimator) -> DenoiseSettings:
+    """The settings that ``estimator``'s series depends on (the cache's key)."""
+    return _filter_settings(_estimator_settings(base, estimator))
+
+
 def _key(
     records: Sequence[ChamberRecord], base: DenoiseSettings, estimator: Estimator
 ) -> tuple[Any, ...]:
-    return _cache_key(records, _filter_settings(_estimator_settings(base, estimator)))
+    return _cache_key(records, _filter_of(base, estimator))
 
 
 def _cache_key(records: Sequence[ChamberRecord], settings: DenoiseSettings) -> tuple[Any, ...]:
