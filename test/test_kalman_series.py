@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 from fresh_interpreter import run_pickling
 
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
@@ -140,3 +141,30 @@ def test_prefetch_does_nothing_for_one_estimator() -> None:
         first = estimator_series(records, RECOMMENDED_SETTINGS, (0.001, 0.0))
         again = estimator_series(records, RECOMMENDED_SETTINGS, (0.001, 0.0))
     assert first[0] is again[0]  # cached
+
+
+def test_a_child_that_cannot_start_leaves_the_work_to_the_parent(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Out of processes (fork fails): no child, no error; the parent computes every series."""
+    import multiprocessing.context
+
+    from fog_temp_comp.core import forked, kalman_series
+
+    def no_fork(self: object) -> None:
+        raise OSError(11, 'Resource temporarily unavailable')
+
+    monkeypatch.setattr(multiprocessing.context.ForkProcess, 'start', no_fork)
+    monkeypatch.setattr(kalman_series, 'fork_available', lambda: True)
+    with forked.ForkedCall(sum, [1, 2]) as child:
+        assert child.result() is None
+    records = [
+        simulate_run('cycle', 1.0, SimulationConfig(cycle_soak_s=600.0), seed=1).as_record()
+    ]
+    estimators = [(0.001, 0.0), (0.003, 0.0)]
+    with series_cache():
+        assert prefetch_series(records, RECOMMENDED_SETTINGS, estimators, min_readings=0) == 0
+        series = [estimator_series(records, RECOMMENDED_SETTINGS, e) for e in estimators]
+    for estimator, (got,) in zip(estimators, series, strict=True):
+        (expected,) = estimator_series(records, RECOMMENDED_SETTINGS, estimator)
+        np.testing.assert_array_equal(got.tdot_degC_per_min, expected.tdot_degC_per_min)

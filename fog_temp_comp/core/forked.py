@@ -14,6 +14,7 @@ import os
 import signal
 import sys
 import threading
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -46,8 +47,9 @@ class ForkedCall:
     """``function(*args)`` in a forked child; :meth:`result` waits for it.
 
     The child ignores SIGINT (Ctrl-C reaches the parent, which stops the child), and any
-    exception in it becomes a ``None`` result: the caller then does the work itself. Use as a
-    context manager, or call :meth:`close`, so the child never outlives the call.
+    exception in it becomes a ``None`` result: the caller then does the work itself. So does a
+    child that cannot be started (out of processes or memory). Use as a context manager, or
+    call :meth:`close`, so the child never outlives the call.
     """
 
     def __init__(self, function: Callable[..., Any], *args: Any) -> None:
@@ -58,10 +60,20 @@ class ForkedCall:
             stream.flush()
         self._receive, send = context.Pipe(duplex=False)
         self._process = context.Process(
-            target=_child, args=(function, args, send), daemon=True, name='fog-temp-comp-read'
+            target=_child, args=(function, args, send), daemon=True, name='fog-temp-comp-child'
         )
-        self._process.start()
-        send.close()
+        try:
+            with warnings.catch_warnings():
+                # Python 3.12+ warns of a fork while native threads run (numpy's BLAS pool);
+                # the child runs only this package's numpy code, and a warnings-as-errors
+                # setting must not turn the fork into a child the parent does not know of
+                warnings.simplefilter('ignore', DeprecationWarning)
+                self._process.start()
+            self._started = True
+        except Exception:  # no child (out of processes, memory): result() is None, caller works
+            self._started = False
+        finally:
+            send.close()
 
     def result(self) -> Any | None:
         """The function's return value, or None if it raised or the child died."""
@@ -76,6 +88,8 @@ class ForkedCall:
     def close(self) -> None:
         """Stop the child if it still runs; release the pipe."""
         self._receive.close()
+        if not self._started:
+            return
         if self._process.is_alive():
             self._process.kill()
         self._process.join()
