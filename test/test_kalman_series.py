@@ -168,3 +168,17 @@ def test_a_child_that_cannot_start_leaves_the_work_to_the_parent(
     for estimator, (got,) in zip(estimators, series, strict=True):
         (expected,) = estimator_series(records, RECOMMENDED_SETTINGS, estimator)
         np.testing.assert_array_equal(got.tdot_degC_per_min, expected.tdot_degC_per_min)
+
+
+def test_one_process_when_the_environment_asks(monkeypatch: pytest.MonkeyPatch) -> None:
+    """FOG_TEMP_COMP_PROCESSES=1 keeps the model choice (and the bag read) in one process."""
+    from fog_temp_comp.core import forked
+
+    monkeypatch.setattr(forked.threading, 'active_count', lambda: 1)  # as in a fresh process
+    monkeypatch.setattr(forked, '_daemonic', lambda: False)
+    monkeypatch.setattr(forked.os, 'sched_getaffinity', lambda pid: {0, 1}, raising=False)
+    monkeypatch.setattr(forked.sys, 'platform', 'linux')
+    monkeypatch.delenv(forked.ONE_PROCESS_VARIABLE, raising=False)
+    assert forked.fork_available()
+    monkeypatch.setenv(forked.ONE_PROCESS_VARIABLE, '1')
+    assert not forked.fork_available()

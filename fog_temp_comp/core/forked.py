@@ -18,7 +18,11 @@ import warnings
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ['ForkedCall', 'fork_available']
+__all__ = ['ONE_PROCESS_VARIABLE', 'ForkedCall', 'fork_available']
+
+#: the environment variable that keeps every command in one process when set to ``1`` (a batch
+#: system that counts processes, a profiler)
+ONE_PROCESS_VARIABLE = 'FOG_TEMP_COMP_PROCESSES'
 
 
 def fork_available() -> bool:
@@ -26,11 +30,13 @@ def fork_available() -> bool:
 
     Linux, more than one CPU, no other Python thread (a fork copies only the calling
     thread; a lock another one held would stay locked in the child, e.g. in a Dask worker),
-    and not a daemonic ``multiprocessing`` worker (a ``Pool``'s: it may not have children).
+    not a daemonic ``multiprocessing`` worker (a ``Pool``'s: it may not have children), and
+    not asked for one process (:data:`ONE_PROCESS_VARIABLE` set to ``1``).
     """
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()
     return (
-        sys.platform.startswith('linux')
+        os.environ.get(ONE_PROCESS_VARIABLE, '') != '1'
+        and sys.platform.startswith('linux')
         and (cpus or 1) > 1
         and threading.active_count() == 1
         and not _daemonic()
