@@ -24,21 +24,16 @@ from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.tools.plants import draw_plant
 from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig, simulate_run
 
+from simdata import EIGHT_HOUR_CYCLE
+
 #: a sensor (1/16 degC, 0.02 degC noise) behind the coil, a wobbling chamber; gyro 0.5 Hz,
 #: temperature 1 Hz
-PLANT = SimulationConfig(
-    imu_hz=0.5,
-    temp_hz=1.0,
-    low_degC=0.0,
-    high_degC=40.0,
-    start_degC=20.0,
-    cycle_soak_s=1800.0,
+PLANT = dataclasses.replace(
+    EIGHT_HOUR_CYCLE,
     soak_duration_s=1200.0,
-    lag_s=400.0,
     sensor_lag_s=200.0,
     temp_quantum_degC=1 / 16,
     temp_noise_degC=0.02,
-    arw_10s_deg_h=0.01,
     soak_oscillation_degC=0.3,
 )
 
