@@ -412,6 +412,88 @@ def test_calibrate_with_several_imu_topics(
     assert_allclose(coeffs.model.coefficients, load(reference).model.coefficients, rtol=1e-12)
 
 
+def write_with_chamber_air(
+    path: Path, fmt: str, run: SimulatedRun, temp_topics: Sequence[str], imu_topic: str
+) -> Path:
+    """A chamber bag that also logs the chamber's air: ``temp_topics[0]`` is the gyro's sensor.
+
+    The others carry the air, 3 degC warmer and a minute ahead of the sensor.
+    """
+    air = np.interp(run.temp_stamps_s + 60.0, run.temp_stamps_s, run.temperature_degC) + 3.0
+    with BagWriter(path, fmt) as writer:
+        for topic in temp_topics:
+            writer.add_topic(topic, TEMPERATURE_TYPE)
+        writer.add_topic(imu_topic, IMU_TYPE)
+        events = [(t, 0, k) for k, t in enumerate(run.temp_stamps_s)]
+        events += [(t, 1, k) for k, t in enumerate(run.imu_stamps_s)]
+        for stamp_s, kind, k in sorted(events):
+            ns = round(stamp_s * 1e9)
+            if kind == 1:
+                writer.write(imu_topic, ns, make_imu(ns, 'fog_link', run.rates_rad_s[k]))
+                continue
+            for j, topic in enumerate(temp_topics):
+                value = run.temperature_degC[k] if j == 0 else air[k]
+                writer.write(topic, ns, make_temperature(ns, 'fog_link', float(value)))
+    return path
+
+
+@pytest.mark.parametrize('fmt', FORMATS)
+def test_the_gyros_temperature_is_told_from_the_chambers_by_its_namespace(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    short_cycle_fast: SimulatedRun,
+    fast_bag: Path,
+    coeffs_yaml: Path,
+    fmt: str,
+) -> None:
+    """Gyro /fog/rate, temperatures /chamber/temperature and /fog/temperature: no flag needed."""
+    bag = write_with_chamber_air(
+        bag_path(tmp_path, 'with_air', fmt),
+        fmt,
+        short_cycle_fast,
+        ['/fog/temperature', '/chamber/temperature'],
+        '/fog/rate',
+    )
+    out = tmp_path / 'coeffs.yaml'
+    assert cli.main(['calibrate', str(bag), '-o', str(out)]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if 'NOTE' in line]
+    assert notes and all('using /fog/temperature, beside /fog/rate' in n for n in notes)
+    assert '/chamber/temperature' in notes[0]
+    coeffs = load(out)
+    assert coeffs.provenance['temperature_topics'] == ['/fog/temperature']
+    reference = tmp_path / 'reference.yaml'
+    assert commands.calibrate_command([fast_bag], reference, stdout=io.StringIO()) == 0
+    assert_allclose(coeffs.model.coefficients, load(reference).model.coefficients, rtol=1e-12)
+
+    out_bag = bag_path(tmp_path, 'out', fmt)
+    argv = ['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(out_bag)]
+    assert cli.main(argv) == 0
+    assert 'using /fog/temperature' in capsys.readouterr().err
+    expected = compensate_record(read_record(fast_bag), load(coeffs_yaml))
+    assert_allclose(rates_of(plain_read(out_bag)['/imu/data']), expected, rtol=1e-15, atol=0)
+
+
+@pytest.mark.parametrize(
+    'temp_topics',
+    [['/a/temperature', '/b/temperature'], ['/fog/a/temperature', '/fog/b/temperature']],
+)
+def test_temperatures_that_the_namespace_does_not_tell_apart_are_refused(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    short_cycle_fast: SimulatedRun,
+    temp_topics: list[str],
+) -> None:
+    bag = write_with_chamber_air(
+        tmp_path / 'two', 'mcap', short_cycle_fast, temp_topics, '/fog/rate'
+    )
+    out = tmp_path / 'coeffs.yaml'
+    assert cli.main(['calibrate', str(bag), '-o', str(out)]) == 1
+    line = error_line(capsys)
+    assert 'several sensor_msgs/msg/Temperature topics' in line and '--temp-topic' in line
+    assert all(topic in line for topic in temp_topics)
+    assert not out.exists()
+
+
 @pytest.mark.parametrize('command', ['calibrate', 'compensate', 'evaluate'])
 def test_command_output_follows_sys_stdout(
     tmp_path: Path,
@@ -661,6 +743,35 @@ def test_compensate_refuses_an_existing_output_topic(
     assert '--output-topic' in line
     assert '/' + topic.lstrip('/') in line
     assert not out.exists()
+
+
+@pytest.mark.parametrize('fmt', FORMATS)
+def test_compensate_of_a_raw_rate_on_imu_data_writes_beside_it(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    coeffs_yaml: Path,
+    short_cycle_fast: SimulatedRun,
+    fmt: str,
+) -> None:
+    """A driver that publishes its raw rate on /imu/data: no flag needed, the input kept."""
+    in_bag = bag_path(tmp_path, 'in', fmt)
+    write_run(in_bag, fmt, short_cycle_fast, imu_topic='/imu/data')
+    out_bag = bag_path(tmp_path, 'out', fmt)
+    argv = ['compensate', str(in_bag), '--coeffs', str(coeffs_yaml), '-o', str(out_bag)]
+    assert cli.main(argv) == 0
+    out = capsys.readouterr().out
+    assert 'NOTE: /imu/data is a topic of' in out
+    assert 'corrected Imu on /imu/data_compensated' in out
+    assert topic_types(out_bag) == {**topic_types(in_bag), '/imu/data_compensated': IMU_TYPE}
+    messages = plain_read(out_bag)
+    expected = compensate_record(read_record(in_bag), load(coeffs_yaml))
+    assert_allclose(rates_of(messages['/imu/data_compensated']), expected, rtol=1e-15, atol=0)
+    assert_array_equal(rates_of(messages['/imu/data']), short_cycle_fast.rates_rad_s)
+    # named by hand, the same topic is still refused
+    again = bag_path(tmp_path, 'again', fmt)
+    assert cli.main([*argv[:-1], str(again), '--output-topic', '/imu/data']) == 1
+    assert '--output-topic /imu/data: already in' in error_line(capsys)
+    assert not again.exists()
 
 
 def test_compensate_custom_output_topic(

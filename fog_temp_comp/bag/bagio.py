@@ -7,6 +7,7 @@ with the path in the message.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from functools import cache
@@ -120,17 +121,51 @@ def _normalise(topic: str) -> str:
     return topic if topic.startswith('/') else '/' + topic
 
 
-def resolve_topic(reader: AnyReader, topic: str | None, msgtype: str, flag: str) -> str:
+def resolve_topic(
+    reader: AnyReader, topic: str | None, msgtype: str, flag: str, beside: str | None = None
+) -> str:
     """The bag topic to use for ``msgtype``.
 
     With ``topic`` given it must exist and carry ``msgtype`` (a missing leading slash is
-    accepted); without, the bag must have exactly one topic of that type.
+    accepted); without, the bag must have exactly one topic of that type, or, with ``beside``
+    (the gyro's topic, for the temperature), exactly one that shares the most of its namespace
+    (:func:`beside_topic`; a ``NOTE:`` line on stderr says which).
     """
     topics = {name: info.msgtype or '' for name, info in reader.topics.items()}
-    return resolve_topic_in(topics, topic, msgtype, flag)
+    return resolve_topic_in(topics, topic, msgtype, flag, beside)
 
 
-def resolve_topic_in(topics: dict[str, str], topic: str | None, msgtype: str, flag: str) -> str:
+def _namespace(topic: str) -> list[str]:
+    """The namespace segments of a topic name: ``['fog', 'imu']`` for ``/fog/imu/data``."""
+    return [part for part in topic.split('/')[:-1] if part]
+
+
+def beside_topic(candidates: Sequence[str], beside: str) -> str | None:
+    """The one candidate whose namespace shares the most leading segments with ``beside``'s.
+
+    ``/fog/temperature`` beside ``/fog/rate`` rather than ``/chamber/temperature``. None
+    where no candidate shares a segment, or two share the most: a guess is not made then.
+    """
+    own = _namespace(beside)
+
+    def shared(name: str) -> int:
+        n = 0
+        for a, b in zip(_namespace(name), own, strict=False):
+            if a != b:
+                break
+            n += 1
+        return n
+
+    counts = [shared(name) for name in candidates]
+    best = max(counts, default=0)
+    if best == 0 or counts.count(best) > 1:
+        return None
+    return candidates[counts.index(best)]
+
+
+def resolve_topic_in(
+    topics: dict[str, str], topic: str | None, msgtype: str, flag: str, beside: str | None = None
+) -> str:
     """:func:`resolve_topic` on a ``{topic name: message type}`` mapping."""
     if topic is not None:
         for name in (topic, _normalise(topic)):
@@ -149,7 +184,16 @@ def resolve_topic_in(topics: dict[str, str], topic: str | None, msgtype: str, fl
         if topics and msgtype == TEMPERATURE_TYPE:
             hint += ' (calibrate reads a number in another message with --temp-field FIELD)'
         raise BagError(f'no {msgtype} topic in bag; topics: {listing}{hint}')
-    raise BagError(f'several {msgtype} topics: {candidates}; choose one with {flag}')
+    paired = beside_topic(candidates, beside) if beside else None
+    if paired is None:
+        raise BagError(f'several {msgtype} topics: {candidates}; choose one with {flag}')
+    others = ', '.join(c for c in candidates if c != paired)
+    print(
+        f'NOTE: several {msgtype} topics: using {paired}, beside {beside} '
+        f'(not {others}; choose another with {flag})',
+        file=sys.stderr,
+    )
+    return paired
 
 
 def temperature_first(

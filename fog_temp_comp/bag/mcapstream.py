@@ -54,7 +54,7 @@ class _McapReading(_StreamDecoding):
             self.salvage.damage(f'cannot open as a whole bag ({err})')
         self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
         self.temp_topic = resolve_topic_in(
-            topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
+            topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic', self.imu_topic
         )
         self._salvage_mcap = files
         self._open = True

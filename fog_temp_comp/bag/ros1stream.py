@@ -36,7 +36,7 @@ class _Ros1Reading(_StreamDecoding):
             )
         self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
         self.temp_topic = resolve_topic_in(
-            topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
+            topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic', self.imu_topic
         )
         wanted = [c for c in bag.connections if c.topic in (self.imu_topic, self.temp_topic)]
         if len(wanted) != 2 or any(c.msgtype != topics[c.topic] for c in wanted):

@@ -151,7 +151,7 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
                     raise BagError(f'{self.path}: cannot open bag: {err}') from err
             self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
             self.temp_topic = resolve_topic_in(
-                topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
+                topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic', self.imu_topic
             )
             self._open = True
             return self
@@ -170,7 +170,7 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
             self.imu_topic = resolve_topic(reader, self._gyro_topic, IMU_TYPE, '--gyro-topic')
             if self.temp_field is None:
                 self.temp_topic = resolve_topic(
-                    reader, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic'
+                    reader, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic', self.imu_topic
                 )
             else:
                 assert self._temp_topic is not None

@@ -417,9 +417,9 @@ def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     _add_topics(p)
     p.add_argument(
         '--output-topic',
-        default='/imu/data',
         metavar='T',
-        help='topic of the corrected Imu (default /imu/data)',
+        help='topic of the corrected Imu (default /imu/data; where the input has /imu/data, '
+        'the gyro topic + _compensated)',
     )
     _add_time_source(p)
     _add_denoise(p, None)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 import shutil
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,7 +47,7 @@ def compensate_command(
     *,
     gyro_topic: str | None = None,
     temp_topic: str | None = None,
-    output_topic: str = '/imu/data',
+    output_topic: str | None = None,
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
     strict: bool = False,
@@ -71,6 +71,10 @@ def compensate_command(
     (:mod:`~fog_temp_comp.core.restfile`, as the node's ``rest_bias_file``). ``time_source``
     ``'receive'`` times gyro and temperature by their receive times, not their header stamps
     (drivers on two clocks, which the default warns about); the output keeps the headers.
+    ``output_topic`` defaults to :data:`DEFAULT_OUTPUT_TOPIC`, or, where the input has that
+    topic already (a driver that publishes its raw rate there), to the gyro topic with
+    ``_compensated`` appended (:func:`output_topic_for`); a given topic that the input has is
+    refused.
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
@@ -98,8 +102,14 @@ def compensate_command(
         by_receive=time_source == 'receive',
     )
     (n_out, counters), compensator = _replay_atomically(run, in_bag, out_bag, strict)
+    if output_topic is None and run.output_used != DEFAULT_OUTPUT_TOPIC:
+        print(
+            f'NOTE: {DEFAULT_OUTPUT_TOPIC} is a topic of {in_bag}: the corrected Imu goes to '
+            f'{run.output_used} (choose another with --output-topic)',
+            file=stdout,
+        )
     print(
-        f'wrote {out_bag}: {n_out} corrected Imu on {output_topic} '
+        f'wrote {out_bag}: {n_out} corrected Imu on {run.output_used} '
         f'({counters.imu_awaiting_temperature} before the first temperature and '
         f'{counters.imu_duplicate} duplicates not written, '
         f'{counters.imu_uncorrected} passed through uncorrected)',
@@ -161,6 +171,34 @@ def _report_rest(
         print(f'wrote {rest_bias_out} (learned bias)', file=stdout)
 
 
+#: the corrected Imu's topic unless the input has it (the node's output topic too)
+DEFAULT_OUTPUT_TOPIC = '/imu/data'
+
+
+def output_topic_for(
+    given: str | None, gyro_topic: str, topics: Collection[str], bag: Path | str = 'the input'
+) -> str:
+    """The corrected Imu's topic in ``bag``, whose topics are ``topics``.
+
+    ``given`` (``--output-topic``) if the bag does not have it; without one,
+    :data:`DEFAULT_OUTPUT_TOPIC`, or ``gyro_topic`` + ``_compensated`` where the bag has that.
+
+    Raises
+    ------
+    BagError
+        If the topic chosen is in the bag already.
+
+    """
+    topic = given
+    if topic is None:
+        topic = DEFAULT_OUTPUT_TOPIC
+        if topic in topics:
+            topic = gyro_topic + '_compensated'
+    if topic in topics:
+        raise BagError(f'--output-topic {topic}: already in {bag}; choose another')
+    return topic
+
+
 class ReplayError(BagError):
     """Reading the input failed while replaying it (a damaged bag: copied and tried again)."""
 
@@ -171,11 +209,13 @@ class _Compensate:
 
     in_bag: Path
     fmt: str
-    topics: tuple[str | None, str | None, str]  # gyro, temperature, output
+    topics: tuple[str | None, str | None, str | None]  # gyro, temperature, output
     new_compensator: Callable[[], Compensator]
     fast: bool
     #: gyro and temperature timed by receive time (``--time-source receive``)
     by_receive: bool = False
+    #: the corrected Imu's topic, once the input's topics are known (:func:`output_topic_for`)
+    output_used: str | None = None
 
     def into(
         self, target: Path, source: Path, salvage: Salvage | None
@@ -199,24 +239,22 @@ class _Compensate:
                 raise
             raise ReplayError(str(err)) from err  # a stale metadata.yaml, ...: copy it
         with opened:
+            imu_name = bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic')
+            self.output_used = output_topic_for(output_topic, imu_name, reader.topics, self.in_bag)
             job = _CompensateJob(
                 reader=reader,
                 in_bag=self.in_bag,
                 out_bag=target,
                 fmt=self.fmt,
-                imu_name=bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic'),
+                imu_name=imu_name,
                 temp_name=bagio.resolve_topic(
-                    reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic'
+                    reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic', imu_name
                 ),
-                output_topic=output_topic,
+                output_topic=self.output_used,
                 compress=self.fmt == 'mcap' and _compressed_mcap(source),
                 unstamped=UnsetStamps(self.by_receive),
             )
             topics = (job.imu_name, job.temp_name)
-            if output_topic in reader.topics:
-                raise BagError(
-                    f'--output-topic {output_topic}: already in {self.in_bag}; choose another'
-                )
             mcap = None
             block = self.fast and reader.is2 and compensator.rest is None
             if block and not blockreplay.per_message_compressed(reader):
