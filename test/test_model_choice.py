@@ -19,8 +19,10 @@ from fog_temp_comp.core.model_choice import (
     choose_and_calibrate,
     cross_validate,
     fold_mode,
+    refine_time_constant,
     sensor_noise,
 )
+from fog_temp_comp.core.publishing import prepared
 from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig, simulate_run
 
 from simdata import EIGHT_HOUR_CYCLE
@@ -251,6 +253,23 @@ def test_a_shrinkage_that_would_bend_the_calibrated_range_is_not_a_candidate() -
     assert np.isfinite(scores[0].criterion) and not scores[0].error
     assert scores[1].criterion == np.inf
     assert 'shrinkage threshold' in scores[1].error
+
+
+def test_refining_a_time_constant_next_to_refused_ones_gives_no_nan() -> None:
+    """A sensor lag whose neighbours' shrinkage is refused (inf): Brent must not see an inf.
+
+    An inf among Brent's values made its parabola nan, and scipy's RuntimeWarning reached
+    ``calibrate``'s output (an error under this suite's warning filter).
+    """
+    records, base = prepared([cycle(CHAMBER).as_record()], RECOMMENDED_SETTINGS)
+    base = sensor_noise(records).apply(dataclasses.replace(base, method='kalman'))
+    lagged = Structure(PAPER_TERMS, 0.001, 2.0, sensor_lag_s=1920.0)
+    (chosen,) = cross_validate(records, base, [lagged])
+    (refused,) = cross_validate(records, base, [dataclasses.replace(lagged, sensor_lag_s=960.0)])
+    assert np.isfinite(chosen.criterion) and refused.criterion == np.inf  # the case at hand
+    best = refine_time_constant(chosen, records, base)
+    assert np.isfinite(best.criterion) and best.criterion <= chosen.criterion
+    assert 960.0 <= best.structure.sensor_lag_s <= 3840.0
 
 
 def test_held_out_runs_score_the_candidates() -> None:

@@ -137,6 +137,9 @@ def choose(scores: Sequence[StructureScore], tolerance: float = TOLERANCE) -> St
 #: for a sensor lag (most of ``calibrate``'s time with a fast temperature sensor)
 REFINE_EVALUATIONS = 5
 
+#: the refinement's objective where a time constant is refused (a score is a ratio near 1)
+REFUSED_PENALTY = 1e6
+
 
 def refine_time_constant(
     chosen: StructureScore,
@@ -177,7 +180,8 @@ def refine_time_constant(
         (score,) = cross_validate(records, base, [candidate], heldout)
         if score.criterion < best.criterion:
             best = score
-        return score.criterion
+        # a refused time constant scores inf, which turns Brent's parabola into nan
+        return score.criterion if math.isfinite(score.criterion) else REFUSED_PENALTY
 
     from scipy import optimize  # here: not every calibration needs it (start-up)
 
