@@ -22,6 +22,7 @@ from fog_temp_comp.bag.bagio import (
     BagError,
     BagWriter,
     bag_format,
+    beside_topic,
     make_imu,
     make_temperature,
     open_bag,
@@ -304,6 +305,23 @@ def test_two_imu_topics_need_a_choice(tmp_path: Path) -> None:
     # naming one resolves it, with or without the leading slash
     assert read_record(path, gyro_topic=IMU2[0]).imu_topic == IMU2[0]
     assert read_record(path, gyro_topic=IMU2[0].lstrip('/')).imu_topic == IMU2[0]
+
+
+@pytest.mark.parametrize(
+    ('imu', 'temperatures', 'expected'),
+    [
+        ('/fog/rate', ['/chamber/temperature', '/fog/temperature'], '/fog/temperature'),
+        ('/fog/imu/rate', ['/fog/imu/temperature', '/fog/temperature'], '/fog/imu/temperature'),
+        ('/fog/imu/data_raw', ['/fog/temperature', '/chamber/temperature'], '/fog/temperature'),
+        ('/fog/rate', ['/fog/a/temperature', '/fog/b/temperature'], None),
+        ('/imu', ['/temperature', '/chamber/temperature'], None),  # the root shares nothing
+        ('/fog/rate', ['/a/temperature', '/b/temperature'], None),
+    ],
+)
+def test_the_temperature_beside_the_gyro_is_the_one_sharing_most_of_its_namespace(
+    imu: str, temperatures: list[str], expected: str | None
+) -> None:
+    assert beside_topic(temperatures, imu) == expected
 
 
 def test_no_temperature_topic(tmp_path: Path) -> None:
