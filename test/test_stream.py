@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+from contextlib import redirect_stdout
 from pathlib import Path
 
 import pytest
@@ -78,6 +79,56 @@ def test_custom_field_errors_name_the_field(tmp_path: Path, short_run: Simulated
     # without --temp-field the custom topic is not a Temperature
     with pytest.raises(BagError, match='sensor_msgs/msg/Temperature'):
         read_record(bag)
+
+
+#: a real coefficients file, as shipped
+EXAMPLE_COEFFS = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
+
+
+def imu_of(bag: Path, topic: str) -> list[tuple[int, bytes]]:
+    """(log time ns, raw bytes) of every message on ``topic``."""
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        return [(t, bytes(raw)) for _, t, raw in reader.messages(connections=conns)]
+
+
+def test_compensate_and_evaluate_read_a_custom_temperature_field(
+    tmp_path: Path, short_run: SimulatedRun
+) -> None:
+    """What calibrate --temp-field reads, compensate and evaluate read too: the same output."""
+    from fog_temp_comp.tools import cli
+
+    custom, plain = tmp_path / 'custom' / 'run', tmp_path / 'plain' / 'run'  # one table name
+    custom.parent.mkdir()
+    plain.parent.mkdir()
+    write_custom_bag(custom, short_run)
+    write_chamber_bag(
+        plain,
+        'mcap',
+        imu_stamps_s=short_run.imu_stamps_s,
+        rates_rad_s=short_run.rates_rad_s,
+        temp_stamps_s=short_run.temp_stamps_s,
+        temperature_degC=short_run.temperature_degC,
+    )
+    coeffs = ['--coeffs', str(EXAMPLE_COEFFS)]
+    field = ['--temp-topic', '/gyro/status', '--temp-field', 'coil_temp_c']
+    assert cli.main(['compensate', str(plain), *coeffs, '-o', str(tmp_path / 'o1')]) == 0
+    assert cli.main(['compensate', str(custom), *coeffs, *field, '-o', str(tmp_path / 'o2')]) == 0
+    got, expected = imu_of(tmp_path / 'o2', '/imu/data'), imu_of(tmp_path / 'o1', '/imu/data')
+    assert len(got) == len(expected) > 0
+    assert got == expected  # the same corrected messages, byte for byte
+    # the custom topic is copied as it was
+    assert imu_of(tmp_path / 'o2', '/gyro/status') == imu_of(custom, '/gyro/status')
+
+    tables = []
+    for argv in (['evaluate', str(plain), *coeffs], ['evaluate', str(custom), *coeffs, *field]):
+        out = io.StringIO()
+        with redirect_stdout(out):
+            assert cli.main(argv) == 0
+        tables.append(out.getvalue())
+    assert tables[0] == tables[1]
 
 
 def test_receive_time_alignment(tmp_path: Path, short_run: SimulatedRun) -> None:

@@ -7,13 +7,25 @@ bag order and patches the corrected angular velocities (rad/s) into the raw byte
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fog_temp_comp.bag import cdr
+from fog_temp_comp.bag.bagio import stamp_to_s
+from fog_temp_comp.bag.streamdecode import get_field
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.compensator import Compensator
+
+
+@dataclass
+class FieldBatch:
+    """Temperatures read from a field of another message type: stamps s, degC, shape (n,)."""
+
+    stamps_s: NDArray[np.float64]
+    temperature_degC: NDArray[np.float64]
 
 
 def chunked(items: Iterable[Any], size: int) -> Iterator[list[Any]]:
@@ -44,8 +56,12 @@ class ChunkReplayer:
         imu_topic: str,
         temp_topic: str,
         unstamped: UnsetStamps | None = None,
+        temp_field: str | None = None,
     ):
         self.compensator = compensator
+        self.reader = reader
+        #: the temperature (degC) is this field of ``temp_topic``'s messages, of any type
+        self.temp_field = temp_field
         #: unset header stamps (0) take the receive time; counted here
         self.unstamped = unstamped if unstamped is not None else UnsetStamps()
         self.ros2 = bool(reader.is2)
@@ -102,6 +118,8 @@ class ChunkReplayer:
     def _decode(self, items: list[tuple[Any, int, bytes]], *, imu: bool) -> Any:
         if not items:
             return None
+        if not imu and self.temp_field is not None:
+            return self._decode_field(items, self.temp_field)
         raws = [raw for _, _, raw in items]
         if self.ros2:
             if imu and self.with_accel:
@@ -113,6 +131,16 @@ class ChunkReplayer:
         if imu:
             return cdr.decode_imu_rates_ros1(raws, header_seq=seq)
         return cdr.decode_temperature_ros1(raws, header_seq=seq)
+
+    def _decode_field(self, items: list[tuple[Any, int, bytes]], field: str) -> FieldBatch:
+        """``field`` of each message, deserialized by rosbags; header stamp or 0 (unset)."""
+        messages = [self.reader.deserialize(raw, conn.msgtype) for conn, _, raw in items]
+        return FieldBatch(
+            np.array(
+                [stamp_to_s(m.header.stamp) if hasattr(m, 'header') else 0.0 for m in messages]
+            ),
+            np.array([get_field(m, field) for m in messages], dtype=np.float64),
+        )
 
     def _patch(self, items: list[tuple[Any, int, bytes]], rates: list[Any]) -> list[bytes]:
         if not items:

@@ -277,14 +277,19 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     _add_calibrate_selection(p.add_argument_group('selection and validation (held-out runs)'))
 
 
-def _add_calibrate_input(g: argparse._ArgumentGroup) -> None:
-    """Input options of calibrate: temperature field, time source, Earth rate."""
+def _add_temp_field(g: argparse._ArgumentGroup | argparse.ArgumentParser) -> None:
+    """``--temp-field``: the temperature is a field of a message of any type."""
     g.add_argument(
         '--temp-field',
         metavar='FIELD',
         help='read temperature (degC) from this field (a.b.c) of --temp-topic, '
         'a message of any type',
     )
+
+
+def _add_calibrate_input(g: argparse._ArgumentGroup) -> None:
+    """Input options of calibrate: temperature field, time source, Earth rate."""
+    _add_temp_field(g)
     _add_time_source(g)
     g.add_argument('--quiet', action='store_true', help='no progress line on stderr')
     _add_strict(g)
@@ -415,6 +420,7 @@ def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument('--coeffs', type=Path, required=True, metavar='COEFFS.yaml')
     p.add_argument('-o', '--output', type=Path, required=True, metavar='OUT_BAG')
     _add_topics(p)
+    _add_temp_field(p)
     p.add_argument(
         '--output-topic',
         metavar='T',
@@ -434,6 +440,7 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
     p.add_argument('--coeffs', type=Path, required=True, metavar='COEFFS.yaml')
     _add_topics(p)
+    _add_temp_field(p)
     _add_time_source(p)
     _add_denoise(p, None)
     _add_guard(p)

@@ -22,6 +22,7 @@ from fog_temp_comp.bag import bagio, mcapwrite
 from fog_temp_comp.bag.bagio import BagError, BagWriter
 from fog_temp_comp.bag.repair import repaired_bag
 from fog_temp_comp.bag.salvage import Salvage
+from fog_temp_comp.bag.stream import resolve_any_topic
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
@@ -47,6 +48,7 @@ def compensate_command(
     *,
     gyro_topic: str | None = None,
     temp_topic: str | None = None,
+    temp_field: str | None = None,
     output_topic: str | None = None,
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
@@ -71,10 +73,12 @@ def compensate_command(
     (:mod:`~fog_temp_comp.core.restfile`, as the node's ``rest_bias_file``). ``time_source``
     ``'receive'`` times gyro and temperature by their receive times, not their header stamps
     (drivers on two clocks, which the default warns about); the output keeps the headers.
-    ``output_topic`` defaults to :data:`DEFAULT_OUTPUT_TOPIC`, or, where the input has that
-    topic already (a driver that publishes its raw rate there), to the gyro topic with
-    ``_compensated`` appended (:func:`output_topic_for`); a given topic that the input has is
-    refused.
+    ``temp_field`` reads the temperature (degC) from a field of ``temp_topic``'s messages of
+    any type, as ``calibrate --temp-field`` (through ``AnyReader``; the node itself subscribes
+    to ``sensor_msgs/Temperature``). ``output_topic`` defaults to :data:`DEFAULT_OUTPUT_TOPIC`,
+    or, where the input has that topic already (a driver that publishes its raw rate there), to
+    the gyro topic with ``_compensated`` appended (:func:`output_topic_for`); a given topic that
+    the input has is refused.
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
@@ -91,6 +95,8 @@ def compensate_command(
         return compensator
 
     new_compensator(stdout)  # refuse a learned-bias file that does not fit, before reading
+    if temp_field is not None and temp_topic is None:
+        raise BagError('--temp-field needs --temp-topic (the topic that carries the field)')
     if output_topic and not output_topic.startswith('/'):
         output_topic = '/' + output_topic
     run = _Compensate(
@@ -100,12 +106,29 @@ def compensate_command(
         new_compensator=new_compensator,
         fast=fast,
         by_receive=time_source == 'receive',
+        temp_field=temp_field,
     )
     (n_out, counters), compensator = _replay_atomically(run, in_bag, out_bag, strict)
-    if output_topic is None and run.output_used != DEFAULT_OUTPUT_TOPIC:
+    _report_written(run, out_bag, n_out, counters, chosen=output_topic is None, stdout=stdout)
+    if compensator.rest is not None:
+        _report_rest(compensator.rest, coeffs_path, rest_bias_out, stdout)
+    return 0
+
+
+def _report_written(
+    run: _Compensate,
+    out_bag: Path,
+    n_out: int,
+    counters: CompensatorCounters,
+    *,
+    chosen: bool,
+    stdout: TextIO,
+) -> None:
+    """The output line; a ``NOTE:`` first where the default output topic was in the input."""
+    if chosen and run.output_used != DEFAULT_OUTPUT_TOPIC:
         print(
-            f'NOTE: {DEFAULT_OUTPUT_TOPIC} is a topic of {in_bag}: the corrected Imu goes to '
-            f'{run.output_used} (choose another with --output-topic)',
+            f'NOTE: {DEFAULT_OUTPUT_TOPIC} is a topic of {run.in_bag}: the corrected Imu goes '
+            f'to {run.output_used} (choose another with --output-topic)',
             file=stdout,
         )
     print(
@@ -115,9 +138,6 @@ def compensate_command(
         f'{counters.imu_uncorrected} passed through uncorrected)',
         file=stdout,
     )
-    if compensator.rest is not None:
-        _report_rest(compensator.rest, coeffs_path, rest_bias_out, stdout)
-    return 0
 
 
 def _replay_atomically(
@@ -216,6 +236,8 @@ class _Compensate:
     by_receive: bool = False
     #: the corrected Imu's topic, once the input's topics are known (:func:`output_topic_for`)
     output_used: str | None = None
+    #: the temperature is this field of the temperature topic's messages (``--temp-field``)
+    temp_field: str | None = None
 
     def into(
         self, target: Path, source: Path, salvage: Salvage | None
@@ -247,16 +269,23 @@ class _Compensate:
                 out_bag=target,
                 fmt=self.fmt,
                 imu_name=imu_name,
-                temp_name=bagio.resolve_topic(
-                    reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic', imu_name
+                temp_name=(
+                    resolve_any_topic(reader, temp_topic, '--temp-topic')
+                    if self.temp_field is not None and temp_topic is not None
+                    else bagio.resolve_topic(
+                        reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic', imu_name
+                    )
                 ),
+                temp_field=self.temp_field,
                 output_topic=self.output_used,
                 compress=self.fmt == 'mcap' and _compressed_mcap(source),
                 unstamped=UnsetStamps(self.by_receive),
             )
             topics = (job.imu_name, job.temp_name)
             mcap = None
-            block = self.fast and reader.is2 and compensator.rest is None
+            block = (
+                self.fast and reader.is2 and compensator.rest is None and self.temp_field is None
+            )
             if block and not blockreplay.per_message_compressed(reader):
                 mcap = blockreplay.single_mcap_file(source)
             if mcap is not None:
@@ -314,6 +343,8 @@ class _CompensateJob:
     compress: bool = False
     #: unset header stamps (0) that took the receive time, per topic
     unstamped: UnsetStamps = dataclasses.field(default_factory=UnsetStamps)
+    #: the temperature is this field of ``temp_name``'s messages (``--temp-field``)
+    temp_field: str | None = None
 
     def run(
         self, compensator: Compensator, *, mcap: Path | None = None, batched: bool = True
@@ -366,7 +397,12 @@ class _CompensateJob:
         """Through ``AnyReader``, a chunk at a time, written as a block or one by one."""
         messages = bagio.temperature_first(self.reader.messages(), self.temp_name)
         replayer = ChunkReplayer(
-            compensator, self.reader, self.imu_name, self.temp_name, self.unstamped
+            compensator,
+            self.reader,
+            self.imu_name,
+            self.temp_name,
+            self.unstamped,
+            temp_field=self.temp_field,
         )
         n_out = 0
         for chunk in chunked(messages, 20_000):

@@ -26,6 +26,7 @@ def evaluate_command(
     *,
     gyro_topic: str | None = None,
     temp_topic: str | None = None,
+    temp_field: str | None = None,
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
     strict: bool = False,
@@ -35,7 +36,8 @@ def evaluate_command(
     """Print stability and range before/after compensation for each bag and axis.
 
     ``time_source`` ``'receive'`` times gyro and temperature by the bag's receive times
-    (drivers on two clocks), as ``calibrate --time-source receive``.
+    (drivers on two clocks), as ``calibrate --time-source receive``; ``temp_field`` reads the
+    temperature from a field of ``temp_topic``, as ``calibrate --temp-field``.
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
@@ -47,6 +49,7 @@ def evaluate_command(
             bag,
             gyro_topic=gyro_topic,
             temp_topic=temp_topic,
+            temp_field=temp_field,
             strict=strict,
             on_salvage=salvaged.add,
             time_source=time_source,
