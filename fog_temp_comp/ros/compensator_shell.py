@@ -22,7 +22,7 @@ from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from sensor_msgs.msg import Imu, Temperature
+from sensor_msgs.msg import Imu
 from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
@@ -36,6 +36,7 @@ from fog_temp_comp.ros.diagnostics import build_report, reading_model
 from fog_temp_comp.ros.node_parameters import FILTER_PARAMETERS, GUARD_PARAMETERS
 from fog_temp_comp.ros.params import ParameterError, params_files, unknown_warnings
 from fog_temp_comp.ros.spin import EXECUTORS
+from fog_temp_comp.ros.temperature_input import temperature_input
 
 __all__ = ['IMU_INPUT_DEPTH', 'IMU_INPUT_QOS', 'CompensatorShell']
 
@@ -76,6 +77,11 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             )
         #: messages timed by the node clock on arrival, not their header stamps
         self._by_receive = time_source == 'receive'
+        #: sensor_msgs/Temperature, or a field of another message type
+        self._temperature = temperature_input(
+            self.get_parameter('temperature_type').value,
+            self.get_parameter('temperature_field').value,
+        )
         for line in unknown_warnings(self._given_parameters(), self._parameters):
             self.get_logger().warning(line)
         self._forget_compensator()
@@ -136,7 +142,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             qos_overriding_options=qos_options,
         )
         self._temp_sub = self.create_subscription(
-            Temperature,
+            self._temperature.msg_type,
             'imu/temperature',
             self._on_temperature,
             copy(qos_profile_sensor_data),
@@ -212,15 +218,18 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         """The node clock's time, s."""
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _on_temperature(self, msg: Temperature) -> None:
+    def _on_temperature(self, msg: Any) -> None:
+        temperature = self._temperature
         if self._by_receive:
             stamp_s = self._now_s()
-        else:
+        elif temperature.stamped:
             stamp = msg.header.stamp
             stamp_s = stamp.sec + stamp.nanosec * 1e-9 or self._unset_stamp_s()
+        else:  # a message without a header (std_msgs/Float64): timed on arrival
+            stamp_s = self._unset_stamp_s()
         status = self.compensator.status
         was_ready = status.estimator_ready
-        if self.compensator.add_temperature(stamp_s, msg.temperature):
+        if self.compensator.add_temperature(stamp_s, temperature.degC(msg)):
             self._track_warm_up(stamp_s, was_ready)
             imu_total = status.counters.imu_total
             if imu_total > self._imu_total_at_temperature:  # the gyro flows: compare clocks

@@ -46,6 +46,7 @@ from fog_temp_comp.ros.params import (
     read_params_file,
     sections_warning,
 )
+from fog_temp_comp.ros.temperature_input import DEFAULT_FIELD, DEFAULT_TYPE
 
 __all__ = [
     'FILTER_PARAMETERS',
@@ -348,6 +349,7 @@ class ParametersMixin(_NodeBase):
                 additional_constraints="one of 'header', 'receive'",
             ),
         )
+        self._declare_temperature_input()
         self._declare(
             'executor',
             'auto',
@@ -377,6 +379,28 @@ class ParametersMixin(_NodeBase):
                 'many seconds (s)',
                 read_only=True,
                 floating_point_range=[FloatingPointRange(from_value=0.01, to_value=3600.0)],
+            ),
+        )
+
+    def _declare_temperature_input(self) -> None:
+        """The temperature input: ``temperature_type`` and ``temperature_field``."""
+        self._declare(
+            'temperature_type',
+            DEFAULT_TYPE,
+            ParameterDescriptor(
+                description="message type of imu/temperature, 'pkg/msg/Type': another type "
+                "carries the temperature in 'temperature_field' (a driver's status message, "
+                'std_msgs/msg/Float64; one without a header is timed on arrival)',
+                read_only=True,
+            ),
+        )
+        self._declare(
+            'temperature_field',
+            DEFAULT_FIELD,
+            ParameterDescriptor(
+                description="field of 'temperature_type' holding the temperature in degC, "
+                "'a.b.c' (as calibrate --temp-field)",
+                read_only=True,
             ),
         )
 

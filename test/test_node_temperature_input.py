@@ -1,0 +1,140 @@
+"""The node's temperature from a field of another message type (``temperature_type/_field``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from rosharness import Harness, rate_of, split_stamp
+from sensor_msgs.msg import FluidPressure
+from std_msgs.msg import Float64
+
+from fog_temp_comp.core.calibration import calibrate
+from fog_temp_comp.core.coefficients import load, save
+from fog_temp_comp.core.compensator import Compensator, replay
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.ros.node import CompensatorNode
+from fog_temp_comp.ros.params import ParameterError
+from fog_temp_comp.tools.simulate import SimulatedRun
+
+
+@pytest.fixture()
+def coeffs_file(tmp_path: Path, short_cycle_fast: SimulatedRun) -> Path:
+    path = tmp_path / 'coeffs.yaml'
+    save(calibrate([short_cycle_fast.as_record()], DenoiseSettings()), path)
+    return path
+
+
+#: the driver's topic: the harness's peer publishes a Temperature on imu/temperature, and one
+#: process cannot hold two types on one topic, so the node's input is remapped, as a user would
+STATUS_TOPIC = 'fog/status'
+
+
+def node_reading(context: object, coeffs_file: Path, msg_type: str, field: str) -> Any:
+    """A compensator node whose temperature is ``field`` of ``msg_type`` on the status topic."""
+    return CompensatorNode(
+        context=context,
+        cli_args=['--ros-args', '-r', f'imu/temperature:={STATUS_TOPIC}'],
+        parameter_overrides=[
+            Parameter('coefficients_file', value=str(coeffs_file)),
+            Parameter('temperature_type', value=msg_type),
+            Parameter('temperature_field', value=field),
+        ],
+    )
+
+
+def harness_with(context: object, node: Any, msg_type: type) -> tuple[Harness, Any]:
+    """The harness, and a peer publisher of ``msg_type`` on the status topic, matched."""
+    harness = Harness(context, node, connect=False)
+    publisher = harness.peer.create_publisher(msg_type, STATUS_TOPIC, qos_profile_sensor_data)
+    harness.spin_until(
+        lambda: (
+            publisher.get_subscription_count() > 0
+            and harness.imu_pub.get_subscription_count() > 0
+            and harness.peer.count_publishers(harness.peer.resolve_topic_name('imu/data')) > 0
+        )
+    )
+    return harness, publisher
+
+
+def test_a_stamped_message_of_another_type_gives_the_cores_output(
+    ros_context: object, coeffs_file: Path, short_cycle: SimulatedRun
+) -> None:
+    """A driver's stamped message (here FluidPressure's float) read as the Temperature is."""
+    run = short_cycle
+    node = node_reading(
+        ros_context, coeffs_file, 'sensor_msgs/msg/FluidPressure', 'fluid_pressure'
+    )
+    harness, publisher = harness_with(ros_context, node, FluidPressure)
+    out = []
+    try:
+        n = 600
+        temps = iter(zip(run.temp_stamps_s, run.temperature_degC, strict=True))
+        pending = next(temps)
+        for k in range(n):
+            while pending is not None and pending[0] <= run.imu_stamps_s[k]:
+                msg = FluidPressure()
+                msg.header.stamp.sec, msg.header.stamp.nanosec = split_stamp(pending[0])
+                msg.fluid_pressure = float(pending[1])
+                before = node.compensator.status.counters.temperature_total
+                publisher.publish(msg)
+                harness.spin_until(
+                    lambda b=before: node.compensator.status.counters.temperature_total > b
+                )
+                pending = next(temps, None)
+            out.append(harness.send_imu(run.imu_stamps_s[k], run.rates_rad_s[k]))
+    finally:
+        harness.close()
+    coeffs = load(coeffs_file)
+    last = run.imu_stamps_s[n - 1]
+    taken = run.temp_stamps_s <= last
+    offline = replay(
+        Compensator(coeffs.model, coeffs.denoise),
+        run.imu_stamps_s[:n],
+        run.rates_rad_s[:n],
+        run.temp_stamps_s[taken],
+        run.temperature_degC[taken],
+    )
+    assert_array_equal(np.array([rate_of(m) for m in out]), offline)
+    assert node.unstamped == 0
+
+
+def test_a_bare_float64_is_timed_on_arrival(ros_context: object, coeffs_file: Path) -> None:
+    """std_msgs/Float64 has no header: each reading takes the node clock and is counted."""
+    node = node_reading(ros_context, coeffs_file, 'std_msgs/msg/Float64', 'data')
+    harness, publisher = harness_with(ros_context, node, Float64)
+    try:
+        for k in range(5):
+            before = node.compensator.status.counters.temperature_total
+            publisher.publish(Float64(data=20.0 + 0.01 * k))
+            harness.spin_until(
+                lambda b=before: node.compensator.status.counters.temperature_total > b
+            )
+            now_s = node.get_clock().now().nanoseconds * 1e-9
+            assert harness.send_imu(now_s, [0.0, 0.0, 0.0]) is not None
+        assert node.unstamped == 5
+        status = node.compensator.status
+        assert status.has_temperature and status.temperature_degC == pytest.approx(20.02, abs=0.05)
+    finally:
+        harness.close()
+
+
+@pytest.mark.parametrize(
+    ('msg_type', 'field', 'message'),
+    [
+        ('no_such_pkg/msg/Temp', 'data', 'no message'),
+        ('std_msgs/Float64/extra', 'data', "expected 'pkg/msg/Type'"),
+        ('std_msgs/msg/Float64', 'value', "'value' is not a field"),
+        ('sensor_msgs/msg/FluidPressure', 'header', 'not a number'),
+    ],
+)
+def test_a_temperature_input_that_cannot_be_read_is_refused_with_the_reason(
+    ros_context: object, coeffs_file: Path, msg_type: str, field: str, message: str
+) -> None:
+    with pytest.raises(ParameterError, match=message):
+        node_reading(ros_context, coeffs_file, msg_type, field)
