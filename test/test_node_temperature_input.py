@@ -14,20 +14,17 @@ from rosharness import Harness, rate_of, split_stamp
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 
-from fog_temp_comp.core.calibration import calibrate
-from fog_temp_comp.core.coefficients import load, save
+from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.compensator import Compensator, replay
-from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.ros.params import ParameterError
 from fog_temp_comp.tools.simulate import SimulatedRun
 
 
 @pytest.fixture()
-def coeffs_file(tmp_path: Path, short_cycle_fast: SimulatedRun) -> Path:
-    path = tmp_path / 'coeffs.yaml'
-    save(calibrate([short_cycle_fast.as_record()], DenoiseSettings()), path)
-    return path
+def coeffs_file() -> Path:
+    """The shipped example coefficients (a Kalman pipeline, frame imu_link)."""
+    return Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
 
 
 #: the driver's topic: the harness's peer publishes a Temperature on imu/temperature, and one
