@@ -17,6 +17,8 @@ from fog_temp_comp.bag.reduce import bin_record, reduce_bag
 from fog_temp_comp.bag.stream import BagStream, Progress, read_record
 from fog_temp_comp.tools.simulate import SimulatedRun
 
+from simdata import write_run
+
 STATUS_MSG = """
 std_msgs/Header header
 float64 coil_temp_c
@@ -104,14 +106,7 @@ def test_compensate_and_evaluate_read_a_custom_temperature_field(
     custom.parent.mkdir()
     plain.parent.mkdir()
     write_custom_bag(custom, short_run)
-    write_chamber_bag(
-        plain,
-        'mcap',
-        imu_stamps_s=short_run.imu_stamps_s,
-        rates_rad_s=short_run.rates_rad_s,
-        temp_stamps_s=short_run.temp_stamps_s,
-        temperature_degC=short_run.temperature_degC,
-    )
+    write_run(plain, 'mcap', short_run)
     coeffs = ['--coeffs', str(EXAMPLE_COEFFS)]
     field = ['--temp-topic', '/gyro/status', '--temp-field', 'coil_temp_c']
     assert cli.main(['compensate', str(plain), *coeffs, '-o', str(tmp_path / 'o1')]) == 0
