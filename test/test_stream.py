@@ -126,6 +126,37 @@ def test_compensate_and_evaluate_read_a_custom_temperature_field(
     assert tables[0] == tables[1]
 
 
+def test_compensate_times_a_bare_float64_by_its_receive_time(
+    tmp_path: Path, short_run: SimulatedRun, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """std_msgs/Float64 (no header), logged when read: as calibrate does, no warning."""
+    from fog_temp_comp.tools import cli
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    bare, plain = tmp_path / 'bare', tmp_path / 'plain'
+    write_run(plain, 'mcap', short_run)
+    events = [(t, 0, k) for k, t in enumerate(short_run.temp_stamps_s)]
+    events += [(t, 1, k) for k, t in enumerate(short_run.imu_stamps_s)]
+    with Writer(bare, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        temp = writer.add_connection('/fog/temperature', 'std_msgs/msg/Float64', typestore=store)
+        imu = writer.add_connection('/imu/data_raw', 'sensor_msgs/msg/Imu', typestore=store)
+        for t, kind, k in sorted(events):
+            ns = round(t * 1e9)
+            if kind == 0:
+                value = store.types['std_msgs/msg/Float64'](data=short_run.temperature_degC[k])
+                writer.write(temp, ns, store.serialize_cdr(value, temp.msgtype))
+            else:
+                msg = make_imu(ns, 'imu_link', short_run.rates_rad_s[k])
+                writer.write(imu, ns, store.serialize_cdr(msg, imu.msgtype))
+    coeffs = ['--coeffs', str(EXAMPLE_COEFFS)]
+    field = ['--temp-topic', '/fog/temperature', '--temp-field', 'data']
+    assert cli.main(['compensate', str(plain), *coeffs, '-o', str(tmp_path / 'o1')]) == 0
+    capsys.readouterr()
+    assert cli.main(['compensate', str(bare), *coeffs, *field, '-o', str(tmp_path / 'o2')]) == 0
+    assert 'WARNING' not in capsys.readouterr().err
+    assert imu_of(tmp_path / 'o2', '/imu/data') == imu_of(tmp_path / 'o1', '/imu/data')
+
+
 def test_receive_time_alignment(tmp_path: Path, short_run: SimulatedRun) -> None:
     bag = tmp_path / 'late'
     write_custom_bag(bag, short_run, lag_ns=250_000_000)  # logged 0.25 s after the stamp

@@ -18,6 +18,7 @@ from fog_temp_comp.bag.bagio import stamp_to_s
 from fog_temp_comp.bag.streamdecode import get_field
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.compensator import Compensator
+from fog_temp_comp.core.units import NS_PER_S
 
 
 @dataclass
@@ -133,11 +134,18 @@ class ChunkReplayer:
         return cdr.decode_temperature_ros1(raws, header_seq=seq)
 
     def _decode_field(self, items: list[tuple[Any, int, bytes]], field: str) -> FieldBatch:
-        """``field`` of each message, deserialized by rosbags; header stamp or 0 (unset)."""
+        """``field`` of each message, deserialized by rosbags, and its stamp (s).
+
+        The header stamp; a message without a header (``std_msgs/Float64``) takes its receive
+        time, as ``calibrate --temp-field`` reads it.
+        """
         messages = [self.reader.deserialize(raw, conn.msgtype) for conn, _, raw in items]
         return FieldBatch(
             np.array(
-                [stamp_to_s(m.header.stamp) if hasattr(m, 'header') else 0.0 for m in messages]
+                [
+                    stamp_to_s(m.header.stamp) if hasattr(m, 'header') else log_ns / NS_PER_S
+                    for m, (_, log_ns, _) in zip(messages, items, strict=True)
+                ]
             ),
             np.array([get_field(m, field) for m in messages], dtype=np.float64),
         )
