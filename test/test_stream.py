@@ -26,25 +26,37 @@ uint8 mode
 """
 
 
-def write_custom_bag(path: Path, run: SimulatedRun, lag_ns: int = 0) -> None:
-    """Imu plus a custom status message whose field carries the temperature."""
+def write_custom_bag(
+    path: Path, run: SimulatedRun, lag_ns: int = 0, *, bare: bool = False
+) -> None:
+    """Imu plus the temperature in a field of another type, logged ``lag_ns`` after its stamp.
+
+    A custom status message on /gyro/status whose header stamps it (field ``coil_temp_c``), or
+    with ``bare`` a std_msgs/Float64 on /fog/temperature (field ``data``, no header).
+    """
     store = get_typestore(Stores.ROS2_JAZZY)
     store.register(get_types_from_msg(STATUS_MSG, 'fog_msgs/msg/GyroStatus'))
-    status_type = store.types['fog_msgs/msg/GyroStatus']
+    topic, msgtype = (
+        ('/fog/temperature', 'std_msgs/msg/Float64')
+        if bare
+        else ('/gyro/status', 'fog_msgs/msg/GyroStatus')
+    )
+    temp_type = store.types[msgtype]
     events = [(t, 0, k) for k, t in enumerate(run.temp_stamps_s)]
     events += [(t, 1, k) for k, t in enumerate(run.imu_stamps_s)]
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        status = writer.add_connection('/gyro/status', 'fog_msgs/msg/GyroStatus', typestore=store)
+        temp = writer.add_connection(topic, msgtype, typestore=store)
         imu = writer.add_connection('/imu/data_raw', 'sensor_msgs/msg/Imu', typestore=store)
         for t, kind, k in sorted(events):
             ns = round(t * 1e9)
             if kind == 0:
-                msg = status_type(
-                    header=make_header(ns, 'imu_link'),
-                    coil_temp_c=float(run.temperature_degC[k]),
-                    mode=1,
+                value = float(run.temperature_degC[k])
+                msg = (
+                    temp_type(data=value)
+                    if bare
+                    else temp_type(header=make_header(ns, 'imu_link'), coil_temp_c=value, mode=1)
                 )
-                writer.write(status, ns + lag_ns, store.serialize_cdr(msg, status.msgtype))
+                writer.write(temp, ns + lag_ns, store.serialize_cdr(msg, msgtype))
             else:
                 msg = make_imu(ns, 'imu_link', run.rates_rad_s[k])
                 writer.write(imu, ns + lag_ns, store.serialize_cdr(msg, imu.msgtype))
@@ -132,22 +144,9 @@ def test_compensate_times_a_bare_float64_by_its_receive_time(
     """std_msgs/Float64 (no header), logged when read: as calibrate does, no warning."""
     from fog_temp_comp.tools import cli
 
-    store = get_typestore(Stores.ROS2_JAZZY)
     bare, plain = tmp_path / 'bare', tmp_path / 'plain'
     write_run(plain, 'mcap', short_run)
-    events = [(t, 0, k) for k, t in enumerate(short_run.temp_stamps_s)]
-    events += [(t, 1, k) for k, t in enumerate(short_run.imu_stamps_s)]
-    with Writer(bare, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        temp = writer.add_connection('/fog/temperature', 'std_msgs/msg/Float64', typestore=store)
-        imu = writer.add_connection('/imu/data_raw', 'sensor_msgs/msg/Imu', typestore=store)
-        for t, kind, k in sorted(events):
-            ns = round(t * 1e9)
-            if kind == 0:
-                value = store.types['std_msgs/msg/Float64'](data=short_run.temperature_degC[k])
-                writer.write(temp, ns, store.serialize_cdr(value, temp.msgtype))
-            else:
-                msg = make_imu(ns, 'imu_link', short_run.rates_rad_s[k])
-                writer.write(imu, ns, store.serialize_cdr(msg, imu.msgtype))
+    write_custom_bag(bare, short_run, bare=True)
     coeffs = ['--coeffs', str(EXAMPLE_COEFFS)]
     field = ['--temp-topic', '/fog/temperature', '--temp-field', 'data']
     assert cli.main(['compensate', str(plain), *coeffs, '-o', str(tmp_path / 'o1')]) == 0
