@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
+from operator import attrgetter
 from typing import Any
 
 from fog_temp_comp.ros.params import ParameterError
@@ -67,16 +68,8 @@ def _reader(msg_type: type, field: str) -> Callable[[Any], float]:
         raise ParameterError(
             f'parameter temperature_field: {field!r} is not a number ({type(value).__name__})'
         )
-    if len(names) == 1:
-        name = names[0]
-        return lambda msg: float(getattr(msg, name))
-
-    def degC(msg: Any) -> float:
-        for name in names:
-            msg = getattr(msg, name)
-        return float(msg)
-
-    return degC
+    read = attrgetter(field)
+    return lambda msg: float(read(msg))
 
 
 def temperature_input(type_name: str, field: str) -> TemperatureInput:

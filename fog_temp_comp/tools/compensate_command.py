@@ -196,7 +196,7 @@ DEFAULT_OUTPUT_TOPIC = '/imu/data'
 
 
 def output_topic_for(
-    given: str | None, gyro_topic: str, topics: Collection[str], bag: Path | str = 'the input'
+    given: str | None, gyro_topic: str, topics: Collection[str], bag: Path
 ) -> str:
     """The corrected Imu's topic in ``bag``, whose topics are ``topics``.
 
