@@ -156,6 +156,33 @@ def test_compensate_times_a_bare_float64_by_its_receive_time(
     assert imu_of(tmp_path / 'o2', '/imu/data') == imu_of(tmp_path / 'o1', '/imu/data')
 
 
+@pytest.mark.parametrize(
+    ('extra', 'message'),
+    [
+        (['--temp-field', 'coil_temp_c'], 'needs --temp-topic'),
+        (['--temp-topic', '/gyro/status', '--temp-field', 'coil_temp'], "no field 'coil_temp'"),
+        (['--temp-topic', '/gyro/status', '--temp-field', 'header'], 'not a number'),
+    ],
+)
+def test_compensate_refuses_a_temperature_field_it_cannot_read(
+    tmp_path: Path,
+    short_run: SimulatedRun,
+    capsys: pytest.CaptureFixture[str],
+    extra: list[str],
+    message: str,
+) -> None:
+    """One ERROR line naming the problem, and no output bag."""
+    from fog_temp_comp.tools import cli
+
+    bag, out = tmp_path / 'custom', tmp_path / 'out'
+    write_custom_bag(bag, short_run)
+    argv = ['compensate', str(bag), '--coeffs', str(EXAMPLE_COEFFS), '-o', str(out), *extra]
+    assert cli.main(argv) == 1
+    errors = [line for line in capsys.readouterr().err.splitlines() if line.startswith('ERROR')]
+    assert len(errors) == 1 and message in errors[0], errors
+    assert not out.exists()
+
+
 def test_receive_time_alignment(tmp_path: Path, short_run: SimulatedRun) -> None:
     bag = tmp_path / 'late'
     write_custom_bag(bag, short_run, lag_ns=250_000_000)  # logged 0.25 s after the stamp
