@@ -313,6 +313,8 @@ DATA: list[tuple[str, str, Callable[[dict[str, np.ndarray]], None], str, str]] =
         slice(20, 30), a['temp_stamps_s'][20]), 'diagnostic', '9 duplicate'),
     ('temperature in millidegrees', 'sqlite3', lambda a: a.__setitem__(
         'temperature_degC', a['temperature_degC'] * 1000.0), 'error', 'not degrees Celsius'),
+    ('gyro rate all zero (angular_velocity not filled)', 'ros1', lambda a: a.__setitem__(
+        'rates_rad_s', a['rates_rad_s'] * 0.0), 'error', 'never changes on any axis'),
     ('temperature in kelvin', 'mcap', lambda a: a.__setitem__(
         'temperature_degC', a['temperature_degC'] + 273.15), 'ok', ''),
     ('gyro and temperature not overlapping', 'mcap',

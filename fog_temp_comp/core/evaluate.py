@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -31,6 +32,16 @@ class Score:
     stability_after_deg_h: float
     range_before_deg_h: float
     range_after_deg_h: float
+
+    def ratio(self, quantity: str) -> float:
+        """``'stability'`` or ``'range'`` after / before; nan where before is 0.
+
+        The raw rate of an axis that never changes (a one-axis gyro's unused channels, all
+        zero) has no stability to compare with.
+        """
+        before = float(getattr(self, f'{quantity}_before_deg_h'))
+        after = float(getattr(self, f'{quantity}_after_deg_h'))
+        return after / before if before > 0 else math.nan
 
 
 def compensate_record(
@@ -101,10 +112,16 @@ def format_scores(scores: Sequence[Score]) -> str:
     for s in scores:
         lines.append(
             f'{s.run:<28} {s.axis:<4} {s.tau_s:>6g} {s.stability_before_deg_h:>11.4f} '
-            f'{s.stability_after_deg_h:>10.4f} '
-            f'{s.stability_after_deg_h / s.stability_before_deg_h:>6.2f} '
+            f'{s.stability_after_deg_h:>10.4f} {_ratio_text(s.ratio("stability"))} '
             f'{s.range_before_deg_h:>12.4f} {s.range_after_deg_h:>11.4f} '
-            f'{s.range_after_deg_h / s.range_before_deg_h:>6.2f}'
+            f'{_ratio_text(s.ratio("range"))}'
         )
     lines.append('(deg/h; stability = std of tau-s means, range = max-min of tau-s means)')
+    if any(math.isnan(s.ratio('stability')) for s in scores):
+        lines.append('(ratio -: the raw rate of that axis never changes, nothing to compare)')
     return '\n'.join(lines)
+
+
+def _ratio_text(ratio: float) -> str:
+    """A ratio in the table's 6-wide column; ``-`` for none."""
+    return f'{"-":>6}' if math.isnan(ratio) else f'{ratio:>6.2f}'

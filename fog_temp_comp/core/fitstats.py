@@ -522,8 +522,9 @@ def format_fits(fits: Sequence[AxisFitStats]) -> list[str]:
             f'{t}={b:+.6g}+-{se:.2g}'
             for t, b, se in zip(f.names, f.coefficients, f.se_hac, strict=True)
         )
+        r2 = '- (the rate never changes)' if math.isnan(f.r_squared) else f'{f.r_squared:.4f}'
         lines.append(
             f'{f.axis}: {values}  residual_std={f.residual_std:.4f} deg/h  '
-            f'R2={f.r_squared:.4f}  cond={f.condition_number:.1f}'
+            f'R2={r2}  cond={f.condition_number:.1f}'
         )
     return lines

@@ -19,7 +19,12 @@ from fog_temp_comp.core.gyro_outliers import without_gyro_outliers
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.temperature_glitches import without_temperature_glitches
 
-__all__ = ['PLAUSIBLE_DEGC', 'check_degrees_celsius', 'without_outliers']
+__all__ = [
+    'PLAUSIBLE_DEGC',
+    'check_degrees_celsius',
+    'check_gyro_rate_changes',
+    'without_outliers',
+]
 
 #: a record whose median temperature lies outside this range (degC) is not in degrees Celsius;
 #: kelvin passes (an offset, which the fit takes as it is), millidegrees or tenths do not
@@ -48,6 +53,28 @@ def check_degrees_celsius(records: Sequence[ChamberRecord]) -> None:
             )
 
 
+def check_gyro_rate_changes(records: Sequence[ChamberRecord]) -> None:
+    """Raise ValueError where no axis of any record's gyro rate ever changes.
+
+    A rate that is the same number on every axis throughout (a driver that leaves
+    ``angular_velocity`` at 0, the wrong Imu topic) has no drift to fit: the fit would write
+    zero coefficients without a word. One axis that changes is enough (a one-axis gyro whose
+    driver fills the other two with 0: those get zero coefficients).
+    """
+    changing = [
+        bool(np.any(np.ptp(rates[np.isfinite(rates).all(axis=1)], axis=0) > 0))
+        for rates in (record.rates_rad_s for record in records)
+        if rates.size
+    ]
+    if changing and not any(changing):
+        first = records[0]
+        raise ValueError(
+            f'{first.path}: the gyro rate on {first.imu_topic} never changes on any axis '
+            f'({np.unique(first.rates_rad_s[np.isfinite(first.rates_rad_s)])[:3].tolist()} '
+            "rad/s): no drift to fit; is this the gyro's raw rate (--gyro-topic)?"
+        )
+
+
 def without_outliers(
     records: Sequence[ChamberRecord],
     settings: DenoiseSettings,
@@ -55,7 +82,8 @@ def without_outliers(
 ) -> tuple[list[ChamberRecord], list[str], dict[str, Any] | None]:
     """The records without their temperature glitches and gyro outlier bins.
 
-    Temperatures that are not degrees Celsius are refused first (:func:`check_degrees_celsius`).
+    Temperatures that are not degrees Celsius, and a gyro rate that never changes, are refused
+    first (:func:`check_degrees_celsius`, :func:`check_gyro_rate_changes`).
 
     Gyro bins of ``settings.tdot_period_s``; the glitch rule is the node's default guard's.
     Returns the records, a warning per record and kind, and ``provenance`` with the entries
@@ -64,6 +92,7 @@ def without_outliers(
     stamps) where there were any.
     """
     check_degrees_celsius(records)
+    check_gyro_rate_changes(records)
     period_s = settings.tdot_period_s
     cleaned, warnings = [], []
     glitched: dict[str, Any] = {}

@@ -137,13 +137,12 @@ class CandidateResult:
     error: str = ''
 
     def ratios(self, quantity: str, tau_s: float | None = None) -> FloatArray:
-        """After/before ratios of ``'stability'`` or ``'range'``, optionally at one tau (s)."""
-        out = [
-            getattr(s, f'{quantity}_after_deg_h') / getattr(s, f'{quantity}_before_deg_h')
-            for s in self.scores
-            if tau_s is None or s.tau_s == tau_s
-        ]
-        return np.asarray(out, dtype=np.float64)
+        """After/before ratios of ``'stability'`` or ``'range'``, optionally at one tau (s).
+
+        An axis whose raw rate never changes has none (:meth:`Score.ratio`) and is left out.
+        """
+        out = [s.ratio(quantity) for s in self.scores if tau_s is None or s.tau_s == tau_s]
+        return np.asarray([r for r in out if not math.isnan(r)], dtype=np.float64)
 
     @property
     def criterion(self) -> float:

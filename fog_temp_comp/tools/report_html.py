@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import datetime as dt
 import html
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -149,8 +150,8 @@ def _range_table(model: DriftModel, temp: FloatArray, tdot: FloatArray) -> str:
     )
 
 
-def _ratio(after: float, before: float) -> str:
-    return f'{after / before:.2f}' if before > 0 else 'n/a'
+def _ratio(ratio: float) -> str:
+    return 'n/a' if math.isnan(ratio) else f'{ratio:.2f}'
 
 
 def _score_table(scores: Sequence[Score]) -> str:
@@ -164,9 +165,9 @@ def _score_table(scores: Sequence[Score]) -> str:
             f'<tr><td class="l">{_e(s.run)}</td><td class="l">{_e(s.axis)}</td>'
             f'<td>{s.tau_s:g}</td><td>{s.stability_before_deg_h:.4f}</td>'
             f'<td>{s.stability_after_deg_h:.4f}</td>'
-            f'<td>{_ratio(s.stability_after_deg_h, s.stability_before_deg_h)}</td>'
+            f'<td>{_ratio(s.ratio("stability"))}</td>'
             f'<td>{s.range_before_deg_h:.4f}</td><td>{s.range_after_deg_h:.4f}</td>'
-            f'<td>{_ratio(s.range_after_deg_h, s.range_before_deg_h)}</td></tr>'
+            f'<td>{_ratio(s.ratio("range"))}</td></tr>'
         )
     rows.append('</table>')
     rows.append(
