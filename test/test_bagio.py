@@ -26,7 +26,9 @@ from fog_temp_comp.bag.bagio import (
     make_imu,
     make_temperature,
     open_bag,
+    raw_imu_topic,
     resolve_topic,
+    resolve_topic_in,
     write_chamber_bag,
 )
 from fog_temp_comp.bag.stream import read_record
@@ -322,6 +324,33 @@ def test_the_temperature_beside_the_gyro_is_the_one_sharing_most_of_its_namespac
     imu: str, temperatures: list[str], expected: str | None
 ) -> None:
     assert beside_topic(temperatures, imu) == expected
+
+
+@pytest.mark.parametrize(
+    ('imus', 'expected'),
+    [
+        (['/imu/data', '/imu/data_raw'], '/imu/data_raw'),
+        (['/fog/imu/data_raw', '/fog/imu/data', '/fog/imu/data_compensated'], '/fog/imu/data_raw'),
+        (['/data', '/data_raw'], '/data_raw'),
+        (['/imu/data_raw', '/fog/rate'], None),  # two gyros, perhaps
+        (['/imu/data_raw', '/imu/filtered/data'], None),  # not siblings
+        (['/a/data_raw', '/b/data_raw'], None),
+        (['/imu/data', '/imu/data_compensated'], None),  # no raw by name
+    ],
+)
+def test_the_raw_imu_is_the_one_data_raw_among_its_siblings(
+    imus: list[str], expected: str | None
+) -> None:
+    assert raw_imu_topic(imus) == expected
+    topics = dict.fromkeys(imus, IMU_TYPE)
+    if expected is None:
+        with pytest.raises(BagError, match='several'):
+            resolve_topic_in(topics, None, IMU_TYPE, '--gyro-topic')
+    else:
+        assert resolve_topic_in(topics, None, IMU_TYPE, '--gyro-topic') == expected
+    # a Temperature is never chosen by this name rule
+    with pytest.raises(BagError, match='several'):
+        resolve_topic_in(dict.fromkeys(imus, TEMPERATURE_TYPE), None, TEMPERATURE_TYPE, 'x')
 
 
 def test_no_temperature_topic(tmp_path: Path) -> None:

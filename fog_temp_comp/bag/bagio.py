@@ -107,10 +107,10 @@ def bag_format(path: str | Path) -> str:
         return 'mcap'
     if path.suffix == '.db3':
         return 'sqlite3'
-    if path.is_dir():
-        if list(path.glob('*.mcap')):
+    if path.is_dir():  # a file-compressed bag (rosbag2 FILE mode) holds .mcap.zstd / .db3.zstd
+        if list(path.glob('*.mcap')) or list(path.glob('*.mcap.zstd')):
             return 'mcap'
-        if list(path.glob('*.db3')):
+        if list(path.glob('*.db3')) or list(path.glob('*.db3.zstd')):
             return 'sqlite3'
     raise BagError(
         f'{path}: not a recognised bag (expected a rosbag2 directory, .mcap, .db3, .bag)'
@@ -129,7 +129,8 @@ def resolve_topic(
     With ``topic`` given it must exist and carry ``msgtype`` (a missing leading slash is
     accepted); without, the bag must have exactly one topic of that type, or, with ``beside``
     (the gyro's topic, for the temperature), exactly one that shares the most of its namespace
-    (:func:`beside_topic`; a ``NOTE:`` line on stderr says which).
+    (:func:`beside_topic`), or, for the Imu, one ``data_raw`` among its siblings
+    (:func:`raw_imu_topic`); a ``NOTE:`` line on stderr says which.
     """
     topics = {name: info.msgtype or '' for name, info in reader.topics.items()}
     return resolve_topic_in(topics, topic, msgtype, flag, beside)
@@ -163,6 +164,21 @@ def beside_topic(candidates: Sequence[str], beside: str) -> str | None:
     return candidates[counts.index(best)]
 
 
+def raw_imu_topic(candidates: Sequence[str]) -> str | None:
+    """The one ``.../data_raw`` among sibling Imu topics, the raw rate by REP 145's names.
+
+    ``/imu/data_raw`` beside ``/imu/data`` (an orientation filter's output, or a compensator's
+    recorded with the raw rate). None unless exactly one candidate is ``data_raw`` and every
+    other one is in its namespace: ``/imu/data_raw`` beside ``/fog/rate`` is not told apart.
+    """
+    raw = [name for name in candidates if name.rsplit('/', 1)[-1] == 'data_raw']
+    if len(raw) != 1:
+        return None
+    if any(_namespace(name) != _namespace(raw[0]) for name in candidates):
+        return None
+    return raw[0]
+
+
 def resolve_topic_in(
     topics: dict[str, str], topic: str | None, msgtype: str, flag: str, beside: str | None = None
 ) -> str:
@@ -184,12 +200,16 @@ def resolve_topic_in(
         if topics and msgtype == TEMPERATURE_TYPE:
             hint += ' (calibrate reads a number in another message with --temp-field FIELD)'
         raise BagError(f'no {msgtype} topic in bag; topics: {listing}{hint}')
-    paired = beside_topic(candidates, beside) if beside else None
+    if beside:
+        paired, why = beside_topic(candidates, beside), f'beside {beside}'
+    else:
+        paired = raw_imu_topic(candidates) if msgtype == IMU_TYPE else None
+        why = "the raw rate by REP 145's names"
     if paired is None:
         raise BagError(f'several {msgtype} topics: {candidates}; choose one with {flag}')
     others = ', '.join(c for c in candidates if c != paired)
     print(
-        f'NOTE: several {msgtype} topics: using {paired}, beside {beside} '
+        f'NOTE: several {msgtype} topics: using {paired}, {why} '
         f'(not {others}; choose another with {flag})',
         file=sys.stderr,
     )
@@ -219,9 +239,19 @@ class BagWriter:
     ROS 2 message objects of :func:`typestore` are serialized to CDR (ROS 2) or ROS 1 format.
     """
 
-    def __init__(self, path: str | Path, fmt: str, *, compress: bool = False) -> None:
+    def __init__(
+        self, path: str | Path, fmt: str, *, compress: bool = False, compress_file: bool = False
+    ) -> None:
+        """Open ``path`` for writing; it must not exist.
+
+        ``compress``: zstd chunks (MCAP), LZ4 chunks (ROS 1). ``compress_file``: a ROS 2 bag's
+        storage file zstd-compressed whole, as ``ros2 bag record --compression-mode file``
+        writes it (``run.db3.zstd``, ``run.mcap.zstd``).
+        """
         if fmt not in FORMATS:
             raise ValueError(f'format must be one of {FORMATS}, got {fmt!r}')
+        if compress_file and fmt == 'ros1':
+            raise ValueError('compress_file is for ROS 2 bags (mcap, sqlite3)')
         from rosbags.rosbag1 import Writer as Writer1
         from rosbags.rosbag2 import Writer as Writer2
         from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlugin
@@ -241,6 +271,8 @@ class BagWriter:
             self._writer = Writer2(self.path, version=9, storage_plugin=plugin)
             if compress and fmt == 'mcap':
                 self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+            if compress_file:
+                self._writer.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
         self._connections: dict[str, Connection] = {}
         self._blocks: mcapwrite.McapBlockWriter | None = None
 
@@ -409,15 +441,19 @@ def write_chamber_bag(
     temp_topic: str = '/imu/temperature',
     frame_id: str = 'imu_link',
     compress: bool = False,
+    compress_file: bool = False,
 ) -> None:
-    """Write gyro and temperature streams as a bag; log time = header stamp, merged in order."""
+    """Write gyro and temperature streams as a bag; log time = header stamp, merged in order.
+
+    ``compress``, ``compress_file``: as :class:`BagWriter`'s.
+    """
     imu_ns = s_to_stamp_ns_array(imu_stamps_s)
     temp_ns = s_to_stamp_ns_array(temp_stamps_s)
     # temperature first on equal stamps, as a sensor driver publishing both would
     order = np.lexsort(
         (np.r_[np.ones(imu_ns.size), np.zeros(temp_ns.size)], np.r_[imu_ns, temp_ns])
     )
-    with BagWriter(path, fmt, compress=compress) as writer:
+    with BagWriter(path, fmt, compress=compress, compress_file=compress_file) as writer:
         # temperature registered first: readers break log-time ties by connection order
         writer.add_topic(temp_topic, TEMPERATURE_TYPE)
         writer.add_topic(imu_topic, IMU_TYPE)
