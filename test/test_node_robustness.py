@@ -547,6 +547,31 @@ def test_unset_header_stamps_are_timed_by_the_node_clock(
         h.close()
 
 
+def test_an_unset_stamp_among_a_device_clocks_is_timed_on_that_clock(
+    ros_context: object, coeffs_file: Path
+) -> None:
+    """Stamps of a clock since power-on (100 s, 101 s, ...) and one left at 0.
+
+    That one is timed by the node clock moved onto the device's, not by the wall clock (a jump
+    of decades, then one back: a reset of the Tdot estimate and a time jump counted). A driver
+    that never stamps stays on the node clock (the test above).
+    """
+    h = Harness(ros_context, start(ros_context, coeffs_file))
+    try:
+        for k in range(5):
+            h.send_temperature(100.0 + k, 25.0 + 0.01 * k)
+        h.send_temperature(0.0, 25.05)
+        status = h.node.compensator.status
+        assert h.node.unstamped == 1
+        # the node clock ran on by the test's own pace since 104 s was sent: well within 5 s
+        assert 104.0 < status.last_temperature_stamp_s < 109.0
+        h.send_temperature(110.0, 25.1)
+        assert status.counters.time_jumps == 0
+        assert status.last_temperature_stamp_s == 110.0
+    finally:
+        h.close()
+
+
 # ------------------------------------------------------------------ coefficients file
 def _broken(coefficients: Coefficients, edit: str) -> dict:
     data = to_dict(coefficients)

@@ -199,3 +199,54 @@ def test_evaluate_by_receive_time_undoes_two_clocks(
         tables[label] = captured.out.replace('apart', 'aligned').split()
     assert tables['by receive'] == tables['aligned']
     assert tables['by header'] != tables['aligned']
+
+
+def write_since_power_on(path: Path, fmt: str, run: SimulatedRun, unset: tuple[int, ...]) -> Path:
+    """The run stamped by a device clock since power-on: its first stamp is exactly 0.
+
+    Logged by the wall clock, 5 ms later; the temperatures at indices ``unset`` not stamped (0).
+    """
+    start_s = float(min(run.imu_stamps_s[0], run.temp_stamps_s[0]))
+    wall_s = 1.7e9
+    items = [(s, 0, k) for k, s in enumerate(run.temp_stamps_s.tolist())]
+    items += [(s, 1, k) for k, s in enumerate(run.imu_stamps_s.tolist())]
+    with BagWriter(path, fmt) as writer:
+        writer.add_topic(TEMP, 'sensor_msgs/msg/Temperature')
+        writer.add_topic(IMU, 'sensor_msgs/msg/Imu')
+        for stamp_s, which, k in sorted(items):
+            header = s_to_stamp_ns(stamp_s - start_s)
+            log = s_to_stamp_ns(wall_s + stamp_s - start_s + 0.005)
+            if which == 1:
+                writer.write(IMU, log, make_imu(header, 'imu', run.rates_rad_s[k]))
+            else:
+                value = float(run.temperature_degC[k])
+                header = 0 if k in unset else header
+                writer.write(TEMP, log, make_temperature(header, 'imu', value))
+    return path
+
+
+@pytest.mark.parametrize('fmt', ['mcap', 'sqlite3', 'ros1'])
+def test_stamps_of_a_clock_since_power_on_stay_on_it(
+    fmt: str, run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A 0 among stamps of a clock since power-on is timed on that clock.
+
+    The first stamp of such a clock is 0, and so is a stamp the driver missed: each is timed by
+    its receive time moved onto that clock, not by the wall clock (decades later: the record
+    was sorted with a 1.7e9 s gap, every message out of order).
+    """
+    missed = (0, 40)
+    bag = write_since_power_on(tmp_path / name(fmt, 'boot'), fmt, run, missed)
+    record = read_record(bag)
+    err = capsys.readouterr().err
+    assert 'out of order' not in err
+    assert f'2 messages on {TEMP} have no header stamp (0)' in err
+    assert "on the clock of the topic's other stamps (-1.7e+09 s" in err
+    start_s = min(run.imu_stamps_s[0], run.temp_stamps_s[0])
+    expected = run.temp_stamps_s - start_s
+    np.testing.assert_allclose(record.temp_stamps_s, expected, rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(
+        np.delete(record.temp_stamps_s, missed),
+        np.delete(np.asarray([s_to_stamp_ns(s) for s in expected]) / 1e9, missed),
+    )
+    np.testing.assert_allclose(record.imu_stamps_s, run.imu_stamps_s - start_s, atol=1e-9)

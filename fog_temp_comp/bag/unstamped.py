@@ -42,6 +42,9 @@ class UnsetStamps:
         self.offsets: dict[str, list[float]] = {}
         #: time every message by its receive time, not its header (``--time-source receive``)
         self.by_receive = by_receive
+        #: topic -> offset (s) by which unset stamps' receive times were moved onto the header
+        #: stamps' clock (:meth:`fill`), where it was more than :data:`CLOCK_MISMATCH_S`
+        self.shifted: dict[str, float] = {}
 
     def note_offsets(self, topic: str, stamps_s: ArrayLike, receive_ns: ArrayLike) -> None:
         """Note the median of header stamp (s) minus receive time (ns) over one chunk."""
@@ -61,6 +64,7 @@ class UnsetStamps:
         """Add what another reader (of a later part of the same bag) counted and noted."""
         for topic, count in other.counts.items():
             self.counts[topic] = self.counts.get(topic, 0) + count
+        self.shifted.update(other.shifted)
         for topic, offsets in other.offsets.items():
             self.offsets.setdefault(topic, []).extend(offsets)
 
@@ -74,7 +78,13 @@ class UnsetStamps:
         )
 
     def fill(self, topic: str, stamps_s: ArrayLike, receive_ns: ArrayLike) -> NDArray[np.float64]:
-        """``stamps_s`` (s) with each 0 replaced by the receive time ``receive_ns`` (ns)."""
+        """``stamps_s`` (s) with each 0 replaced by its receive time ``receive_ns`` (ns).
+
+        On the header stamps' clock: where the other stamps of these messages run more than
+        :data:`CLOCK_MISMATCH_S` from the receive times (a device's clock since power-on, whose
+        first stamp may be exactly 0; sim time), the receive time is moved by their median
+        offset, so a 0 does not become a jump of decades.
+        """
         stamps = np.asarray(stamps_s, dtype=np.float64)
         unset = stamps == 0.0
         if not unset.any():
@@ -83,7 +93,14 @@ class UnsetStamps:
         if receive.size != stamps.size:
             raise ValueError(f'{stamps.size} stamps but {receive.size} receive times')
         self.counts[topic] = self.counts.get(topic, 0) + int(unset.sum())
-        return np.where(unset, receive / NS_PER_S, stamps)
+        receive_s = receive / NS_PER_S
+        stamped = ~unset & np.isfinite(stamps)
+        if stamped.any():
+            offset = float(np.median(stamps[stamped] - receive_s[stamped]))
+            if abs(offset) > CLOCK_MISMATCH_S:
+                self.shifted[topic] = offset
+                receive_s = receive_s + offset
+        return np.where(unset, receive_s, stamps)
 
     def timed(
         self, topic: str, stamps_s: ArrayLike, receive_ns: ArrayLike, *, fill_unset: bool = True
@@ -112,9 +129,14 @@ class UnsetStamps:
         ``topics``: (gyro, temperature), to compare their clocks (not compared without).
         """
         for topic, count in self.counts.items():
+            used = 'their receive time is used (the driver does not stamp them)'
+            if topic in self.shifted:
+                used = (
+                    "their receive time is used, on the clock of the topic's other stamps "
+                    f'({self.shifted[topic]:+.6g} s from the receive times)'
+                )
             print(
-                f'WARNING: {bag}: {count} messages on {topic} have no header stamp (0); '
-                'their receive time is used (the driver does not stamp them)',
+                f'WARNING: {bag}: {count} messages on {topic} have no header stamp (0); {used}',
                 file=stderr or sys.stderr,
             )
         offsets = None if topics is None else self.clock_offsets_s(*topics)

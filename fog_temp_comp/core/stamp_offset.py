@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections import deque
 
-__all__ = ['CLOCK_MISMATCH_S', 'TIME_SOURCES', 'ArrivalOffsets']
+__all__ = ['CLOCK_MISMATCH_S', 'TIME_SOURCES', 'ArrivalOffsets', 'header_clock_offset_s']
 
 #: what gyro and temperature are timed by: their header stamps, or when they were received (the
 #: bag's receive times offline, the node clock on arrival live)
@@ -68,3 +68,14 @@ class ArrivalOffsets:
     def two_clocks(self) -> bool:
         """True when ``least`` offsets or more are all beyond :data:`CLOCK_MISMATCH_S`."""
         return len(self._recent) >= self.least and abs(self.offset_s) > CLOCK_MISMATCH_S
+
+
+def header_clock_offset_s(stamp_s: float, receive_s: float) -> float:
+    """Offset (s) of a header stamp's clock from the receive clock; 0 within 5 s.
+
+    Within :data:`CLOCK_MISMATCH_S` the two are taken for one clock and latency. An unset
+    stamp (0) timed by its receive time takes this offset too, so that it lands on the clock
+    of the topic's other stamps (a device's clock since power-on, sim time).
+    """
+    offset = stamp_s - receive_s
+    return offset if abs(offset) > CLOCK_MISMATCH_S else 0.0

@@ -28,7 +28,7 @@ from std_srvs.srv import Trigger
 
 from fog_temp_comp.core.coefficients import CoefficientsError
 from fog_temp_comp.core.compensator import Compensator
-from fog_temp_comp.core.stamp_offset import TIME_SOURCES, ArrivalOffsets
+from fog_temp_comp.core.stamp_offset import TIME_SOURCES, ArrivalOffsets, header_clock_offset_s
 from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.bias_learning import BiasLearningMixin
 from fog_temp_comp.ros.console_log import ConsoleLogMixin
@@ -89,6 +89,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self.frame_mismatches = 0
         #: messages with an unset (0) header stamp, timed by the node clock instead
         self.unstamped = 0
+        #: the last stamped temperature's clock minus the node clock, s (0 within 5 s)
+        self._header_clock_s = 0.0
         self._require_frame_match = bool(self.get_parameter('require_frame_id_match').value)
         self._inflate_covariance = bool(self.get_parameter('inflate_covariance').value)
         self._throttle_s = float(self.get_parameter('log_throttle_s').value)
@@ -208,11 +210,12 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
     def _unset_stamp_s(self) -> float:
         """The node clock's time, s, for a temperature whose driver left the stamp unset (0).
 
-        (An unset gyro stamp goes to the core, which corrects it with the current correction
-        and counts it.)
+        Moved onto the clock of the temperature's other stamps where that runs more than 5 s
+        from the node's (a device's clock since power-on). (An unset gyro stamp goes to the
+        core, which corrects it with the current correction and counts it.)
         """
         self.unstamped += 1
-        return self._now_s()
+        return self._now_s() + self._header_clock_s
 
     def _now_s(self) -> float:
         """The node clock's time, s."""
@@ -224,7 +227,11 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             stamp_s = self._now_s()
         elif temperature.stamped:
             stamp = msg.header.stamp
-            stamp_s = stamp.sec + stamp.nanosec * 1e-9 or self._unset_stamp_s()
+            stamp_s = stamp.sec + stamp.nanosec * 1e-9
+            if stamp_s:
+                self._header_clock_s = header_clock_offset_s(stamp_s, self._now_s())
+            else:
+                stamp_s = self._unset_stamp_s()
         else:  # a message without a header (std_msgs/Float64): timed on arrival
             stamp_s = self._unset_stamp_s()
         status = self.compensator.status
