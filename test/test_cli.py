@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import dataclasses
 import io
+import math
 import os
 import subprocess
 import sys
@@ -667,28 +668,38 @@ def test_a_file_compressed_bag_is_read_like_its_plain_copy(
     assert tables[1] == tables[0]
 
 
+@pytest.mark.parametrize('fill', [0.0, math.nan])
 def test_a_one_axis_gyro_with_zero_channels_is_calibrated_compensated_and_evaluated(
-    tmp_path: Path, short_cycle_fast: SimulatedRun, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path,
+    short_cycle_fast: SimulatedRun,
+    capsys: pytest.CaptureFixture[str],
+    fill: float,
 ) -> None:
-    """A one-axis FOG's driver fills x and y with 0: those axes get no correction and no ratio.
+    """A one-axis FOG's driver fills x and y with 0 or NaN: no correction and no ratio there.
 
-    ``evaluate`` once stopped with a ZeroDivisionError traceback on such a bag.
+    ``evaluate`` once stopped with a ZeroDivisionError traceback where they were 0; where they
+    were NaN, ``calibrate`` dropped every sample ("stamps do not overlap").
     """
     rates = short_cycle_fast.rates_rad_s.copy()
-    rates[:, :2] = 0.0
+    rates[:, :2] = fill
     bag = write_run(
         tmp_path / 'one_axis', 'mcap', dataclasses.replace(short_cycle_fast, rates_rad_s=rates)
     )
     coeffs = tmp_path / 'coeffs.yaml'
     assert cli.main(['calibrate', str(bag), '-o', str(coeffs)]) == 0
-    out = capsys.readouterr().out
-    assert 'R2=- (the rate never changes)' in out and 'nan' not in out
-    model = load(coeffs).model
-    assert_array_equal(model.coefficients[:, :2], 0.0)
-    assert np.all(model.coefficients[:2, 2] != 0.0)  # z's const and T
+    captured = capsys.readouterr()
+    assert 'R2=- (the rate never changes)' in captured.out and 'nan' not in captured.out
+    nan_warning = 'no finite gyro rate on axis x, y (NaN throughout'
+    assert (nan_warning in captured.err) == math.isnan(fill)
+    loaded = load(coeffs)
+    assert ('axes_without_finite_rate' in loaded.provenance) == math.isnan(fill)
+    assert_array_equal(loaded.model.coefficients[:, :2], 0.0)
+    assert np.all(loaded.model.coefficients[:2, 2] != 0.0)  # z's const and T
     corrected = tmp_path / 'out'
     assert cli.main(['compensate', str(bag), '--coeffs', str(coeffs), '-o', str(corrected)]) == 0
-    assert_array_equal(rates_of(plain_read(corrected)['/imu/data'])[:, :2], 0.0)
+    out_rates = rates_of(plain_read(corrected)['/imu/data'])
+    assert_array_equal(out_rates[:, :2], fill)  # passed on as they came
+    assert np.isfinite(out_rates[:, 2]).all()
     capsys.readouterr()
     assert cli.main(['evaluate', str(bag), '--coeffs', str(coeffs)]) == 0
     rows = [line.split() for line in capsys.readouterr().out.splitlines()]

@@ -164,21 +164,35 @@ def split_at_gaps(record: ChamberRecord, salvage: Salvage | None) -> list[Chambe
     return pieces
 
 
-def finite_only(record: ChamberRecord) -> tuple[ChamberRecord, int, int]:
+def finite_only(record: ChamberRecord) -> tuple[ChamberRecord, int, int, list[int]]:
     """The record without its non-finite samples (NaN, inf in stamp or value).
 
-    Returns the record and the numbers of gyro and temperature samples dropped.
+    An axis with no finite rate at all (a one-axis gyro whose driver fills the other two with
+    NaN) is not a reason to drop every sample: it is set to 0 (no drift to fit: zero
+    coefficients, and the node passes its NaN on) and the others are kept.
+
+    Returns the record, the numbers of gyro and temperature samples dropped, and the axes
+    (0-2) set to 0.
     """
-    imu = np.isfinite(record.imu_stamps_s) & np.isfinite(record.rates_rad_s).all(axis=1)
+    rates = record.rates_rad_s
+    finite = np.isfinite(rates)
+    dead = [j for j in range(rates.shape[1]) if rates.shape[0] and not finite[:, j].any()]
+    if dead and len(dead) < rates.shape[1]:
+        rates = rates.copy()
+        rates[:, dead] = 0.0
+        finite[:, dead] = True
+    else:
+        dead = []
+    imu = np.isfinite(record.imu_stamps_s) & finite.all(axis=1)
     temp = np.isfinite(record.temp_stamps_s) & np.isfinite(record.temperature_degC)
     dropped_imu, dropped_temp = int((~imu).sum()), int((~temp).sum())
-    if not dropped_imu and not dropped_temp:
-        return record, 0, 0
+    if not dropped_imu and not dropped_temp and not dead:
+        return record, 0, 0, []
     clean = dataclasses.replace(
         record,
         imu_stamps_s=record.imu_stamps_s[imu],
-        rates_rad_s=record.rates_rad_s[imu],
+        rates_rad_s=rates[imu],
         temp_stamps_s=record.temp_stamps_s[temp],
         temperature_degC=record.temperature_degC[temp],
     )
-    return clean, dropped_imu, dropped_temp
+    return clean, dropped_imu, dropped_temp, dead

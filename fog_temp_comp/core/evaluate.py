@@ -82,9 +82,11 @@ def score_record(
     """Scores of one run for every axis and averaging time.
 
     Rows the compensator dropped (NaN: a repeated stamp, gyro before the first temperature)
-    are left out of both the raw and the corrected means, so both cover the same samples.
+    are left out of both the raw and the corrected means, so both cover the same samples. An
+    axis that is NaN throughout (a gyro without it) does not count, and scores nan.
     """
-    keep = np.all(np.isfinite(corrected_rad_s), axis=1)
+    live = np.isfinite(corrected_rad_s).any(axis=0)
+    keep = np.all(np.isfinite(corrected_rad_s[:, live]), axis=1)
     if not keep.all():
         stamps_s, raw_rad_s, corrected_rad_s = (
             stamps_s[keep], raw_rad_s[keep], corrected_rad_s[keep]
@@ -118,7 +120,9 @@ def format_scores(scores: Sequence[Score]) -> str:
         )
     lines.append('(deg/h; stability = std of tau-s means, range = max-min of tau-s means)')
     if any(math.isnan(s.ratio('stability')) for s in scores):
-        lines.append('(ratio -: the raw rate of that axis never changes, nothing to compare)')
+        lines.append(
+            "(ratio -: that axis's raw rate never changes, or is NaN: nothing to compare)"
+        )
     return '\n'.join(lines)
 
 

@@ -11,6 +11,7 @@ from typing import Any, TextIO
 
 from fog_temp_comp.bag.salvage import Salvage, finite_only, split_at_gaps
 from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.units import AXES
 
 
 class Salvaged:
@@ -21,6 +22,7 @@ class Salvaged:
         self.found: dict[Path, Salvage] = {}
         self.non_finite: dict[str, dict[str, int]] = {}  # bag -> samples dropped per stream
         self.disorder: dict[str, dict[str, dict[str, int]]] = {}  # bag -> stream -> counts
+        self.no_finite_axes: dict[str, list[str]] = {}  # bag -> axes NaN throughout
 
     def add(self, salvage: Salvage) -> None:
         """Called by the readers for a damaged bag (read as far as intact) or unsorted stamps."""
@@ -38,7 +40,15 @@ class Salvaged:
 
     def split(self, record: ChamberRecord) -> list[ChamberRecord]:
         """``record`` without non-finite samples, cut at the chunks skipped inside it."""
-        record, imu, temp = finite_only(record)
+        record, imu, temp, dead = finite_only(record)
+        if dead:
+            names = ', '.join(AXES[j] for j in dead)
+            self.no_finite_axes[str(record.path)] = [AXES[j] for j in dead]
+            print(
+                f'WARNING: {record.path}: no finite gyro rate on axis {names} (NaN throughout: a '
+                'gyro without that axis?): fitted as 0, its coefficients are 0',
+                file=self.stderr or sys.stderr,
+            )
         if imu or temp:
             self.non_finite[str(record.path)] = {'gyro': imu, 'temperature': temp}
             print(
@@ -55,6 +65,8 @@ class Salvaged:
             out['recovered_inputs'] = [s.provenance() for s in self.found.values()]
         if self.non_finite:
             out['non_finite_dropped'] = dict(self.non_finite)
+        if self.no_finite_axes:
+            out['axes_without_finite_rate'] = dict(self.no_finite_axes)
         if self.disorder:
             out['stamps_not_in_order'] = dict(self.disorder)
         return out
