@@ -61,11 +61,7 @@ def check_gyro_rate_changes(records: Sequence[ChamberRecord]) -> None:
     zero coefficients without a word. One axis that changes is enough (a one-axis gyro whose
     driver fills the other two with 0: those get zero coefficients).
     """
-    changing = [
-        bool(np.any(np.ptp(rates[np.isfinite(rates).all(axis=1)], axis=0) > 0))
-        for rates in (record.rates_rad_s for record in records)
-        if rates.size
-    ]
+    changing = [_rate_changes(record.rates_rad_s) for record in records if record.rates_rad_s.size]
     if changing and not any(changing):
         first = records[0]
         raise ValueError(
@@ -73,6 +69,15 @@ def check_gyro_rate_changes(records: Sequence[ChamberRecord]) -> None:
             f'({np.unique(first.rates_rad_s[np.isfinite(first.rates_rad_s)])[:3].tolist()} '
             "rad/s): no drift to fit; is this the gyro's raw rate (--gyro-topic)?"
         )
+
+
+def _rate_changes(rates_rad_s: np.ndarray) -> bool:
+    """Whether any axis of a (N, 3) rate takes two finite values."""
+    for column in np.asarray(rates_rad_s).T:
+        finite = column[np.isfinite(column)]
+        if finite.size and finite.max() > finite.min():
+            return True
+    return False
 
 
 def without_outliers(
