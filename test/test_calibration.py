@@ -70,11 +70,13 @@ def test_refuses_a_fit_without_temperature_swing() -> None:
 
 
 def test_refuses_a_fit_without_tdot_spread() -> None:
-    # a constant, noise-free temperature: Tdot is exactly zero
+    # a constant, noise-free temperature: Tdot is exactly zero (the gyro has its noise: a rate
+    # that never changes is refused before, check_gyro_rate_changes)
     stamps = 1.7e9 + np.arange(0.0, 3600.0)
+    rates = np.random.default_rng(3).normal(0.0, 1e-7, (stamps.size, 3))
     record = ChamberRecord(
         path=Path('flat'), imu_topic='/imu', temp_topic='/t', frame_id='imu',
-        imu_stamps_s=stamps, rates_rad_s=np.zeros((stamps.size, 3)),
+        imu_stamps_s=stamps, rates_rad_s=rates,
         temp_stamps_s=stamps, temperature_degC=np.full(stamps.size, 20.0),
     )  # fmt: skip
     with pytest.raises(CalibrationError, match='Tdot spread'):
