@@ -302,6 +302,28 @@ def test_temperature_stamped_by_another_clock_is_reported(
     assert float(values['temperature_stamp_offset_s']) == pytest.approx(offset_s + 0.5)
 
 
+def test_header_clocks_hours_apart_are_timed_on_arrival(
+    harness: Harness, coefficients: Coefficients
+) -> None:
+    """Gyro stamped by the computer, temperature by its sensor's clock since power-on.
+
+    By header stamp every temperature is 1.7e9 s stale at the gyro stamps: nothing would
+    ever be corrected. Once the arrivals show it, both are timed by the node clock.
+    """
+    for k in range(8):
+        harness.send_imu(T0 + k, RATE)
+        harness.send_temperature(5.0 + k, 25.0)
+    assert harness.node.clocks_apart_s == pytest.approx(5.0 - T0, abs=10.0)
+    for k in range(3):  # timed on arrival now: the temperature is fresh at the gyro sample
+        harness.send_temperature(0.0 + k, 25.0)  # any stamp (even unset) is ignored
+        out = harness.send_imu(T0 + 100 + k, RATE)
+        assert out is not None
+    assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0))
+    status = harness.diagnose()
+    assert 'header clocks' in status.message and 'timed by the node clock' in status.message
+    assert float(diag_values(status)['header_clocks_apart_s']) < -1e9
+
+
 def test_time_source_receive_times_both_by_the_node_clock(
     ros_context: object, coeffs_file: Path, coefficients: Coefficients
 ) -> None:

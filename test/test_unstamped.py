@@ -250,3 +250,41 @@ def test_stamps_of_a_clock_since_power_on_stay_on_it(
         np.delete(np.asarray([s_to_stamp_ns(s) for s in expected]) / 1e9, missed),
     )
     np.testing.assert_allclose(record.imu_stamps_s, run.imu_stamps_s - start_s, atol=1e-9)
+
+
+@pytest.mark.parametrize('fmt', ['mcap', 'sqlite3', 'ros1'])
+def test_clocks_hours_apart_are_aligned_by_receive_time_without_a_flag(
+    fmt: str, run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Gyro stamped by the computer, temperature by its sensor's clock since power-on.
+
+    By header stamp no temperature pairs with any gyro sample: ``calibrate`` stopped ("stamps
+    do not overlap") and ``compensate`` corrected nothing. Each command now notes it and reads
+    by receive time: the very results of ``--time-source receive``.
+    """
+    since_power_on = 5.0 - float(run.temp_stamps_s[0])
+    bag = write(tmp_path / name(fmt, 'apart'), fmt, run, temp_clock_s=since_power_on)
+    results: dict[str, tuple[object, ...]] = {}
+    for label, extra in (('default', []), ('receive', ['--time-source', 'receive'])):
+        coeffs = tmp_path / f'{label}.yaml'
+        argv = ['calibrate', str(bag), '-o', str(coeffs), '--terms', 'const,T,Tdot', '--quiet']
+        assert cli.main([*argv, *extra]) == 0
+        out = tmp_path / name(fmt, f'out_{label}')
+        argv = ['compensate', str(bag), '--coeffs', str(coeffs), '-o', str(out), *extra]
+        assert cli.main(argv) == 0
+        assert cli.main(['evaluate', str(bag), '--coeffs', str(coeffs), *extra]) == 0
+        captured = capsys.readouterr()
+        notes = [line for line in captured.err.splitlines() if line.startswith('NOTE')]
+        assert len(notes) == (3 if label == 'default' else 0), captured.err
+        assert all('on two clocks' in n and 'aligned by receive time' in n for n in notes)
+        assert 'WARNING' not in captured.err
+        corrected = read_record(
+            out, gyro_topic='/imu/data', temp_topic=TEMP, time_source='receive'
+        )
+        table = [line for line in captured.out.splitlines() if line.startswith('apart')]
+        results[label] = (yaml.safe_load(coeffs.read_text())['axes'], corrected.rates_rad_s, table)
+    assert results['default'][0] == results['receive'][0]
+    np.testing.assert_array_equal(results['default'][1], results['receive'][1])
+    assert results['default'][2] == results['receive'][2] and len(results['default'][2]) == 6
+    # and the correction did something
+    assert not np.allclose(results['default'][1], run.rates_rad_s, atol=1e-9)

@@ -198,8 +198,12 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
 
         Stamps out of order and duplicate are counted in :attr:`salvage` (``disorder``).
         ``span``: only the records of this part of the bag's one MCAP file (one of
-        :meth:`mcap_spans`, in order; :meth:`check_spans` after the last).
+        :meth:`mcap_spans`, in order; :meth:`check_spans` after the last). Aligned by header
+        stamp, gyro and temperature stamped by clocks hours apart raise
+        :class:`~fog_temp_comp.bag.unstamped.ClocksApartError` as soon as the first chunks show it.
         """
+        if self.time_source == 'header':
+            self.unstamped.watch = (self.imu_topic, self.temp_topic)
         for chunk in self._chunks() if span is None else self._scan_span(span):
             self.order.count(chunk)
             yield chunk

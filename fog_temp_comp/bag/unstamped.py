@@ -22,9 +22,9 @@ from typing import TextIO
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fog_temp_comp.core.stamp_offset import CLOCK_MISMATCH_S
+from fog_temp_comp.core.stamp_offset import CLOCK_MISMATCH_S, GROSS_CLOCK_MISMATCH_S
 
-__all__ = ['CLOCK_MISMATCH_S', 'UnsetStamps']
+__all__ = ['CLOCK_MISMATCH_S', 'ClocksApartError', 'UnsetStamps']
 
 NS_PER_S = 1e9
 
@@ -32,10 +32,41 @@ NS_PER_S = 1e9
 _OFFSET_SAMPLES = 256
 
 
-class UnsetStamps:
-    """Replace unset header stamps by receive times and count them per topic."""
+class ClocksApartError(Exception):
+    """Gyro and temperature header stamps on clocks hours apart: they cannot be aligned.
 
-    def __init__(self, by_receive: bool = False) -> None:
+    A gyro stamped by the computer and a temperature by its sensor's clock since power-on pair
+    no temperature with any gyro sample (``calibrate``: "stamps do not overlap"; ``compensate``:
+    nothing corrected). Raised by :meth:`UnsetStamps.note_offsets` as soon as both streams'
+    first chunks show it (:data:`~fog_temp_comp.core.stamp_offset.GROSS_CLOCK_MISMATCH_S`);
+    the commands then read the bag again by receive time, one clock for both
+    (:func:`fog_temp_comp.bag.one_clock.on_one_clock`).
+    """
+
+    def __init__(self, gyro_s: float, temperature_s: float) -> None:
+        super().__init__(f'header stamps on two clocks {abs(temperature_s - gyro_s):.6g} s apart')
+        #: median header stamp minus receive time, s, of the gyro and of the temperature
+        self.gyro_s = gyro_s
+        self.temperature_s = temperature_s
+
+    def note(self, bag: str | Path) -> str:
+        """The ``NOTE:`` line a command prints when it aligns by receive time instead."""
+        return (
+            f'NOTE: {bag}: the gyro and temperature header stamps are on two clocks '
+            f'{abs(self.temperature_s - self.gyro_s):.6g} s apart (against the receive times: '
+            f'gyro {self.gyro_s:+.6g} s, temperature {self.temperature_s:+.6g} s; a sensor '
+            'clock since power-on?): aligned by receive time (as --time-source receive)'
+        )
+
+
+class UnsetStamps:
+    """Replace unset header stamps by receive times and count them per topic.
+
+    ``watch``: (gyro, temperature) topics whose clocks :meth:`note_offsets` compares as soon
+    as it has both, raising :class:`ClocksApartError` where they are hours apart.
+    """
+
+    def __init__(self, by_receive: bool = False, watch: tuple[str, str] | None = None) -> None:
         #: topic -> messages whose header stamp was unset and took their receive time
         self.counts: dict[str, int] = {}
         #: topic -> each chunk's median of header stamp minus receive time, s
@@ -45,6 +76,7 @@ class UnsetStamps:
         #: topic -> offset (s) by which unset stamps' receive times were moved onto the header
         #: stamps' clock (:meth:`fill`), where it was more than :data:`CLOCK_MISMATCH_S`
         self.shifted: dict[str, float] = {}
+        self.watch = watch
 
     def note_offsets(self, topic: str, stamps_s: ArrayLike, receive_ns: ArrayLike) -> None:
         """Note the median of header stamp (s) minus receive time (ns) over one chunk."""
@@ -59,6 +91,10 @@ class UnsetStamps:
         diff = (stamps - receive / NS_PER_S)[::every][stamped[::every]]
         if diff.size:
             self.offsets.setdefault(topic, []).append(float(np.median(diff)))
+        if self.watch is not None and topic in self.watch:
+            offsets = self.clock_offsets_s(*self.watch)
+            if offsets is not None and abs(offsets[1] - offsets[0]) > GROSS_CLOCK_MISMATCH_S:
+                raise ClocksApartError(*offsets)
 
     def merge(self, other: UnsetStamps) -> None:
         """Add what another reader (of a later part of the same bag) counted and noted."""

@@ -18,7 +18,13 @@ from __future__ import annotations
 import math
 from collections import deque
 
-__all__ = ['CLOCK_MISMATCH_S', 'TIME_SOURCES', 'ArrivalOffsets', 'header_clock_offset_s']
+__all__ = [
+    'CLOCK_MISMATCH_S',
+    'GROSS_CLOCK_MISMATCH_S',
+    'TIME_SOURCES',
+    'ArrivalOffsets',
+    'header_clock_offset_s',
+]
 
 #: what gyro and temperature are timed by: their header stamps, or when they were received (the
 #: bag's receive times offline, the node clock on arrival live)
@@ -27,6 +33,10 @@ TIME_SOURCES: tuple[str, ...] = ('header', 'receive')
 #: stamps of two streams whose offsets differ by more than this (s) are taken for two clocks;
 #: a driver's latency (ms to a second) and a gyro sample interval stay well below it
 CLOCK_MISMATCH_S = 5.0
+#: ... and by more than this (s), header stamps cannot be aligned at all (a sensor clock since
+#: power-on against the computer's): the offline commands align by receive time instead; no
+#: driver latency or late reading is an hour
+GROSS_CLOCK_MISMATCH_S = 3600.0
 
 
 class ArrivalOffsets:

@@ -11,6 +11,7 @@ a timer. Parameters, the learned-bias file and the console lines are its mixins'
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Sequence
 from copy import copy
@@ -28,7 +29,12 @@ from std_srvs.srv import Trigger
 
 from fog_temp_comp.core.coefficients import CoefficientsError
 from fog_temp_comp.core.compensator import Compensator
-from fog_temp_comp.core.stamp_offset import TIME_SOURCES, ArrivalOffsets, header_clock_offset_s
+from fog_temp_comp.core.stamp_offset import (
+    GROSS_CLOCK_MISMATCH_S,
+    TIME_SOURCES,
+    ArrivalOffsets,
+    header_clock_offset_s,
+)
 from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.bias_learning import BiasLearningMixin
 from fog_temp_comp.ros.console_log import ConsoleLogMixin
@@ -91,6 +97,9 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self.unstamped = 0
         #: the last stamped temperature's clock minus the node clock, s (0 within 5 s)
         self._header_clock_s = 0.0
+        #: temperature minus gyro header clock (s) that made the node time both on arrival
+        #: (:meth:`_time_on_arrival`); nan while it times by header stamp as asked
+        self.clocks_apart_s = math.nan
         self._require_frame_match = bool(self.get_parameter('require_frame_id_match').value)
         self._inflate_covariance = bool(self.get_parameter('inflate_covariance').value)
         self._throttle_s = float(self.get_parameter('log_throttle_s').value)
@@ -241,7 +250,25 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             imu_total = status.counters.imu_total
             if imu_total > self._imu_total_at_temperature:  # the gyro flows: compare clocks
                 self._arrival.add(stamp_s, status.last_imu_stamp_s)
+                arrival = self._arrival
+                if arrival.two_clocks and abs(arrival.offset_s) > GROSS_CLOCK_MISMATCH_S:
+                    self._time_on_arrival()
             self._imu_total_at_temperature = imu_total
+
+    def _time_on_arrival(self) -> None:
+        """Time gyro and temperature by the node clock: their header clocks are hours apart.
+
+        No temperature would ever pair with a gyro sample (a sensor clock since power-on
+        against the computer's). The estimate restarts at the next temperature (a gap).
+        """
+        self.clocks_apart_s = self._arrival.offset_s
+        self._by_receive = True
+        self._arrival.reset()
+        self.get_logger().warning(
+            f'temperature header stamps {self.clocks_apart_s:+.6g} s from the gyro stamps on '
+            'arrival: two clocks hours apart; gyro and temperature are timed by the node clock '
+            'on arrival from now on (as time_source receive)'
+        )
 
     def _on_at_rest(self, msg: Bool) -> None:
         if self.configured and self.compensator.rest is not None:
@@ -306,6 +333,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             unstamped=self.unstamped,
             temperature_stamp_offset_s=self._arrival.offset_s,
             two_clocks=self._arrival.two_clocks,
+            clocks_apart_s=self.clocks_apart_s,
             require_frame_match=self._require_frame_match,
             rest=None if self.compensator.rest is None else self.compensator.rest.finish(),
             rest_bias_file=(

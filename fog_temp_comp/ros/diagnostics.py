@@ -67,6 +67,7 @@ def build_report(
     unstamped: int = 0,
     temperature_stamp_offset_s: float = math.nan,
     two_clocks: bool = False,
+    clocks_apart_s: float = math.nan,
     require_frame_match: bool = False,
     rest: RestStatus | None = None,
     rest_bias_file: tuple[str, str] | None = None,
@@ -78,7 +79,8 @@ def build_report(
     :attr:`~fog_temp_comp.core.compensator.Compensator.stale_after_s`);
     ``temperature_stamp_offset_s`` the recent temperature stamp minus the gyro's latest on
     arrival nearest zero (s) and ``two_clocks`` whether it says two clocks
-    (:class:`~fog_temp_comp.core.stamp_offset.ArrivalOffsets`).
+    (:class:`~fog_temp_comp.core.stamp_offset.ArrivalOffsets`); ``clocks_apart_s`` the offset
+    of header clocks hours apart that made the node time both on arrival (nan: it did not).
     """
     counters = status.counters
     reasons = _temperature_reasons(status, previous)
@@ -92,8 +94,7 @@ def build_report(
         reasons.append((level, f'gyro frame_id differs from calibrated one ({action})'))
     if unstamped:
         reasons.append((WARN, 'temperature without a header stamp: timed by the node clock'))
-    if two_clocks:
-        reasons.append((WARN, two_clocks_text(temperature_stamp_offset_s)))
+    reasons += _clock_reasons(temperature_stamp_offset_s, two_clocks, clocks_apart_s)
     if rest is not None and rest.residual_over_limit:
         reasons.append(
             (WARN, 'rest residual above rest_residual_limit_deg_h: not applied (moving?)')
@@ -106,6 +107,7 @@ def build_report(
         ('temperature_rate_hz', _num(temperature_rate_hz)),
         ('temperature_stale_after_s', _num(stale_after_s)),
         ('temperature_stamp_offset_s', _num(temperature_stamp_offset_s)),
+        ('header_clocks_apart_s', _num(clocks_apart_s)),
         ('denoise', method),
         ('temperature_reading_model', reading_model),
         ('filter_ready', str(status.estimator_ready)),
@@ -124,6 +126,22 @@ def build_report(
             ('rest_bias_file_state', rest_bias_file[1]),
         ]
     return Report(level, message, values)
+
+
+def _clock_reasons(
+    offset_s: float, two_clocks: bool, clocks_apart_s: float
+) -> list[tuple[int, str]]:
+    """WARNs for temperature stamps on another clock, and for clocks hours apart."""
+    reasons = [(WARN, two_clocks_text(offset_s))] if two_clocks else []
+    if math.isfinite(clocks_apart_s):
+        reasons.append(
+            (
+                WARN,
+                f'header clocks {clocks_apart_s:+.6g} s apart: gyro and temperature timed by '
+                'the node clock on arrival',
+            )
+        )
+    return reasons
 
 
 def two_clocks_text(offset_s: float) -> str:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
+from fog_temp_comp.bag.one_clock import on_one_clock
 from fog_temp_comp.bag.reduce import reduce_record
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.calibration import CalibrationResult, calibrate_detailed
@@ -126,12 +127,14 @@ def _calibrate(
 
     def load_record(bag: Path) -> ChamberRecord:
         """A held-out or validation bag's record with the Earth rate removed."""
-        return earth(read_record(bag, **read))
+        return earth(on_one_clock(read_record, bag, **read))
 
     period = opt.settings.tdot_period_s
     # a chunk skipped inside a run splits it: the grid never bridges what was lost
     records = [
-        earth(piece) for b in bags for piece in salvaged.split(reduce_record(b, period, **read))
+        earth(piece)
+        for b in bags
+        for piece in salvaged.split(on_one_clock(reduce_record, b, period, **read))
     ]
     if opt.prior is not None and (opt.terms or opt.fit_coil_lag or opt.heldout):
         raise ValueError('--prior sets the terms and Tdot settings; drop --terms/--fit-coil-lag')

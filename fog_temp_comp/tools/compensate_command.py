@@ -23,7 +23,7 @@ from fog_temp_comp.bag.bagio import BagError, BagWriter
 from fog_temp_comp.bag.repair import repaired_bag
 from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.stream import resolve_any_topic
-from fog_temp_comp.bag.unstamped import UnsetStamps
+from fog_temp_comp.bag.unstamped import ClocksApartError, UnsetStamps
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
 from fog_temp_comp.core.rest import RestLearner, RestSettings
@@ -108,7 +108,7 @@ def compensate_command(
         by_receive=time_source == 'receive',
         temp_field=temp_field,
     )
-    (n_out, counters), compensator = _replay_atomically(run, in_bag, out_bag, strict)
+    (n_out, counters), compensator = _on_one_clock(run, in_bag, out_bag, strict)
     _report_written(run, out_bag, n_out, counters, chosen=output_topic is None, stdout=stdout)
     if compensator.rest is not None:
         _report_rest(compensator.rest, coeffs_path, rest_bias_out, stdout)
@@ -138,6 +138,18 @@ def _report_written(
         f'{counters.imu_uncorrected} passed through uncorrected)',
         file=stdout,
     )
+
+
+def _on_one_clock(
+    run: _Compensate, in_bag: Path, out_bag: Path, strict: bool
+) -> tuple[tuple[int, CompensatorCounters], Compensator]:
+    """:func:`_replay_atomically`, again by receive time where the clocks are hours apart."""
+    try:
+        return _replay_atomically(run, in_bag, out_bag, strict)
+    except ClocksApartError as apart:
+        print(apart.note(in_bag), file=sys.stderr)
+        run.by_receive = True
+        return _replay_atomically(run, in_bag, out_bag, strict)
 
 
 def _replay_atomically(
@@ -239,6 +251,12 @@ class _Compensate:
     #: the temperature is this field of the temperature topic's messages (``--temp-field``)
     temp_field: str | None = None
 
+    def _unset_stamps(self, imu_name: str, temp_name: str) -> UnsetStamps:
+        """What times the messages; by header, it stops at clocks hours apart."""
+        if self.by_receive:
+            return UnsetStamps(by_receive=True)
+        return UnsetStamps(watch=(imu_name, temp_name))
+
     def into(
         self, target: Path, source: Path, salvage: Salvage | None
     ) -> tuple[tuple[int, CompensatorCounters], Compensator]:
@@ -263,23 +281,24 @@ class _Compensate:
         with opened:
             imu_name = bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic')
             self.output_used = output_topic_for(output_topic, imu_name, reader.topics, self.in_bag)
+            temp_name = (
+                resolve_any_topic(reader, temp_topic, '--temp-topic')
+                if self.temp_field is not None and temp_topic is not None
+                else bagio.resolve_topic(
+                    reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic', imu_name
+                )
+            )
             job = _CompensateJob(
                 reader=reader,
                 in_bag=self.in_bag,
                 out_bag=target,
                 fmt=self.fmt,
                 imu_name=imu_name,
-                temp_name=(
-                    resolve_any_topic(reader, temp_topic, '--temp-topic')
-                    if self.temp_field is not None and temp_topic is not None
-                    else bagio.resolve_topic(
-                        reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic', imu_name
-                    )
-                ),
+                temp_name=temp_name,
                 temp_field=self.temp_field,
                 output_topic=self.output_used,
                 compress=self.fmt == 'mcap' and _compressed_mcap(source),
-                unstamped=UnsetStamps(self.by_receive),
+                unstamped=self._unset_stamps(imu_name, temp_name),
             )
             topics = (job.imu_name, job.temp_name)
             mcap = None
@@ -297,7 +316,7 @@ class _Compensate:
                     remove_bag(target)  # the per-message path decides (and words any error)
                     compensator = self.new_compensator()
                     compensator.mark_holes(holes)
-                    job.unstamped = UnsetStamps(self.by_receive)
+                    job.unstamped = self._unset_stamps(imu_name, temp_name)
             result = job.run(compensator, batched=self.fast)
             job.unstamped.warn(self.in_bag, topics=topics)
             return result, compensator
@@ -373,7 +392,7 @@ class _CompensateJob:
                     n_out = self._replay_messages(writer, compensator, batched)
         except Exception as err:
             remove_bag(self.out_bag)  # no half-written output
-            if isinstance(err, BagError) or (
+            if isinstance(err, (BagError, ClocksApartError)) or (
                 mcap is not None and isinstance(err, (blockreplay.UnsupportedError, ValueError))
             ):
                 raise

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TextIO
 
+from fog_temp_comp.bag.one_clock import on_one_clock
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.coefficients import Coefficients, load
 from fog_temp_comp.core.compensator import CompensatorCounters, GuardSettings
@@ -45,7 +46,8 @@ def evaluate_command(
     notes = []
     salvaged = Salvaged()
     for bag in bags:
-        record = read_record(
+        record = on_one_clock(
+            read_record,
             bag,
             gyro_topic=gyro_topic,
             temp_topic=temp_topic,
