@@ -288,3 +288,24 @@ def test_clocks_hours_apart_are_aligned_by_receive_time_without_a_flag(
     assert results['default'][2] == results['receive'][2] and len(results['default'][2]) == 6
     # and the correction did something
     assert not np.allclose(results['default'][1], run.rates_rad_s, atol=1e-9)
+
+
+def test_readings_that_arrive_hours_late_are_not_taken_for_another_clock() -> None:
+    """Offsets hours apart raise only where the first stamps are hours apart too."""
+    from fog_temp_comp.bag.unstamped import ClocksApartError, UnsetStamps
+
+    start_s, hours_s = 1.7e9, 5 * 3600.0
+    gyro_s = start_s + np.arange(100.0)
+    ns = (gyro_s * 1e9).astype(np.int64)
+    # a logger that hands its readings over at the end: right stamps, received 5 h late
+    late = UnsetStamps(watch=(IMU, TEMP))
+    late.note_offsets(IMU, gyro_s, ns)
+    late.note_offsets(TEMP, gyro_s, ns + int(hours_s * 1e9))
+    assert late.clock_offsets_s(IMU, TEMP) == pytest.approx((0.0, -hours_s))
+    # a sensor clock since power-on, received with the gyro
+    apart = UnsetStamps(watch=(IMU, TEMP))
+    apart.note_offsets(IMU, gyro_s, ns)
+    with pytest.raises(ClocksApartError) as info:
+        apart.note_offsets(TEMP, gyro_s - start_s + 5.0, ns)
+    assert info.value.temperature_s == pytest.approx(5.0 - start_s)
+    assert 'aligned by receive time' in info.value.note('run')

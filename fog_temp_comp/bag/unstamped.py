@@ -77,6 +77,7 @@ class UnsetStamps:
         #: stamps' clock (:meth:`fill`), where it was more than :data:`CLOCK_MISMATCH_S`
         self.shifted: dict[str, float] = {}
         self.watch = watch
+        self._first_s: dict[str, float] = {}  # watched topic -> its first chunk's first stamp
 
     def note_offsets(self, topic: str, stamps_s: ArrayLike, receive_ns: ArrayLike) -> None:
         """Note the median of header stamp (s) minus receive time (ns) over one chunk."""
@@ -92,9 +93,21 @@ class UnsetStamps:
         if diff.size:
             self.offsets.setdefault(topic, []).append(float(np.median(diff)))
         if self.watch is not None and topic in self.watch:
-            offsets = self.clock_offsets_s(*self.watch)
-            if offsets is not None and abs(offsets[1] - offsets[0]) > GROSS_CLOCK_MISMATCH_S:
-                raise ClocksApartError(*offsets)
+            self._first_s.setdefault(topic, float(stamps[stamped].min()))
+            self._check_watched(*self.watch)
+
+    def _check_watched(self, gyro: str, temperature: str) -> None:
+        """Raise :class:`ClocksApartError` where the two header clocks are hours apart.
+
+        Both their offsets from the receive times and their first stamps must be: a sensor
+        whose readings arrive hours late (all at once at the end) is stamped right, and its
+        first stamp is near the gyro's.
+        """
+        offsets = self.clock_offsets_s(gyro, temperature)
+        if offsets is None or abs(offsets[1] - offsets[0]) <= GROSS_CLOCK_MISMATCH_S:
+            return
+        if abs(self._first_s[temperature] - self._first_s[gyro]) > GROSS_CLOCK_MISMATCH_S:
+            raise ClocksApartError(*offsets)
 
     def merge(self, other: UnsetStamps) -> None:
         """Add what another reader (of a later part of the same bag) counted and noted."""
