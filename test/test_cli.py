@@ -415,6 +415,35 @@ def test_calibrate_with_several_imu_topics(
     assert_allclose(coeffs.model.coefficients, load(reference).model.coefficients, rtol=1e-9)
 
 
+def calibrates_as_the_reference(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    bag: Path,
+    reference_bag: Path,
+    stream_topic: tuple[str, str],
+) -> str:
+    """``calibrate`` with no flag on ``bag``, which has more topics than ``reference_bag``.
+
+    It reads ``stream_topic`` ((``'gyro'`` or ``'temperature'``, topic)), says so in one
+    ``NOTE`` line, and fits what the reference bag (only the streams used) gives. Returns the
+    line.
+    """
+    out = tmp_path / 'coeffs.yaml'
+    assert cli.main(['calibrate', str(bag), '-o', str(out)]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if 'NOTE' in line]
+    assert len(set(notes)) == 1, notes
+    coeffs = load(out)
+    stream, topic = stream_topic
+    assert coeffs.provenance[f'{stream}_topics'] == [topic]
+    reference = tmp_path / 'reference.yaml'
+    assert commands.calibrate_command([reference_bag], reference, stdout=io.StringIO()) == 0
+    assert coeffs.model.terms == load(reference).model.terms
+    # (the bag is chunked otherwise, the 10 s sums are summed in another order: equal up to
+    # rounding, amplified by the fit)
+    assert_allclose(coeffs.model.coefficients, load(reference).model.coefficients, rtol=1e-9)
+    return notes[0]
+
+
 @pytest.mark.parametrize('fmt', FORMATS)
 def test_the_raw_rate_is_told_from_a_filters_output_by_its_rep145_name(
     tmp_path: Path,
@@ -432,17 +461,8 @@ def test_the_raw_rate_is_told_from_a_filters_output_by_its_rep145_name(
         short_cycle_fast,
         {'/imu/data': filtered, '/imu/data_raw': short_cycle_fast.rates_rad_s},
     )
-    out = tmp_path / 'coeffs.yaml'
-    assert cli.main(['calibrate', str(bag), '-o', str(out)]) == 0
-    notes = [line for line in capsys.readouterr().err.splitlines() if 'NOTE' in line]
-    assert notes and all("using /imu/data_raw, the raw rate by REP 145's" in n for n in notes)
-    assert 'not /imu/data;' in notes[0]
-    coeffs = load(out)
-    assert coeffs.provenance['gyro_topics'] == ['/imu/data_raw']
-    reference = tmp_path / 'reference.yaml'
-    assert commands.calibrate_command([fast_bag], reference, stdout=io.StringIO()) == 0
-    assert coeffs.model.terms == load(reference).model.terms
-    assert_allclose(coeffs.model.coefficients, load(reference).model.coefficients, rtol=1e-9)
+    note = calibrates_as_the_reference(tmp_path, capsys, bag, fast_bag, ('gyro', '/imu/data_raw'))
+    assert "using /imu/data_raw, the raw rate by REP 145's" in note and 'not /imu/data;' in note
 
     out_bag = bag_path(tmp_path, 'out', fmt)
     argv = ['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(out_bag)]
@@ -496,18 +516,9 @@ def test_the_gyros_temperature_is_told_from_the_chambers_by_its_namespace(
         ['/fog/temperature', '/chamber/temperature'],
         '/fog/rate',
     )
-    out = tmp_path / 'coeffs.yaml'
-    assert cli.main(['calibrate', str(bag), '-o', str(out)]) == 0
-    notes = [line for line in capsys.readouterr().err.splitlines() if 'NOTE' in line]
-    assert notes and all('using /fog/temperature, beside /fog/rate' in n for n in notes)
-    assert '/chamber/temperature' in notes[0]
-    coeffs = load(out)
-    assert coeffs.provenance['temperature_topics'] == ['/fog/temperature']
-    reference = tmp_path / 'reference.yaml'
-    assert commands.calibrate_command([fast_bag], reference, stdout=io.StringIO()) == 0
-    # (the bag is chunked otherwise, the 10 s sums are summed in another order: equal up to
-    # rounding, amplified by the fit)
-    assert_allclose(coeffs.model.coefficients, load(reference).model.coefficients, rtol=1e-9)
+    topic = ('temperature', '/fog/temperature')
+    note = calibrates_as_the_reference(tmp_path, capsys, bag, fast_bag, topic)
+    assert 'using /fog/temperature, beside /fog/rate' in note and '/chamber/temperature' in note
 
     out_bag = bag_path(tmp_path, 'out', fmt)
     argv = ['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(out_bag)]

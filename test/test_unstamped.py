@@ -21,12 +21,21 @@ def run() -> SimulatedRun:
 
 
 def write(
-    path: Path, fmt: str, run: SimulatedRun, *, unstamped: str = '', temp_clock_s: float = 0.0
+    path: Path,
+    fmt: str,
+    run: SimulatedRun,
+    *,
+    unstamped: str = '',
+    temp_clock_s: float = 0.0,
+    clock_s: float = 0.0,
+    log_clock_s: float = 0.0,
+    unset: tuple[int, ...] = (),
 ) -> Path:
     """The run as a bag, log time = true stamp; ``unstamped`` topic written with stamp 0.
 
     ``temp_clock_s``: the temperature's header stamps run this far (s) ahead of the true time
-    (a driver on another clock).
+    (a driver on another clock); ``clock_s``, ``log_clock_s``: every header stamp, every log
+    time; ``unset``: the temperatures at these indices are written with stamp 0.
     """
     items = [(s, 0, k) for k, s in enumerate(run.temp_stamps_s.tolist())]
     items += [(s, 1, k) for k, s in enumerate(run.imu_stamps_s.tolist())]
@@ -34,11 +43,12 @@ def write(
         writer.add_topic(TEMP, 'sensor_msgs/msg/Temperature')
         writer.add_topic(IMU, 'sensor_msgs/msg/Imu')
         for stamp_s, which, k in sorted(items):
-            log = s_to_stamp_ns(stamp_s)
+            log = s_to_stamp_ns(stamp_s + log_clock_s)
             topic = TEMP if which == 0 else IMU
-            header = 0 if topic == unstamped else log
-            if topic == TEMP and header:
-                header = s_to_stamp_ns(stamp_s + temp_clock_s)
+            ahead_s = temp_clock_s if topic == TEMP else 0.0
+            header = s_to_stamp_ns(stamp_s + clock_s + ahead_s)
+            if topic == unstamped or (topic == TEMP and k in unset):
+                header = 0
             if topic == IMU:
                 writer.write(IMU, log, make_imu(header, 'imu', run.rates_rad_s[k]))
             else:
@@ -207,22 +217,9 @@ def write_since_power_on(path: Path, fmt: str, run: SimulatedRun, unset: tuple[i
     Logged by the wall clock, 5 ms later; the temperatures at indices ``unset`` not stamped (0).
     """
     start_s = float(min(run.imu_stamps_s[0], run.temp_stamps_s[0]))
-    wall_s = 1.7e9
-    items = [(s, 0, k) for k, s in enumerate(run.temp_stamps_s.tolist())]
-    items += [(s, 1, k) for k, s in enumerate(run.imu_stamps_s.tolist())]
-    with BagWriter(path, fmt) as writer:
-        writer.add_topic(TEMP, 'sensor_msgs/msg/Temperature')
-        writer.add_topic(IMU, 'sensor_msgs/msg/Imu')
-        for stamp_s, which, k in sorted(items):
-            header = s_to_stamp_ns(stamp_s - start_s)
-            log = s_to_stamp_ns(wall_s + stamp_s - start_s + 0.005)
-            if which == 1:
-                writer.write(IMU, log, make_imu(header, 'imu', run.rates_rad_s[k]))
-            else:
-                value = float(run.temperature_degC[k])
-                header = 0 if k in unset else header
-                writer.write(TEMP, log, make_temperature(header, 'imu', value))
-    return path
+    return write(
+        path, fmt, run, clock_s=-start_s, log_clock_s=1.7e9 - start_s + 0.005, unset=unset
+    )
 
 
 @pytest.mark.parametrize('fmt', ['mcap', 'sqlite3', 'ros1'])
