@@ -335,12 +335,13 @@ def test_the_temperature_beside_the_gyro_is_the_one_sharing_most_of_its_namespac
         (['/imu/data_raw', '/fog/rate'], None),  # two gyros, perhaps
         (['/imu/data_raw', '/imu/filtered/data'], None),  # not siblings
         (['/a/data_raw', '/b/data_raw'], None),
-        (['/imu/data', '/imu/data_compensated'], None),  # no raw by name
+        (['/imu/data', '/imu/data_compensated'], '/imu/data'),  # compensate's own output
+        (['/fog/rate', '/fog/rate_compensated'], '/fog/rate'),
+        (['/imu/data', '/imu/data_raw', '/imu/data_raw_compensated'], '/imu/data_raw'),
+        (['/imu/data', '/imu/data_corrected'], None),  # no raw by name
     ],
 )
-def test_the_raw_imu_is_the_one_data_raw_among_its_siblings(
-    imus: list[str], expected: str | None
-) -> None:
+def test_the_raw_imu_is_told_by_its_name(imus: list[str], expected: str | None) -> None:
     assert raw_imu_topic(imus) == expected
     topics = dict.fromkeys(imus, IMU_TYPE)
     if expected is None:

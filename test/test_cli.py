@@ -462,7 +462,8 @@ def test_the_raw_rate_is_told_from_a_filters_output_by_its_rep145_name(
         {'/imu/data': filtered, '/imu/data_raw': short_cycle_fast.rates_rad_s},
     )
     note = calibrates_as_the_reference(tmp_path, capsys, bag, fast_bag, ('gyro', '/imu/data_raw'))
-    assert "using /imu/data_raw, the raw rate by REP 145's" in note and 'not /imu/data;' in note
+    assert "using /imu/data_raw, the raw rate by the topics' names" in note
+    assert 'not /imu/data;' in note
 
     out_bag = bag_path(tmp_path, 'out', fmt)
     argv = ['compensate', str(bag), '--coeffs', str(coeffs_yaml), '-o', str(out_bag)]
@@ -902,6 +903,16 @@ def test_compensate_of_a_raw_rate_on_imu_data_writes_beside_it(
     assert cli.main([*argv[:-1], str(again), '--output-topic', '/imu/data']) == 1
     assert '--output-topic /imu/data: already in' in error_line(capsys)
     assert not again.exists()
+    # the output read again with no flag: its raw rate, not the compensated one beside it
+    tables = []
+    for bag in (out_bag, in_bag):
+        assert cli.main(['evaluate', str(bag), '--coeffs', str(coeffs_yaml)]) == 0
+        captured = capsys.readouterr()
+        rows = [r.split()[1:] for r in captured.out.splitlines() if r.split()[:1] == [bag.name]]
+        tables.append((rows, captured.err))
+    assert len(tables[0][0]) == 6 and tables[0][0] == tables[1][0]
+    assert 'using /imu/data, the raw rate' in tables[0][1]
+    assert 'not /imu/data_compensated' in tables[0][1]
 
 
 def test_compensate_custom_output_topic(

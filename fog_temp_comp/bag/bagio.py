@@ -29,6 +29,8 @@ if TYPE_CHECKING:  # rosbags is imported where it is used: the package's own rea
 
 FloatArray = NDArray[np.float64]
 IMU_TYPE = 'sensor_msgs/msg/Imu'
+#: what ``compensate`` appends to the gyro topic for its output where ``/imu/data`` is taken
+OUTPUT_SUFFIX = '_compensated'
 TEMPERATURE_TYPE = 'sensor_msgs/msg/Temperature'
 
 
@@ -165,16 +167,22 @@ def beside_topic(candidates: Sequence[str], beside: str) -> str | None:
 
 
 def raw_imu_topic(candidates: Sequence[str]) -> str | None:
-    """The one ``.../data_raw`` among sibling Imu topics, the raw rate by REP 145's names.
+    """The raw rate among several Imu topics, by their names, or None.
 
-    ``/imu/data_raw`` beside ``/imu/data`` (an orientation filter's output, or a compensator's
-    recorded with the raw rate). None unless exactly one candidate is ``data_raw`` and every
-    other one is in its namespace: ``/imu/data_raw`` beside ``/fog/rate`` is not told apart.
+    ``X_compensated`` beside ``X`` is this package's output (``compensate``'s default name, a
+    node recorded along) and is left out; of the others, the one left, or the one
+    ``.../data_raw`` among its siblings (REP 145's names: ``/imu/data`` is an orientation
+    filter's output, or a compensator's). ``/imu/data_raw`` beside ``/fog/rate`` is not told
+    apart.
     """
-    raw = [name for name in candidates if name.rsplit('/', 1)[-1] == 'data_raw']
+    names = set(candidates)
+    rest = [n for n in candidates if n.removesuffix(OUTPUT_SUFFIX) not in names - {n}]
+    if len(rest) == 1:
+        return rest[0]
+    raw = [name for name in rest if name.rsplit('/', 1)[-1] == 'data_raw']
     if len(raw) != 1:
         return None
-    if any(_namespace(name) != _namespace(raw[0]) for name in candidates):
+    if any(_namespace(name) != _namespace(raw[0]) for name in rest):
         return None
     return raw[0]
 
@@ -204,7 +212,7 @@ def resolve_topic_in(
         paired, why = beside_topic(candidates, beside), f'beside {beside}'
     else:
         paired = raw_imu_topic(candidates) if msgtype == IMU_TYPE else None
-        why = "the raw rate by REP 145's names"
+        why = "the raw rate by the topics' names"
     if paired is None:
         raise BagError(f'several {msgtype} topics: {candidates}; choose one with {flag}')
     others = ', '.join(c for c in candidates if c != paired)

@@ -225,7 +225,7 @@ def output_topic_for(
     if topic is None:
         topic = DEFAULT_OUTPUT_TOPIC
         if topic in topics:
-            topic = gyro_topic + '_compensated'
+            topic = gyro_topic + bagio.OUTPUT_SUFFIX
     if topic in topics:
         raise BagError(f'--output-topic {topic}: already in {bag}; choose another')
     return topic
