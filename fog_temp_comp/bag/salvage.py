@@ -176,7 +176,7 @@ def finite_only(record: ChamberRecord) -> tuple[ChamberRecord, int, int, list[in
     """
     rates = record.rates_rad_s
     finite = np.isfinite(rates)
-    dead = [j for j in range(rates.shape[1]) if rates.shape[0] and not finite[:, j].any()]
+    dead = np.flatnonzero(~finite.any(axis=0)).tolist() if rates.shape[0] else []
     if dead and len(dead) < rates.shape[1]:
         rates = rates.copy()
         rates[:, dead] = 0.0

@@ -22,7 +22,11 @@ from typing import TextIO
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fog_temp_comp.core.stamp_offset import CLOCK_MISMATCH_S, GROSS_CLOCK_MISMATCH_S
+from fog_temp_comp.core.stamp_offset import (
+    CLOCK_MISMATCH_S,
+    GROSS_CLOCK_MISMATCH_S,
+    header_clock_offset_s,
+)
 
 __all__ = ['CLOCK_MISMATCH_S', 'ClocksApartError', 'UnsetStamps']
 
@@ -145,8 +149,8 @@ class UnsetStamps:
         receive_s = receive / NS_PER_S
         stamped = ~unset & np.isfinite(stamps)
         if stamped.any():
-            offset = float(np.median(stamps[stamped] - receive_s[stamped]))
-            if abs(offset) > CLOCK_MISMATCH_S:
+            offset = header_clock_offset_s(float(np.median(stamps[stamped] - receive_s[stamped])))
+            if offset:
                 self.shifted[topic] = offset
                 receive_s = receive_s + offset
         return np.where(unset, receive_s, stamps)

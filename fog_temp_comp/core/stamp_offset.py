@@ -80,12 +80,13 @@ class ArrivalOffsets:
         return len(self._recent) >= self.least and abs(self.offset_s) > CLOCK_MISMATCH_S
 
 
-def header_clock_offset_s(stamp_s: float, receive_s: float) -> float:
-    """Offset (s) of a header stamp's clock from the receive clock; 0 within 5 s.
+def header_clock_offset_s(stamp_minus_receive_s: float) -> float:
+    """Offset (s) of a header stamps' clock from the receive clock; 0 within 5 s.
 
+    ``stamp_minus_receive_s``: a header stamp minus its receive time (or a median of them).
     Within :data:`CLOCK_MISMATCH_S` the two are taken for one clock and latency. An unset
     stamp (0) timed by its receive time takes this offset too, so that it lands on the clock
     of the topic's other stamps (a device's clock since power-on, sim time).
     """
-    offset = stamp_s - receive_s
+    offset = stamp_minus_receive_s
     return offset if abs(offset) > CLOCK_MISMATCH_S else 0.0

@@ -238,7 +238,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             stamp = msg.header.stamp
             stamp_s = stamp.sec + stamp.nanosec * 1e-9
             if stamp_s:
-                self._header_clock_s = header_clock_offset_s(stamp_s, self._now_s())
+                self._header_clock_s = header_clock_offset_s(stamp_s - self._now_s())
             else:
                 stamp_s = self._unset_stamp_s()
         else:  # a message without a header (std_msgs/Float64): timed on arrival

@@ -42,8 +42,9 @@ class Salvaged:
         """``record`` without non-finite samples, cut at the chunks skipped inside it."""
         record, imu, temp, dead = finite_only(record)
         if dead:
-            names = ', '.join(AXES[j] for j in dead)
-            self.no_finite_axes[str(record.path)] = [AXES[j] for j in dead]
+            axes = [AXES[j] for j in dead]
+            names = ', '.join(axes)
+            self.no_finite_axes[str(record.path)] = axes
             print(
                 f'WARNING: {record.path}: no finite gyro rate on axis {names} (NaN throughout: a '
                 'gyro without that axis?): fitted as 0, its coefficients are 0',
