@@ -17,6 +17,7 @@ from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.forked import ForkedCall, fork_available
 from fog_temp_comp.core.grid import GridAccumulator, bin_means
 from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.core.temperature_frames import FrameLock
 
 FloatArray = NDArray[np.float64]
 
@@ -46,6 +47,8 @@ class BinnedRecord:
     temperature_samples: tuple[FloatArray, FloatArray] | None = None
     #: processes that read the bag (2: its second half in a fork, see :func:`reduce_bag`)
     processes: int = 1
+    #: the temperature frame_id kept where the topic carried several (else '')
+    temp_frame_id: str = ''
 
 
 def bin_record(record: ChamberRecord, period_s: float) -> BinnedRecord:
@@ -93,6 +96,7 @@ class _SpanResult:
     order: StampOrder
     unstamped: UnsetStamps
     frame_id: str
+    frames: FrameLock
     stats: list[ScanStats]
     messages: int
 
@@ -107,6 +111,7 @@ def _reduce_span(
     stream.unstamped = UnsetStamps()
     stream.span_stats = []
     stream.frame_id = ''
+    stream.frames = FrameLock(stream.frames.preferred)
     reduction = _Reduction(period_s, keep_temperature)
     messages = 0
     for chunk in stream.chunks(span):
@@ -115,8 +120,8 @@ def _reduce_span(
     if stream.salvage.recovered:  # the parent reads it again and records the damage
         return None
     return _SpanResult(
-        reduction, stream.order, stream.unstamped, stream.frame_id, stream.span_stats,
-        messages,
+        reduction, stream.order, stream.unstamped, stream.frame_id, stream.frames,
+        stream.span_stats, messages,
     )  # fmt: skip
 
 
@@ -137,12 +142,18 @@ def _read_in_two(stream: BagStream, reduction: _Reduction, period_s: float) -> b
         for chunk in stream.chunks(first):
             reduction.add(chunk)
         part = child.result()
-    if part is not None and stream.order.follows(part.order):
+    kept = stream.frames.kept
+    if (
+        part is not None
+        and stream.order.follows(part.order)
+        and (kept is None or part.frames.kept in (None, kept))  # the same sensor's readings
+    ):
         reduction.extend(part.reduction)
         stream.order.extend(part.order)
         stream.salvage.disorder = stream.order.disorder()
         stream.unstamped.merge(part.unstamped)
         stream.frame_id = stream.frame_id or part.frame_id
+        stream.frames.merge(part.frames)
         stream.span_stats += part.stats
         if stream.progress is not None and part.stats:
             stream.progress.update(part.messages, part.stats[-1].last_log_ns)
@@ -161,6 +172,7 @@ def reduce_bag(
     temp_topic: str | None = None,
     temp_field: str | None = None,
     time_source: str = 'header',
+    temp_frame_id: str = '',
     quiet: bool = True,
     keep_temperature: bool = False,
     strict: bool = False,
@@ -182,6 +194,7 @@ def reduce_bag(
         temp_topic=temp_topic,
         temp_field=temp_field,
         time_source=time_source,
+        temp_frame_id=temp_frame_id,
         progress=progress,
         strict=strict,
     ) as stream:
@@ -203,7 +216,7 @@ def reduce_bag(
         return BinnedRecord(
             path, stream.imu_topic, stream.temp_topic, stream.frame_id, period_s,
             t_idx, t_stamp, temp, g_idx, g_stamp, rate.reshape(-1, 3),
-            gyro.samples, temperature.samples, kept, processes,
+            gyro.samples, temperature.samples, kept, processes, stream.temp_frame_id,
         )  # fmt: skip
 
 
@@ -222,6 +235,7 @@ def reduce_record(
     temp_topic: str | None = None,
     temp_field: str | None = None,
     time_source: str = 'header',
+    temp_frame_id: str = '',
     quiet: bool = True,
     strict: bool = False,
     on_salvage: Callable[[Salvage], None] | None = None,
@@ -239,6 +253,7 @@ def reduce_record(
         temp_topic=temp_topic,
         temp_field=temp_field,
         time_source=time_source,
+        temp_frame_id=temp_frame_id,
         quiet=quiet,
         keep_temperature=True,
         strict=strict,
@@ -255,4 +270,5 @@ def reduce_record(
         rates_rad_s=binned.rate_rad_s,
         temp_stamps_s=temp_t,
         temperature_degC=temps,
+        temp_frame_id=binned.temp_frame_id,
     )

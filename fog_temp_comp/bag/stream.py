@@ -51,6 +51,7 @@ from fog_temp_comp.bag.streamdecode import _decoder, get_field
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.stamp_offset import TIME_SOURCES
+from fog_temp_comp.core.temperature_frames import FrameLock
 
 if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader
@@ -81,6 +82,9 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         ``temp_topic``, which may then be of any type rosbags can deserialize.
     time_source : {'header', 'receive'}
         Align by header stamp (default) or by the bag's receive (log) time.
+    temp_frame_id : str
+        Of a temperature topic that carries several sensors' readings (told by frame_id),
+        keep this one's (:mod:`fog_temp_comp.core.temperature_frames`); '' chooses.
     chunk_size : int
         Messages per chunk and stream.
     progress : Progress, optional
@@ -99,6 +103,7 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         temp_topic: str | None = None,
         temp_field: str | None = None,
         time_source: str = 'header',
+        temp_frame_id: str = '',
         chunk_size: int = 10_000,
         progress: Progress | None = None,
         strict: bool = False,
@@ -122,6 +127,8 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         self.imu_topic = ''
         self.temp_topic = ''
         self.frame_id = ''
+        #: which frame_id's temperatures are kept, and how many of each were read
+        self.frames = FrameLock(temp_frame_id)
         #: damage found so far (filled while reading; complete after :meth:`chunks`)
         self.salvage = Salvage(self.path, strict=strict)
         self._salvage_mcap: list[Path] = []  # MCAP files rosbags cannot open
@@ -279,9 +286,18 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
     def warn_unstamped(self, stderr: TextIO | None = None) -> None:
         """One ``WARNING:`` line per topic whose unset header stamps took the receive time.
 
-        And one where the gyro's and the temperature's header stamps look like two clocks.
+        And one where the gyro's and the temperature's header stamps look like two clocks, and
+        a ``NOTE:`` where the temperature topic carried several sensors' readings.
         """
         self.unstamped.warn(self.path, stderr, (self.imu_topic, self.temp_topic))
+        note = self.frames.note(str(self.path), self.temp_topic)
+        if note is not None:
+            print(note, file=stderr or sys.stderr)
+
+    @property
+    def temp_frame_id(self) -> str:
+        """The temperature frame_id kept where the topic carried several, else ''."""
+        return (self.frames.kept or '') if self.frames.several else ''
 
 
 def resolve_any_topic(reader: AnyReader, topic: str, flag: str) -> str:
@@ -300,6 +316,7 @@ def read_record(
     temp_topic: str | None = None,
     temp_field: str | None = None,
     time_source: str = 'header',
+    temp_frame_id: str = '',
     quiet: bool = True,
     strict: bool = False,
     on_salvage: Callable[[Salvage], None] | None = None,
@@ -318,6 +335,7 @@ def read_record(
         temp_topic=temp_topic,
         temp_field=temp_field,
         time_source=time_source,
+        temp_frame_id=temp_frame_id,
         progress=progress,
         strict=strict,
     ) as stream:
@@ -345,4 +363,5 @@ def read_record(
             rates_rad_s=rates[imu_order].reshape(-1, 3),
             temp_stamps_s=temp_t[temp_order],
             temperature_degC=temps[temp_order],
+            temp_frame_id=stream.temp_frame_id,
         )

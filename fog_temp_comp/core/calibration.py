@@ -454,12 +454,20 @@ def _coefficients(
         frame_id=common_frame_id(records),
         fit={**fit_summary(fits), **({'warnings': warnings} if warnings else {})},
         provenance={**records_provenance(records), **provenance},
+        temperature_frame_id=common_frame_id(records, temperature=True),
     )
 
 
-def common_frame_id(records: Sequence[ChamberRecord]) -> str:
-    """The gyro frame_id of all the records ('' when they differ)."""
-    frame_ids = sorted({r.frame_id for r in records})
+def common_frame_id(records: Sequence[ChamberRecord], *, temperature: bool = False) -> str:
+    """The gyro frame_id of all the records ('' when they differ).
+
+    With ``temperature``, the temperature frame_id kept of the records whose topic carried
+    several ('' when none did, or they kept different ones).
+    """
+    if temperature:
+        frame_ids = sorted({r.temp_frame_id for r in records} - {''})
+    else:
+        frame_ids = sorted({r.frame_id for r in records})
     return frame_ids[0] if len(frame_ids) == 1 else ''
 
 

@@ -48,6 +48,9 @@ class Coefficients:
     frame_id: str = ''
     fit: dict[str, Any] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
+    #: of a temperature topic that carried several sensors' readings (told by frame_id), the
+    #: one the fit used; the node, ``compensate`` and ``evaluate`` keep it too ('' for none)
+    temperature_frame_id: str = ''
 
 
 def _hinge_text(term: str) -> str:
@@ -81,6 +84,11 @@ def to_dict(coeffs: Coefficients) -> dict[str, Any]:
         'model': model_equation(model.terms),
         'terms': list(model.terms),
         'frame_id': coeffs.frame_id,
+        **(
+            {'temperature_frame_id': coeffs.temperature_frame_id}
+            if coeffs.temperature_frame_id
+            else {}
+        ),
         'axes': {
             axis: {
                 coefficient_key(term): float(model.coefficients[i, j])
@@ -214,8 +222,10 @@ def from_dict(data: Any) -> Coefficients:
     except (TypeError, ValueError) as err:
         raise CoefficientsError(f'denoise: {err}') from None
     frame_id = data.get('frame_id', '') or ''
-    if not isinstance(frame_id, str):
-        raise CoefficientsError('frame_id: expected a string')
+    temperature_frame_id = data.get('temperature_frame_id', '') or ''
+    for key, value in (('frame_id', frame_id), ('temperature_frame_id', temperature_frame_id)):
+        if not isinstance(value, str):
+            raise CoefficientsError(f'{key}: expected a string')
     model = DriftModel(terms, matrix, t_range, r_range)
     return Coefficients(
         model=model,
@@ -223,6 +233,7 @@ def from_dict(data: Any) -> Coefficients:
         frame_id=frame_id,
         fit=dict(data.get('fit') or {}),
         provenance=dict(data.get('provenance') or {}),
+        temperature_frame_id=temperature_frame_id,
     )
 
 

@@ -16,6 +16,8 @@ class ChamberRecord:
     """Gyro and temperature streams of one bag, in header-stamp time (s).
 
     ``rates_rad_s`` has shape (N, 3); stamps are sorted (stable) so they are non-decreasing.
+    ``temp_frame_id``: where the temperature topic carried several sensors' readings (told by
+    frame_id), the one kept (:mod:`fog_temp_comp.core.temperature_frames`); else ''.
     """
 
     path: Path
@@ -26,3 +28,4 @@ class ChamberRecord:
     rates_rad_s: FloatArray
     temp_stamps_s: FloatArray
     temperature_degC: FloatArray
+    temp_frame_id: str = ''

@@ -35,6 +35,7 @@ from fog_temp_comp.core.stamp_offset import (
     ArrivalOffsets,
     header_clock_offset_s,
 )
+from fog_temp_comp.core.temperature_frames import FrameLock
 from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.bias_learning import BiasLearningMixin
 from fog_temp_comp.ros.console_log import ConsoleLogMixin
@@ -121,6 +122,12 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             self.config.rest,
         )
         self._warm_up_start_s = None
+        #: which frame_id's temperatures are kept (a topic with several sensors' readings)
+        self.temperature_frames = FrameLock(
+            self.get_parameter('temperature_frame_id').value
+            or self.config.coefficients.temperature_frame_id
+        )
+        self._frames_logged = False
         #: temperature stamps against the gyro's latest on arrival: two clocks, seen live
         self._arrival = ArrivalOffsets()
         self._imu_total_at_temperature = 0
@@ -232,6 +239,10 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
 
     def _on_temperature(self, msg: Any) -> None:
         temperature = self._temperature
+        if temperature.stamped and not self.temperature_frames.keep(msg.header.frame_id):
+            if self.temperature_frames.kept is not None and not self._frames_logged:
+                self._log_other_frames()
+            return
         if self._by_receive:
             stamp_s = self._now_s()
         elif temperature.stamped:
@@ -254,6 +265,19 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
                 if arrival.two_clocks and abs(arrival.offset_s) > GROSS_CLOCK_MISMATCH_S:
                     self._time_on_arrival()
             self._imu_total_at_temperature = imu_total
+
+    def _log_other_frames(self) -> None:
+        """Say once that the temperature topic carries several sensors' readings."""
+        self._frames_logged = True
+        frames = self.temperature_frames
+        text = (
+            f"imu/temperature carries several sensors' readings ({frames.summary()} so far, by "
+            f'frame_id): {frames.kept} kept'
+        )
+        if frames.preferred and not frames.fell_back:
+            self.get_logger().info(text + ', as calibrated')
+        else:
+            self.get_logger().warning(text + ' (set temperature_frame_id)')
 
     def _time_on_arrival(self) -> None:
         """Time gyro and temperature by the node clock: their header clocks are hours apart.
@@ -335,6 +359,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             two_clocks=self._arrival.two_clocks,
             clocks_apart_s=self.clocks_apart_s,
             require_frame_match=self._require_frame_match,
+            frames=self.temperature_frames,
             rest=None if self.compensator.rest is None else self.compensator.rest.finish(),
             rest_bias_file=(
                 (self.config.rest_bias_file, self._rest_bias_state)

@@ -10,6 +10,7 @@ from fog_temp_comp.core.coefficients import Coefficients
 from fog_temp_comp.core.compensator import CompensatorCounters, CompensatorStatus
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.rest import RestStatus
+from fog_temp_comp.core.temperature_frames import FrameLock
 from fog_temp_comp.core.units import AXES
 
 OK, WARN, ERROR = 0, 1, 2
@@ -71,6 +72,7 @@ def build_report(
     require_frame_match: bool = False,
     rest: RestStatus | None = None,
     rest_bias_file: tuple[str, str] | None = None,
+    frames: FrameLock | None = None,
 ) -> Report:
     """Summarise ``status``; ``previous`` are the counters at the last report (for deltas).
 
@@ -80,7 +82,8 @@ def build_report(
     ``temperature_stamp_offset_s`` the recent temperature stamp minus the gyro's latest on
     arrival nearest zero (s) and ``two_clocks`` whether it says two clocks
     (:class:`~fog_temp_comp.core.stamp_offset.ArrivalOffsets`); ``clocks_apart_s`` the offset
-    of header clocks hours apart that made the node time both on arrival (nan: it did not).
+    of header clocks hours apart that made the node time both on arrival (nan: it did not);
+    ``frames`` which frame_id's temperatures the node keeps.
     """
     counters = status.counters
     reasons = _temperature_reasons(status, previous)
@@ -92,9 +95,9 @@ def build_report(
         level = ERROR if require_frame_match else WARN
         action = 'passed through uncorrected' if require_frame_match else 'corrected anyway'
         reasons.append((level, f'gyro frame_id differs from calibrated one ({action})'))
-    if unstamped:
-        reasons.append((WARN, 'temperature without a header stamp: timed by the node clock'))
-    reasons += _clock_reasons(temperature_stamp_offset_s, two_clocks, clocks_apart_s)
+    reasons += _clock_reasons(temperature_stamp_offset_s, two_clocks, clocks_apart_s, unstamped)
+    frame_reasons, frame_values = _temperature_frames(frames)
+    reasons += frame_reasons
     if rest is not None and rest.residual_over_limit:
         reasons.append(
             (WARN, 'rest residual above rest_residual_limit_deg_h: not applied (moving?)')
@@ -116,6 +119,7 @@ def build_report(
     values += [
         ('frame_id_mismatches', str(frame_mismatches)),
         ('temperature_unstamped', str(unstamped)),
+        *frame_values,
     ]
     values += [(name, str(value)) for name, value in dataclasses.asdict(counters).items()]
     if rest is not None:
@@ -128,11 +132,38 @@ def build_report(
     return Report(level, message, values)
 
 
+def _temperature_frames(
+    frames: FrameLock | None,
+) -> tuple[list[tuple[int, str]], list[tuple[str, str]]]:
+    """Reasons and values of a temperature topic with several frame_ids (none if it has one).
+
+    A WARN where the frame_id kept is not the coefficients file's (the file has none, or its
+    frame_id is not on the topic): the temperature may not be the one calibrated with.
+    """
+    if frames is None or not frames.several:
+        return [], []
+    values = [
+        ('temperature_frame_id', frames.kept or ''),
+        ('temperature_frame_ids', frames.summary()),
+        ('temperature_other_frames_dropped', str(frames.dropped)),
+    ]
+    if frames.preferred and not frames.fell_back:
+        return [], values
+    text = f'temperature topic carries several frame_ids: using {frames.kept}' + (
+        f', {frames.preferred!r} not among them' if frames.fell_back else ', the first seen'
+    )
+    return [(WARN, text + ' (set temperature_frame_id)')], values
+
+
 def _clock_reasons(
-    offset_s: float, two_clocks: bool, clocks_apart_s: float
+    offset_s: float, two_clocks: bool, clocks_apart_s: float, unstamped: int = 0
 ) -> list[tuple[int, str]]:
-    """WARNs for temperature stamps on another clock, and for clocks hours apart."""
-    reasons = [(WARN, two_clocks_text(offset_s))] if two_clocks else []
+    """WARNs for temperature stamps on another clock or none, and for clocks hours apart."""
+    reasons = []
+    if unstamped:
+        reasons.append((WARN, 'temperature without a header stamp: timed by the node clock'))
+    if two_clocks:
+        reasons.append((WARN, two_clocks_text(offset_s)))
     if math.isfinite(clocks_apart_s):
         reasons.append(
             (

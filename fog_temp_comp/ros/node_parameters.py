@@ -383,7 +383,7 @@ class ParametersMixin(_NodeBase):
         )
 
     def _declare_temperature_input(self) -> None:
-        """The temperature input: ``temperature_type`` and ``temperature_field``."""
+        """The temperature input: type, field and frame_id (of several sensors on one topic)."""
         self._declare(
             'temperature_type',
             DEFAULT_TYPE,
@@ -400,6 +400,16 @@ class ParametersMixin(_NodeBase):
             ParameterDescriptor(
                 description="field of 'temperature_type' holding the temperature in degC, "
                 "'a.b.c' (as calibrate --temp-field)",
+                read_only=True,
+            ),
+        )
+        self._declare(
+            'temperature_frame_id',
+            '',
+            ParameterDescriptor(
+                description="of a temperature topic that carries several sensors' readings "
+                "(told by header.frame_id), keep this one's; '' keeps the coefficients file's "
+                'temperature_frame_id (the one calibrate kept), else the first seen',
                 read_only=True,
             ),
         )

@@ -29,6 +29,7 @@ from fog_temp_comp.bag.cdr import Spans
 from fog_temp_comp.bag.mcapscan import scan_mcap
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.compensator import Compensator
+from fog_temp_comp.core.temperature_frames import FrameLock
 
 __all__ = ['UnsupportedError', 'per_message_compressed', 'replay_mcap', 'single_mcap_file']
 
@@ -103,11 +104,13 @@ def replay_mcap(
     temp_topic: str,
     output_topic: str,
     unstamped: UnsetStamps | None = None,
+    frames: FrameLock | None = None,
 ) -> int:
     """Compensate ``mcap`` into ``writer`` (topics registered already); corrected Imu written.
 
     Unset header stamps (0) take the receive time, counted in ``unstamped`` (which also notes
     the stamps' offsets from the receive times, or times every message by its receive time).
+    Of a temperature topic with several sensors' readings, ``frames`` keeps one's.
 
     Raises
     ------
@@ -122,6 +125,7 @@ def replay_mcap(
     output_id = writer.connection_id(output_topic)
     boundary = _Boundary()
     unstamped = unstamped if unstamped is not None else UnsetStamps()
+    frames = frames if frames is not None else FrameLock()
     n_out = 0
     for buffer, batches in _chunks(mcap, topics):
         n_out += _replay_chunk(
@@ -135,6 +139,7 @@ def replay_mcap(
             imu_topic=imu_topic,
             temp_topic=temp_topic,
             unstamped=unstamped,
+            frames=frames,
         )
     return n_out
 
@@ -151,6 +156,7 @@ def _replay_chunk(
     imu_topic: str,
     temp_topic: str,
     unstamped: UnsetStamps,
+    frames: FrameLock,
 ) -> int:
     """One chunk: order, compensate, patch, write; return the corrected Imu written."""
     kind_of = {imu_topic: _IMU, temp_topic: _TEMP}
@@ -165,7 +171,7 @@ def _replay_chunk(
     spans = {n: s for n, _, s in batches}
     logs = {n: t for n, t, _ in batches}
     rates, keep = _compensate(
-        compensator, kind[order], spans, logs, (imu_topic, temp_topic), unstamped
+        compensator, kind[order], spans, logs, (imu_topic, temp_topic), (unstamped, frames)
     )
     patched: bytes | bytearray = b''
     if imu_topic in spans and keep.any():
@@ -195,15 +201,17 @@ def _compensate(
     spans: dict[str, Spans],
     logs: dict[str, IntArray],
     topics: tuple[str, str],
-    unstamped: UnsetStamps,
+    timing: tuple[UnsetStamps, FrameLock],
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Feed the messages in order; corrected rates (N_imu, 3) and which Imu were not dropped.
 
     ``kind`` is the chunk's merged order; Imu and temperatures each come in their batch's
     order in it, so the chunk goes in as one :meth:`Compensator.correct_interleaved`.
-    ``topics``: (gyro, temperature); ``logs``: each topic's log times, ns.
+    ``topics``: (gyro, temperature); ``logs``: each topic's log times, ns; ``timing``: what
+    times the messages, and which temperature frame_id is kept.
     """
     imu_topic, temp_topic = topics
+    unstamped, frames = timing
     n_imu = len(spans[imu_topic]) if imu_topic in spans else 0
     if n_imu:
         imu = cdr.decode_imu_rates_cdr(spans[imu_topic])
@@ -219,6 +227,7 @@ def _compensate(
     temp_stamps, temps = np.empty(0), np.empty(0)
     if before.size:
         temp = cdr.decode_temperature_cdr(spans[temp_topic])
-        temp_stamps = unstamped.timed(temp_topic, temp.stamps_s, logs[temp_topic])
-        temps = temp.temperature_degC
+        keep = frames.keep_batch(temp.frame_id_table, temp.frame_id_index)
+        temp_stamps = unstamped.timed(temp_topic, temp.stamps_s[keep], logs[temp_topic][keep])
+        temps, before = temp.temperature_degC[keep], before[keep]
     return compensator.correct_interleaved(stamps, rates, temp_stamps, temps, before)

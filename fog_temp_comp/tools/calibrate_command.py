@@ -40,6 +40,8 @@ class CalibrateOptions:
     gyro_topic: str | None = None
     temp_topic: str | None = None
     temp_field: str | None = None
+    #: of a temperature topic with several sensors' readings (frame_ids), this one's ('': choose)
+    temp_frame_id: str = ''
     time_source: str = 'header'
     settings: DenoiseSettings = RECOMMENDED_SETTINGS
     #: model terms; None (the default) lets calibrate choose the pipeline by cross-validation
@@ -119,6 +121,7 @@ def _calibrate(
         gyro_topic=opt.gyro_topic,
         temp_topic=opt.temp_topic,
         temp_field=opt.temp_field,
+        temp_frame_id=opt.temp_frame_id,
         time_source=opt.time_source,
         quiet=opt.quiet,
         strict=opt.strict,

@@ -18,6 +18,7 @@ from fog_temp_comp.bag.bagio import stamp_to_s
 from fog_temp_comp.bag.streamdecode import get_field
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.compensator import Compensator
+from fog_temp_comp.core.temperature_frames import FrameLock
 from fog_temp_comp.core.units import NS_PER_S
 
 
@@ -58,6 +59,7 @@ class ChunkReplayer:
         temp_topic: str,
         unstamped: UnsetStamps | None = None,
         temp_field: str | None = None,
+        frames: FrameLock | None = None,
     ):
         self.compensator = compensator
         self.reader = reader
@@ -65,6 +67,8 @@ class ChunkReplayer:
         self.temp_field = temp_field
         #: unset header stamps (0) take the receive time; counted here
         self.unstamped = unstamped if unstamped is not None else UnsetStamps()
+        #: of a temperature topic with several sensors' readings (frame_ids), the one kept
+        self.frames = frames if frames is not None else FrameLock()
         self.ros2 = bool(reader.is2)
         self.imu_topic = imu_topic
         self.temp_topic = temp_topic
@@ -85,6 +89,11 @@ class ChunkReplayer:
         temp = [k for k, (c, _, _) in enumerate(chunk) if c.topic == self.temp_topic]
         imu_batch = self._decode([chunk[k] for k in imu], imu=True)
         temp_batch = self._decode([chunk[k] for k in temp], imu=False)
+        if temp and self.temp_field is None:  # one sensor's readings, of several
+            ours = self.frames.keep_batch(temp_batch.frame_id_table, temp_batch.frame_id_index)
+            if not ours.all():
+                temp = [k for k, ok in zip(temp, ours.tolist(), strict=True) if ok]
+                temp_batch = temp_batch.take(ours)
         rates = imu_batch.angular_velocity_rad_s if imu else np.empty((0, 3))
         accel = imu_batch.linear_acceleration if imu and self.with_accel else None
         # an unset temperature stamp takes the receive time (as the node takes its clock); an

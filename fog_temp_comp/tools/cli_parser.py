@@ -278,12 +278,20 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
 
 
 def _add_temp_field(g: argparse._ArgumentGroup | argparse.ArgumentParser) -> None:
-    """``--temp-field``: the temperature is a field of a message of any type."""
+    """``--temp-field`` (a field of a message of any type) and ``--temp-frame-id``."""
     g.add_argument(
         '--temp-field',
         metavar='FIELD',
         help='read temperature (degC) from this field (a.b.c) of --temp-topic, '
         'a message of any type',
+    )
+    g.add_argument(
+        '--temp-frame-id',
+        metavar='ID',
+        default='',
+        help="of a temperature topic that carries several sensors' readings (told by "
+        "header.frame_id), use this sensor's (default: calibrate keeps the first by name; "
+        'compensate and evaluate the one calibrate kept)',
     )
 
 

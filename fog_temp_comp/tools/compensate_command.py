@@ -34,6 +34,7 @@ from fog_temp_comp.core.restfile import (
     read_learned_bias,
     write_learned_bias,
 )
+from fog_temp_comp.core.temperature_frames import FrameLock
 from fog_temp_comp.tools import blockreplay
 from fog_temp_comp.tools.atomic import AtomicOutputs
 from fog_temp_comp.tools.chunkreplay import ChunkReplayer, chunked
@@ -49,6 +50,7 @@ def compensate_command(
     gyro_topic: str | None = None,
     temp_topic: str | None = None,
     temp_field: str | None = None,
+    temp_frame_id: str = '',
     output_topic: str | None = None,
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
@@ -75,7 +77,9 @@ def compensate_command(
     (drivers on two clocks, which the default warns about); the output keeps the headers.
     ``temp_field`` reads the temperature (degC) from a field of ``temp_topic``'s messages of
     any type, as ``calibrate --temp-field`` (through ``AnyReader``; the node itself subscribes
-    to ``sensor_msgs/Temperature``). ``output_topic`` defaults to :data:`DEFAULT_OUTPUT_TOPIC`,
+    to ``sensor_msgs/Temperature``). ``temp_frame_id`` (default: the coefficients'
+    ``temperature_frame_id``) picks one sensor's readings of a topic that carries several.
+    ``output_topic`` defaults to :data:`DEFAULT_OUTPUT_TOPIC`,
     or, where the input has that topic already (a driver that publishes its raw rate there), to
     the gyro topic with ``_compensated`` appended (:func:`output_topic_for`); a given topic that
     the input has is refused.
@@ -107,6 +111,7 @@ def compensate_command(
         fast=fast,
         by_receive=time_source == 'receive',
         temp_field=temp_field,
+        temp_frame_id=temp_frame_id or coeffs.temperature_frame_id,
     )
     (n_out, counters), compensator = _on_one_clock(run, in_bag, out_bag, strict)
     _report_written(run, out_bag, n_out, counters, chosen=output_topic is None, stdout=stdout)
@@ -250,6 +255,8 @@ class _Compensate:
     output_used: str | None = None
     #: the temperature is this field of the temperature topic's messages (``--temp-field``)
     temp_field: str | None = None
+    #: of a temperature topic with several sensors' readings, this one's ('': choose)
+    temp_frame_id: str = ''
 
     def _unset_stamps(self, imu_name: str, temp_name: str) -> UnsetStamps:
         """What times the messages; by header, it stops at clocks hours apart."""
@@ -299,8 +306,8 @@ class _Compensate:
                 output_topic=self.output_used,
                 compress=self.fmt == 'mcap' and _compressed_mcap(source),
                 unstamped=self._unset_stamps(imu_name, temp_name),
+                frames=FrameLock(self.temp_frame_id),
             )
-            topics = (job.imu_name, job.temp_name)
             mcap = None
             block = (
                 self.fast and reader.is2 and compensator.rest is None and self.temp_field is None
@@ -310,15 +317,16 @@ class _Compensate:
             if mcap is not None:
                 try:
                     result = job.run(compensator, mcap=mcap)
-                    job.unstamped.warn(self.in_bag, topics=topics)
+                    job.warn(self.in_bag)
                     return result, compensator
                 except (blockreplay.UnsupportedError, ValueError):
                     remove_bag(target)  # the per-message path decides (and words any error)
                     compensator = self.new_compensator()
                     compensator.mark_holes(holes)
                     job.unstamped = self._unset_stamps(imu_name, temp_name)
+                    job.frames = FrameLock(self.temp_frame_id)
             result = job.run(compensator, batched=self.fast)
-            job.unstamped.warn(self.in_bag, topics=topics)
+            job.warn(self.in_bag)
             return result, compensator
 
 
@@ -364,6 +372,15 @@ class _CompensateJob:
     unstamped: UnsetStamps = dataclasses.field(default_factory=UnsetStamps)
     #: the temperature is this field of ``temp_name``'s messages (``--temp-field``)
     temp_field: str | None = None
+    #: of a temperature topic with several sensors' readings (frame_ids), the one kept
+    frames: FrameLock = dataclasses.field(default_factory=FrameLock)
+
+    def warn(self, in_bag: Path) -> None:
+        """The warnings on the input's stamps, a note on its temperature frame_ids (stderr)."""
+        self.unstamped.warn(in_bag, topics=(self.imu_name, self.temp_name))
+        note = self.frames.note(str(in_bag), self.temp_name)
+        if note is not None:
+            print(note, file=sys.stderr)
 
     def run(
         self, compensator: Compensator, *, mcap: Path | None = None, batched: bool = True
@@ -387,6 +404,7 @@ class _CompensateJob:
                         temp_topic=self.temp_name,
                         output_topic=self.output_topic,
                         unstamped=self.unstamped,
+                        frames=self.frames,
                     )
                 else:
                     n_out = self._replay_messages(writer, compensator, batched)
@@ -422,6 +440,7 @@ class _CompensateJob:
             self.temp_name,
             self.unstamped,
             temp_field=self.temp_field,
+            frames=self.frames,
         )
         n_out = 0
         for chunk in chunked(messages, 20_000):

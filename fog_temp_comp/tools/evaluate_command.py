@@ -28,6 +28,7 @@ def evaluate_command(
     gyro_topic: str | None = None,
     temp_topic: str | None = None,
     temp_field: str | None = None,
+    temp_frame_id: str = '',
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
     strict: bool = False,
@@ -38,7 +39,9 @@ def evaluate_command(
 
     ``time_source`` ``'receive'`` times gyro and temperature by the bag's receive times
     (drivers on two clocks), as ``calibrate --time-source receive``; ``temp_field`` reads the
-    temperature from a field of ``temp_topic``, as ``calibrate --temp-field``.
+    temperature from a field of ``temp_topic``, as ``calibrate --temp-field``;
+    ``temp_frame_id`` (default: the coefficients' ``temperature_frame_id``) picks one sensor's
+    readings of a topic that carries several.
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
@@ -52,6 +55,7 @@ def evaluate_command(
             gyro_topic=gyro_topic,
             temp_topic=temp_topic,
             temp_field=temp_field,
+            temp_frame_id=temp_frame_id or coeffs.temperature_frame_id,
             strict=strict,
             on_salvage=salvaged.add,
             time_source=time_source,
