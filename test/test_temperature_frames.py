@@ -26,7 +26,7 @@ from fog_temp_comp.bag.bagio import FORMATS, IMU_TYPE, TEMPERATURE_TYPE, BagWrit
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.compensator import Compensator, replay
-from fog_temp_comp.core.temperature_frames import SWITCH_READINGS, WAIT_READINGS, FrameLock
+from fog_temp_comp.core.frame_lock import SWITCH_READINGS, WAIT_READINGS, FrameLock
 from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.simulate import SimulatedRun
@@ -221,6 +221,65 @@ def test_temp_frame_id_chooses_another_sensor(
     got, want = load(coeffs), load(reference)
     assert got.temperature_frame_id == 'fog_z'
     assert_allclose(got.model.coefficients, want.model.coefficients, rtol=1e-9)
+
+
+def write_two_gyros(path: Path, run: SimulatedRun, rates_b: np.ndarray) -> Path:
+    """``run`` as gyro fog_a, and a second gyro fog_b of ``rates_b`` on the same Imu topic."""
+    events = []
+    for t, a, b in zip(run.imu_stamps_s, run.rates_rad_s, rates_b, strict=True):
+        ns = round(t * 1e9)
+        events.append((ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'fog_b', b)))
+        events.append((ns + 1000, 2, '/imu/data_raw', bagio.make_imu(ns + 1000, 'fog_a', a)))
+    for t, value in zip(run.temp_stamps_s, run.temperature_degC, strict=True):
+        ns = round(t * 1e9)
+        events.append((ns, 0, '/imu/temperature', bagio.make_temperature(ns, 'fog_a', value)))
+    events.sort(key=lambda e: (e[0], e[1]))
+    with BagWriter(path, 'mcap') as writer:
+        writer.add_topic('/imu/data_raw', IMU_TYPE)
+        writer.add_topic('/imu/temperature', TEMPERATURE_TYPE)
+        for ns, _, topic, msg in events:
+            writer.write(topic, ns, msg)
+    return path
+
+
+def test_two_gyros_on_one_topic_are_calibrated_and_evaluated_one_at_a_time(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    short_cycle: SimulatedRun,
+    short_cycle_fast: SimulatedRun,
+) -> None:
+    """Before, their messages were averaged into one fit without a word."""
+
+    def other(run: SimulatedRun) -> np.ndarray:  # another unit: another bias and Tdot slope
+        tdot = np.interp(run.imu_stamps_s, run.imu_stamps_s, run.true_tdot_degC_per_min)
+        return run.rates_rad_s + 2e-5 + 1e-5 * tdot[:, None]
+
+    cal = write_two_gyros(tmp_path / 'cal', short_cycle, other(short_cycle))
+    fast = write_two_gyros(tmp_path / 'fast', short_cycle_fast, other(short_cycle_fast))
+    cal_b = dataclasses.replace(short_cycle, rates_rad_s=other(short_cycle))
+    references = {
+        'fog_a': write_run(tmp_path / 'ref_a', 'mcap', short_cycle, frame_id='fog_a'),
+        'fog_b': write_run(tmp_path / 'ref_b', 'mcap', cal_b, frame_id='fog_b'),
+    }
+    for frame, flags in (('fog_a', []), ('fog_b', ['--gyro-frame-id', 'fog_b'])):
+        coeffs, reference = tmp_path / f'{frame}.yaml', tmp_path / f'{frame}_ref.yaml'
+        assert cli.main(['calibrate', str(cal), '-o', str(coeffs), *flags]) == 0
+        notes = notes_of(capsys)
+        assert len(notes) == 1 and "several gyros' messages" in notes[0], notes
+        assert f'kept {frame}' in notes[0] and '--gyro-frame-id' in notes[0]
+        assert (
+            commands.calibrate_command([references[frame]], reference, stdout=io.StringIO()) == 0
+        )
+        got, want = load(coeffs), load(reference)
+        assert got.frame_id == frame and got.model.terms == want.model.terms
+        assert_allclose(got.model.coefficients, want.model.coefficients, rtol=1e-9)
+    # evaluate keeps the coefficients' gyro: fog_a's table
+    fast_a = write_run(tmp_path / 'fast_a', 'mcap', short_cycle_fast, frame_id='fog_a')
+    tables = []
+    for bag in (fast, fast_a):
+        assert cli.main(['evaluate', str(bag), '--coeffs', str(tmp_path / 'fog_a.yaml')]) == 0
+        tables.append(capsys.readouterr().out.replace(fast_a.name, fast.name).split())
+    assert tables[0] == tables[1]
 
 
 # --------------------------------------------------------------------------------------------

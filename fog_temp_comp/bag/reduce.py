@@ -15,9 +15,9 @@ from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.stream import BagStream, Chunk, Progress, StampOrder
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.forked import ForkedCall, fork_available
+from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.grid import GridAccumulator, bin_means
 from fog_temp_comp.core.record import ChamberRecord
-from fog_temp_comp.core.temperature_frames import FrameLock
 
 FloatArray = NDArray[np.float64]
 
@@ -96,7 +96,7 @@ class _SpanResult:
     order: StampOrder
     unstamped: UnsetStamps
     frame_id: str
-    frames: FrameLock
+    frames: dict[str, FrameLock]
     stats: list[ScanStats]
     messages: int
 
@@ -111,7 +111,7 @@ def _reduce_span(
     stream.unstamped = UnsetStamps()
     stream.span_stats = []
     stream.frame_id = ''
-    stream.frames = FrameLock(stream.frames.preferred)
+    stream.frames = {kind: lock.fresh() for kind, lock in stream.frames.items()}
     reduction = _Reduction(period_s, keep_temperature)
     messages = 0
     for chunk in stream.chunks(span):
@@ -142,18 +142,18 @@ def _read_in_two(stream: BagStream, reduction: _Reduction, period_s: float) -> b
         for chunk in stream.chunks(first):
             reduction.add(chunk)
         part = child.result()
-    kept = stream.frames.kept
     if (
         part is not None
         and stream.order.follows(part.order)
-        and (kept is None or part.frames.kept in (None, kept))  # the same sensor's readings
+        and all(lock.agrees(part.frames[kind]) for kind, lock in stream.frames.items())
     ):
         reduction.extend(part.reduction)
         stream.order.extend(part.order)
         stream.salvage.disorder = stream.order.disorder()
         stream.unstamped.merge(part.unstamped)
         stream.frame_id = stream.frame_id or part.frame_id
-        stream.frames.merge(part.frames)
+        for kind, lock in stream.frames.items():
+            lock.merge(part.frames[kind])
         stream.span_stats += part.stats
         if stream.progress is not None and part.stats:
             stream.progress.update(part.messages, part.stats[-1].last_log_ns)
@@ -172,6 +172,7 @@ def reduce_bag(
     temp_topic: str | None = None,
     temp_field: str | None = None,
     time_source: str = 'header',
+    gyro_frame_id: str = '',
     temp_frame_id: str = '',
     quiet: bool = True,
     keep_temperature: bool = False,
@@ -194,6 +195,7 @@ def reduce_bag(
         temp_topic=temp_topic,
         temp_field=temp_field,
         time_source=time_source,
+        gyro_frame_id=gyro_frame_id,
         temp_frame_id=temp_frame_id,
         progress=progress,
         strict=strict,
@@ -235,6 +237,7 @@ def reduce_record(
     temp_topic: str | None = None,
     temp_field: str | None = None,
     time_source: str = 'header',
+    gyro_frame_id: str = '',
     temp_frame_id: str = '',
     quiet: bool = True,
     strict: bool = False,
@@ -253,6 +256,7 @@ def reduce_record(
         temp_topic=temp_topic,
         temp_field=temp_field,
         time_source=time_source,
+        gyro_frame_id=gyro_frame_id,
         temp_frame_id=temp_frame_id,
         quiet=quiet,
         keep_temperature=True,

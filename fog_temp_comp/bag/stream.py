@@ -49,9 +49,9 @@ from fog_temp_comp.bag.sqlitestream import _SqliteReading
 from fog_temp_comp.bag.streamchunk import Chunk, FloatArray, StampOrder
 from fog_temp_comp.bag.streamdecode import _decoder, get_field
 from fog_temp_comp.bag.unstamped import UnsetStamps
+from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.stamp_offset import TIME_SOURCES
-from fog_temp_comp.core.temperature_frames import FrameLock
 
 if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader
@@ -82,9 +82,10 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         ``temp_topic``, which may then be of any type rosbags can deserialize.
     time_source : {'header', 'receive'}
         Align by header stamp (default) or by the bag's receive (log) time.
-    temp_frame_id : str
-        Of a temperature topic that carries several sensors' readings (told by frame_id),
-        keep this one's (:mod:`fog_temp_comp.core.temperature_frames`); '' chooses.
+    gyro_frame_id, temp_frame_id : str
+        Of a gyro topic that carries several gyros' messages, or a temperature topic several
+        sensors' readings (told by frame_id), keep this one's
+        (:mod:`fog_temp_comp.core.frame_lock`); '' chooses.
     chunk_size : int
         Messages per chunk and stream.
     progress : Progress, optional
@@ -103,6 +104,7 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         temp_topic: str | None = None,
         temp_field: str | None = None,
         time_source: str = 'header',
+        gyro_frame_id: str = '',
         temp_frame_id: str = '',
         chunk_size: int = 10_000,
         progress: Progress | None = None,
@@ -127,8 +129,13 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         self.imu_topic = ''
         self.temp_topic = ''
         self.frame_id = ''
-        #: which frame_id's temperatures are kept, and how many of each were read
-        self.frames = FrameLock(temp_frame_id)
+        #: which frame_id's gyro and temperature messages are kept, how many of each were read
+        #: (a preferred gyro frame_id not seen is not waited for: the node does not drop gyro
+        #: messages by frame_id)
+        self.frames = {
+            'imu': FrameLock(gyro_frame_id, wait=0),
+            'temperature': FrameLock(temp_frame_id),
+        }
         #: damage found so far (filled while reading; complete after :meth:`chunks`)
         self.salvage = Salvage(self.path, strict=strict)
         self._salvage_mcap: list[Path] = []  # MCAP files rosbags cannot open
@@ -287,17 +294,25 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         """One ``WARNING:`` line per topic whose unset header stamps took the receive time.
 
         And one where the gyro's and the temperature's header stamps look like two clocks, and
-        a ``NOTE:`` where the temperature topic carried several sensors' readings.
+        a ``NOTE:`` where the gyro topic carried several gyros' messages or the temperature
+        topic several sensors' readings.
         """
         self.unstamped.warn(self.path, stderr, (self.imu_topic, self.temp_topic))
-        note = self.frames.note(str(self.path), self.temp_topic)
-        if note is not None:
-            print(note, file=stderr or sys.stderr)
+        notes = (
+            self.frames['imu'].note(
+                str(self.path), self.imu_topic, what="gyros' messages", flag='--gyro-frame-id'
+            ),
+            self.frames['temperature'].note(str(self.path), self.temp_topic),
+        )
+        for note in notes:
+            if note is not None:
+                print(note, file=stderr or sys.stderr)
 
     @property
     def temp_frame_id(self) -> str:
         """The temperature frame_id kept where the topic carried several, else ''."""
-        return (self.frames.kept or '') if self.frames.several else ''
+        frames = self.frames['temperature']
+        return (frames.kept or '') if frames.several else ''
 
 
 def resolve_any_topic(reader: AnyReader, topic: str, flag: str) -> str:
@@ -316,6 +331,7 @@ def read_record(
     temp_topic: str | None = None,
     temp_field: str | None = None,
     time_source: str = 'header',
+    gyro_frame_id: str = '',
     temp_frame_id: str = '',
     quiet: bool = True,
     strict: bool = False,
@@ -335,6 +351,7 @@ def read_record(
         temp_topic=temp_topic,
         temp_field=temp_field,
         time_source=time_source,
+        gyro_frame_id=gyro_frame_id,
         temp_frame_id=temp_frame_id,
         progress=progress,
         strict=strict,

@@ -21,7 +21,7 @@ from fog_temp_comp.bag.progress import Progress
 from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.streamchunk import Chunk
 from fog_temp_comp.bag.unstamped import UnsetStamps
-from fog_temp_comp.core.temperature_frames import FrameLock
+from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.units import NS_PER_S
 
 __all__ = ['get_field']
@@ -66,7 +66,8 @@ class _StreamDecoding:
     imu_topic: str
     temp_topic: str
     frame_id: str
-    frames: FrameLock
+    #: per chunk kind ('imu', 'temperature'): which frame_id's messages are kept
+    frames: dict[str, FrameLock]
     salvage: Salvage
     unstamped: UnsetStamps
     _gyro_topic: str | None
@@ -145,17 +146,18 @@ class _StreamDecoding:
             else:
                 batch_out = decode(raws)
             stamps = batch_out.stamps_s
+            frames = self.frames[kind]
+            keep = frames.keep_batch(batch_out.frame_id_table, batch_out.frame_id_index)
             if kind == 'imu':
                 values = batch_out.angular_velocity_rad_s
                 if not self.frame_id:
-                    self.frame_id = batch_out.frame_id
+                    self.frame_id = frames.kept or ''
             else:
                 values = batch_out.temperature_degC
-                keep = self.frames.keep_batch(batch_out.frame_id_table, batch_out.frame_id_index)
-                if not keep.all():  # another sensor's readings on the topic
-                    stamps, values, log_ns, receive = (
-                        stamps[keep], values[keep], log_ns[keep], receive[keep]
-                    )  # fmt: skip
+            if not keep.all():  # another gyro's or sensor's messages on the topic
+                stamps, values, log_ns, receive = (
+                    stamps[keep], values[keep], log_ns[keep], receive[keep]
+                )  # fmt: skip
         if self.time_source == 'receive':
             return Chunk(kind, receive, values)
         return Chunk(kind, self._stamped(kind, stamps, log_ns), values)

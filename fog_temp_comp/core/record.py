@@ -17,7 +17,7 @@ class ChamberRecord:
 
     ``rates_rad_s`` has shape (N, 3); stamps are sorted (stable) so they are non-decreasing.
     ``temp_frame_id``: where the temperature topic carried several sensors' readings (told by
-    frame_id), the one kept (:mod:`fog_temp_comp.core.temperature_frames`); else ''.
+    frame_id), the one kept (:mod:`fog_temp_comp.core.frame_lock`); else ''.
     """
 
     path: Path

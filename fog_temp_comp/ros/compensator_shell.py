@@ -29,13 +29,13 @@ from std_srvs.srv import Trigger
 
 from fog_temp_comp.core.coefficients import CoefficientsError
 from fog_temp_comp.core.compensator import Compensator
+from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.stamp_offset import (
     GROSS_CLOCK_MISMATCH_S,
     TIME_SOURCES,
     ArrivalOffsets,
     header_clock_offset_s,
 )
-from fog_temp_comp.core.temperature_frames import FrameLock
 from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.bias_learning import BiasLearningMixin
 from fog_temp_comp.ros.console_log import ConsoleLogMixin

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 from fog_temp_comp.core.coefficients import Coefficients
 from fog_temp_comp.core.compensator import CompensatorCounters, CompensatorStatus
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.rest import RestStatus
-from fog_temp_comp.core.temperature_frames import FrameLock
 from fog_temp_comp.core.units import AXES
 
 OK, WARN, ERROR = 0, 1, 2

@@ -29,7 +29,7 @@ from fog_temp_comp.bag.cdr import Spans
 from fog_temp_comp.bag.mcapscan import scan_mcap
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.compensator import Compensator
-from fog_temp_comp.core.temperature_frames import FrameLock
+from fog_temp_comp.core.frame_lock import FrameLock
 
 __all__ = ['UnsupportedError', 'per_message_compressed', 'replay_mcap', 'single_mcap_file']
 

@@ -42,6 +42,8 @@ class CalibrateOptions:
     temp_field: str | None = None
     #: of a temperature topic with several sensors' readings (frame_ids), this one's ('': choose)
     temp_frame_id: str = ''
+    #: of a gyro topic with several gyros' messages (frame_ids), this one's ('': choose)
+    gyro_frame_id: str = ''
     time_source: str = 'header'
     settings: DenoiseSettings = RECOMMENDED_SETTINGS
     #: model terms; None (the default) lets calibrate choose the pipeline by cross-validation
@@ -122,6 +124,7 @@ def _calibrate(
         temp_topic=opt.temp_topic,
         temp_field=opt.temp_field,
         temp_frame_id=opt.temp_frame_id,
+        gyro_frame_id=opt.gyro_frame_id,
         time_source=opt.time_source,
         quiet=opt.quiet,
         strict=opt.strict,

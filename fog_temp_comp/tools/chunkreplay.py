@@ -18,7 +18,7 @@ from fog_temp_comp.bag.bagio import stamp_to_s
 from fog_temp_comp.bag.streamdecode import get_field
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.compensator import Compensator
-from fog_temp_comp.core.temperature_frames import FrameLock
+from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.units import NS_PER_S
 
 

@@ -295,9 +295,22 @@ def _add_temp_field(g: argparse._ArgumentGroup | argparse.ArgumentParser) -> Non
     )
 
 
+def _add_gyro_frame_id(g: argparse._ArgumentGroup | argparse.ArgumentParser) -> None:
+    """``--gyro-frame-id``: one gyro's messages of a topic that carries several."""
+    g.add_argument(
+        '--gyro-frame-id',
+        metavar='ID',
+        default='',
+        help="of a gyro topic that carries several gyros' messages (told by header.frame_id), "
+        "use this gyro's (default: calibrate keeps the first by name; evaluate the "
+        "coefficients' frame_id)",
+    )
+
+
 def _add_calibrate_input(g: argparse._ArgumentGroup) -> None:
     """Input options of calibrate: temperature field, time source, Earth rate."""
     _add_temp_field(g)
+    _add_gyro_frame_id(g)
     _add_time_source(g)
     g.add_argument('--quiet', action='store_true', help='no progress line on stderr')
     _add_strict(g)
@@ -449,6 +462,7 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument('--coeffs', type=Path, required=True, metavar='COEFFS.yaml')
     _add_topics(p)
     _add_temp_field(p)
+    _add_gyro_frame_id(p)
     _add_time_source(p)
     _add_denoise(p, None)
     _add_guard(p)

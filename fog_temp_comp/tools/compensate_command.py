@@ -26,6 +26,7 @@ from fog_temp_comp.bag.stream import resolve_any_topic
 from fog_temp_comp.bag.unstamped import ClocksApartError, UnsetStamps
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
+from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.rest import RestLearner, RestSettings
 from fog_temp_comp.core.restfile import (
     check_learned_bias,
@@ -34,7 +35,6 @@ from fog_temp_comp.core.restfile import (
     read_learned_bias,
     write_learned_bias,
 )
-from fog_temp_comp.core.temperature_frames import FrameLock
 from fog_temp_comp.tools import blockreplay
 from fog_temp_comp.tools.atomic import AtomicOutputs
 from fog_temp_comp.tools.chunkreplay import ChunkReplayer, chunked

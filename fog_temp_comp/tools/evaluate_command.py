@@ -29,6 +29,7 @@ def evaluate_command(
     temp_topic: str | None = None,
     temp_field: str | None = None,
     temp_frame_id: str = '',
+    gyro_frame_id: str = '',
     denoise_method: str | None = None,
     guard: GuardSettings | None = None,
     strict: bool = False,
@@ -41,7 +42,8 @@ def evaluate_command(
     (drivers on two clocks), as ``calibrate --time-source receive``; ``temp_field`` reads the
     temperature from a field of ``temp_topic``, as ``calibrate --temp-field``;
     ``temp_frame_id`` (default: the coefficients' ``temperature_frame_id``) picks one sensor's
-    readings of a topic that carries several.
+    readings of a topic that carries several, ``gyro_frame_id`` (default: the coefficients'
+    ``frame_id``) one gyro's messages.
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
@@ -56,6 +58,7 @@ def evaluate_command(
             temp_topic=temp_topic,
             temp_field=temp_field,
             temp_frame_id=temp_frame_id or coeffs.temperature_frame_id,
+            gyro_frame_id=gyro_frame_id or coeffs.frame_id,
             strict=strict,
             on_salvage=salvaged.add,
             time_source=time_source,

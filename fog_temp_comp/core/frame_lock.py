@@ -1,9 +1,10 @@
-"""One sensor's readings from a temperature topic that carries several, told by frame_id.
+"""One sensor's readings from a topic that carries several, told apart by frame_id.
 
 A driver that reads several temperature sensors (one per coil, the housing, the board) may
 publish them all on one topic, each with its own ``header.frame_id``. Read as one series the
 readings jump between the sensors every message: a Tdot that no filter cleans, and a fit that
-is wrong without a word. So one sensor is kept:
+is wrong without a word. (A driver of several gyros may do the same on one Imu topic: the bag
+readers keep one gyro's messages by the same rule.) So one sensor is kept:
 
 - the ``preferred`` frame_id (asked for, or the one ``calibrate`` kept, from the coefficients
   file), once it is seen; if it is not among the first :data:`WAIT_READINGS` readings (a
@@ -40,9 +41,11 @@ SWITCH_READINGS = 30
 class FrameLock:
     """Which frame_id's readings a temperature topic keeps (see the module)."""
 
-    def __init__(self, preferred: str = '') -> None:
+    def __init__(self, preferred: str = '', wait: int = WAIT_READINGS) -> None:
         #: the frame_id to keep once seen ('' for none)
         self.preferred = preferred
+        #: readings of other frame_ids before a preferred one not seen is given up (0: none)
+        self.wait = wait
         #: the frame_id kept; None until chosen
         self.kept: str | None = None
         #: readings per frame_id, in order of first appearance
@@ -82,7 +85,7 @@ class FrameLock:
         """Choose on the node's one reading of ``frame_id`` (its count already added)."""
         if not self.preferred or frame_id == self.preferred:
             self.kept = frame_id
-        elif sum(self.readings.values()) >= WAIT_READINGS:
+        elif sum(self.readings.values()) >= self.wait:
             self.kept = next(iter(self.readings))
             self.fell_back = True
 
@@ -101,7 +104,7 @@ class FrameLock:
             first = {table[k] for k in np.unique(index[:WAIT_READINGS]).tolist()}
             if not self.preferred or self.preferred in first:
                 self.kept = self.preferred or min(first)
-            elif len(first) > 1 or sum(self.readings.values()) + index.size >= WAIT_READINGS:
+            elif len(first) > 1 or sum(self.readings.values()) + index.size >= self.wait:
                 self.kept = min(first)
                 self.fell_back = True
         if len(table) == 1 and table[0] == self.kept:
@@ -123,7 +126,22 @@ class FrameLock:
         """``'fog_x (3,600), fog_y (3,600)'``: the frame_ids and their readings."""
         return ', '.join(f'{name or "(empty)"} ({n:,})' for name, n in self.readings.items())
 
-    def note(self, where: str, topic: str) -> str | None:
+    def fresh(self) -> FrameLock:
+        """A lock of the same settings that has read nothing."""
+        return FrameLock(self.preferred, self.wait)
+
+    def agrees(self, later: FrameLock) -> bool:
+        """Whether ``later``, which read the readings after this one's, kept the same frame_id."""
+        return self.kept is None or later.kept in (None, self.kept)
+
+    def note(
+        self,
+        where: str,
+        topic: str,
+        *,
+        what: str = "sensors' readings",
+        flag: str = '--temp-frame-id',
+    ) -> str | None:
         """The ``NOTE:`` line a command prints where ``topic`` carried several frame_ids."""
         if not self.several:
             return None
@@ -137,7 +155,7 @@ class FrameLock:
             else ''
         )
         return (
-            f"NOTE: {where}: {topic} carries several sensors' readings, told by frame_id: "
-            f'{self.summary()}; kept {self.kept} ({how}{switched}; choose with '
-            f'--temp-frame-id), left out {self.dropped:,}'
+            f'NOTE: {where}: {topic} carries several {what}, told by frame_id: '
+            f'{self.summary()}; kept {self.kept} ({how}{switched}; choose with {flag}), '
+            f'left out {self.dropped:,}'
         )
