@@ -100,20 +100,30 @@ def _opened_reader(path: Path) -> AnyReader:
     return reader
 
 
+def data_files(path: Path, suffix: str) -> list[Path]:
+    """The ``suffix`` files of a bag: the bag itself if it is one, else those in its directory.
+
+    A directory named ``run.mcap`` (``ros2 bag record -o run.mcap``) is a directory.
+    """
+    if path.suffix == suffix and not path.is_dir():
+        return [path]
+    return sorted(path.glob('*' + suffix))
+
+
 def bag_format(path: str | Path) -> str:
     """One of :data:`FORMATS` for an existing bag."""
     path = Path(path)
-    if path.suffix == '.bag':
-        return 'ros1'
-    if path.suffix == '.mcap':
-        return 'mcap'
-    if path.suffix == '.db3':
-        return 'sqlite3'
     if path.is_dir():  # a file-compressed bag (rosbag2 FILE mode) holds .mcap.zstd / .db3.zstd
         if list(path.glob('*.mcap')) or list(path.glob('*.mcap.zstd')):
             return 'mcap'
         if list(path.glob('*.db3')) or list(path.glob('*.db3.zstd')):
             return 'sqlite3'
+    elif path.suffix == '.bag':
+        return 'ros1'
+    elif path.suffix == '.mcap':
+        return 'mcap'
+    elif path.suffix == '.db3':
+        return 'sqlite3'
     raise BagError(
         f'{path}: not a recognised bag (expected a rosbag2 directory, .mcap, .db3, .bag)'
     )

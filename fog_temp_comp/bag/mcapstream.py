@@ -12,7 +12,13 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from fog_temp_comp.bag.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagError, resolve_topic_in
+from fog_temp_comp.bag.bagio import (
+    IMU_TYPE,
+    TEMPERATURE_TYPE,
+    BagError,
+    data_files,
+    resolve_topic_in,
+)
 from fog_temp_comp.bag.mcapbatches import ScanStats, check_counts
 from fog_temp_comp.bag.mcapformat import MAGIC
 from fog_temp_comp.bag.mcapinfo import chunk_offsets, mcap_topics
@@ -129,10 +135,8 @@ class _McapReading(_StreamDecoding):
 
     def _mcap_files(self) -> list[Path]:
         """The MCAP files of this bag (in order), or [] when it is not MCAP."""
-        if self.path.suffix == '.mcap':
-            return [self.path]
-        if self.path.is_dir():
-            return sorted(self.path.glob('*.mcap'))
+        if self.path.suffix == '.mcap' or self.path.is_dir():
+            return data_files(self.path, '.mcap')
         return []
 
     def _scan_mcap(

@@ -26,7 +26,14 @@ from typing import Any
 import numpy as np
 
 from fog_temp_comp.bag import cdr
-from fog_temp_comp.bag.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagError, BagWriter, typestore
+from fog_temp_comp.bag.bagio import (
+    IMU_TYPE,
+    TEMPERATURE_TYPE,
+    BagError,
+    BagWriter,
+    data_files,
+    typestore,
+)
 from fog_temp_comp.bag.cdr import Spans
 from fog_temp_comp.bag.mcapscan import MAGIC, mcap_topics, scan_mcap
 from fog_temp_comp.bag.ros1scan import Ros1Bag, Ros1Connection, Ros1FormatError
@@ -102,7 +109,7 @@ def needs_repair(path: Path) -> tuple[bool, str | None]:
         except (OSError, KeyError, struct.error):
             return False, None
         return False, None
-    mcaps = [path] if path.suffix == '.mcap' else sorted(path.glob('*.mcap'))
+    mcaps = data_files(path, '.mcap')
     if mcaps and path.exists():
         if path.is_dir() and not (path / 'metadata.yaml').is_file():
             return True, 'no metadata.yaml (recorder killed?): read the .mcap files'
@@ -110,7 +117,7 @@ def needs_repair(path: Path) -> tuple[bool, str | None]:
     loose = loose_sqlite_files(path)
     if loose is not None:
         return True, loose[1]
-    dbs = [path] if path.suffix == '.db3' else sorted(path.glob('*.db3'))
+    dbs = data_files(path, '.db3')
     return any(f.is_file() and _cut_sqlite(f) for f in dbs), None
 
 
@@ -136,11 +143,11 @@ def repair_bag(path: Path, out: Path, salvage: Salvage) -> Path:
     if path.suffix == '.bag':
         copied = repair_ros1(path, out, salvage)
     else:
-        mcaps = [path] if path.suffix == '.mcap' else sorted(path.glob('*.mcap'))
+        mcaps = data_files(path, '.mcap')
         if mcaps:
             copied = _repair_mcap(mcaps, out, salvage)
         else:
-            dbs = [path] if path.suffix == '.db3' else sorted(path.glob('*.db3'))
+            dbs = data_files(path, '.db3')
             if not dbs:
                 raise BagError(f'{path}: not a recognised bag')
             copied = repair_sqlite(dbs, out, salvage)

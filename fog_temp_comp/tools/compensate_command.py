@@ -10,6 +10,7 @@ learned-bias files (deg/h).
 from __future__ import annotations
 
 import dataclasses
+import os
 import shutil
 import sys
 from collections.abc import Callable, Collection
@@ -163,19 +164,43 @@ def _replay_atomically(
     """``run`` into ``out_bag``, complete or not at all: (written, counters), the compensator.
 
     A bag whose damage shows only when read is repaired (what is intact copied) and replayed.
+    A single ``.mcap`` or ``.db3`` file in gives one out where ``out_bag`` ends so
+    (:func:`_as_single_file`).
     """
     with AtomicOutputs(out_bag) as out:  # complete, or nothing at out_bag
         target = out.path(out_bag)
         try:
             with repaired_bag(in_bag, out_bag.parent, strict=strict) as (source, salvage):
-                return run.into(target, source, salvage)
+                result = run.into(target, source, salvage)
         except ReplayError as err:  # damage that shows only when read: copy what is intact
             remove_bag(target)
             with repaired_bag(in_bag, out_bag.parent, strict=strict, failure=err) as (
                 source,
                 salvage,
             ):
-                return run.into(target, source, salvage)
+                result = run.into(target, source, salvage)
+        if in_bag.is_file() and out_bag.suffix == {'mcap': '.mcap', 'sqlite3': '.db3'}.get(
+            run.fmt
+        ):
+            _as_single_file(target)
+        return result
+
+
+#: the data file's suffix of a one-file ROS 2 bag, per storage format
+_FILE_SUFFIX = {'mcap': '.mcap', 'sqlite3': '.db3'}
+
+
+def _as_single_file(bag: Path) -> None:
+    """Replace the rosbag2 directory ``bag`` by its one data file, under the name ``bag``.
+
+    ``compensate run.mcap -o out.mcap`` gives a file, as it was given one (the MCAP file holds
+    its schemas, the sqlite3 file its topics: ``metadata.yaml`` is not needed to read it).
+    """
+    (data,) = [f for f in bag.iterdir() if f.name != 'metadata.yaml']
+    moved = bag.with_name(bag.name + '.data')
+    os.replace(data, moved)
+    shutil.rmtree(bag)
+    os.replace(moved, bag)
 
 
 def _report_rest(
