@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -11,6 +12,10 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, Temperature
+
+from fog_temp_comp.core.coefficients import load
+from fog_temp_comp.core.compensator import Compensator, replay
+from fog_temp_comp.tools.simulate import SimulatedRun
 
 
 def split_stamp(stamp_s: float) -> tuple[int, int]:
@@ -28,6 +33,22 @@ def rate_of(msg: Imu) -> np.ndarray:
     """Angular velocity, shape (3,), rad/s."""
     w = msg.angular_velocity
     return np.array([w.x, w.y, w.z])
+
+
+def core_output(coeffs_file: Path, run: SimulatedRun, n: int) -> np.ndarray:
+    """What the core gives for ``run``'s first ``n`` gyro samples (rad/s, (n, 3)).
+
+    With the temperatures stamped up to the last of them, as a node fed in stamp order has.
+    """
+    coeffs = load(coeffs_file)
+    taken = run.temp_stamps_s <= run.imu_stamps_s[n - 1]
+    return replay(
+        Compensator(coeffs.model, coeffs.denoise),
+        run.imu_stamps_s[:n],
+        run.rates_rad_s[:n],
+        run.temp_stamps_s[taken],
+        run.temperature_degC[taken],
+    )
 
 
 def make_imu(stamp_s: float, rate_rad_s: Any, frame_id: str = 'imu_link') -> Imu:

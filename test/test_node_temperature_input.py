@@ -10,12 +10,10 @@ import pytest
 from numpy.testing import assert_array_equal
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
-from rosharness import Harness, rate_of, split_stamp
+from rosharness import Harness, core_output, rate_of, split_stamp
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 
-from fog_temp_comp.core.coefficients import load
-from fog_temp_comp.core.compensator import Compensator, replay
 from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.ros.params import ParameterError
 from fog_temp_comp.tools.simulate import SimulatedRun
@@ -87,17 +85,7 @@ def test_a_stamped_message_of_another_type_gives_the_cores_output(
             out.append(harness.send_imu(run.imu_stamps_s[k], run.rates_rad_s[k]))
     finally:
         harness.close()
-    coeffs = load(coeffs_file)
-    last = run.imu_stamps_s[n - 1]
-    taken = run.temp_stamps_s <= last
-    offline = replay(
-        Compensator(coeffs.model, coeffs.denoise),
-        run.imu_stamps_s[:n],
-        run.rates_rad_s[:n],
-        run.temp_stamps_s[taken],
-        run.temperature_degC[taken],
-    )
-    assert_array_equal(np.array([rate_of(m) for m in out]), offline)
+    assert_array_equal(np.array([rate_of(m) for m in out]), core_output(coeffs_file, run, n))
     assert node.unstamped == 0
 
 
