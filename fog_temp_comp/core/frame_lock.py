@@ -101,7 +101,7 @@ class FrameLock:
         if not index.size:
             return np.zeros(0, dtype=np.bool_)
         if self.kept is None:
-            first = {table[k] for k in np.unique(index[:WAIT_READINGS]).tolist()}
+            first = {table[k] for k in index[:WAIT_READINGS].tolist()}
             if not self.preferred or self.preferred in first:
                 self.kept = self.preferred or min(first)
             elif len(first) > 1 or sum(self.readings.values()) + index.size >= self.wait:
