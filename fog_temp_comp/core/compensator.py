@@ -351,7 +351,9 @@ class Compensator(_BlockCorrection):
             counters.imu_uncorrected += 1
             self._set_correction((0.0, 0.0, 0.0))
             return (x, y, z)
-        if stamp_ok and abs(stamp_s - status.last_temperature_stamp_s) > self._stale_after_s:
+        # stale: older than the gyro by more; a temperature ahead of the gyro (a driver that
+        # delivers the gyro late, in bursts) is the newest there is, not stale
+        if stamp_ok and stamp_s - status.last_temperature_stamp_s > self._stale_after_s:
             status.temperature_stale = True
             if guard.stale_policy == 'none':
                 counters.imu_uncorrected += 1

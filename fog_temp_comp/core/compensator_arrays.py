@@ -253,8 +253,8 @@ class _BlockCorrection:
         self._last_rates = (x, y, z)  # rad/s, for the next message's repeat test
         counters.imu_nonfinite += int(np.count_nonzero(~np.isfinite(rates).all(axis=1)))
         has = has_s[seg]
-        # abs(stamp_s - status.last_temperature_stamp_s) > self._stale_after_s
-        stale = has & (np.abs(t - last_s[seg]) > self._stale_after_s)
+        # stamp_s - status.last_temperature_stamp_s > self._stale_after_s
+        stale = has & (t - last_s[seg] > self._stale_after_s)
         fresh = has & ~stale
         n_stale = int(np.count_nonzero(stale))
         n_fresh = int(np.count_nonzero(fresh))
