@@ -26,7 +26,7 @@ from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.compensator import Compensator
 from fog_temp_comp.core.units import DEG_H_PER_RAD_S
 from fog_temp_comp.ros.node import CompensatorNode
-from fog_temp_comp.tools import commands
+from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.simulate import SimulatedRun
 
 from simdata import write_run
@@ -173,3 +173,38 @@ def test_the_node_corrects_a_gyro_behind_its_temperature(
         harness.close()
     removed = (np.array(rates) - np.array(outputs)) * DEG_H_PER_RAD_S
     assert np.abs(removed[:, 0]).min() > 10.0
+
+
+def test_compensate_says_when_time_jumps_restarted_the_correction(
+    tmp_path: Path, short_cycle_fast: SimulatedRun, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A stretch recorded twice (its stamps again, among later ones): one WARNING line."""
+    run = short_cycle_fast
+    again = (run.imu_stamps_s >= run.imu_stamps_s[0] + 600) & (
+        run.imu_stamps_s < run.imu_stamps_s[0] + 660
+    )
+    shift_ns = 700 * 10**9  # logged 700 s later, with its own header stamps
+    bag = tmp_path / 'twice'
+    with BagWriter(bag, 'mcap') as writer:
+        writer.add_topic('/imu/temperature', TEMPERATURE_TYPE)
+        writer.add_topic('/imu/data_raw', IMU_TYPE)
+        events = [
+            (round(t * 1e9), 0, '/imu/temperature', bagio.make_temperature(round(t * 1e9), 'f', v))
+            for t, v in zip(run.temp_stamps_s, run.temperature_degC, strict=True)
+        ]
+        for k, (t, w) in enumerate(zip(run.imu_stamps_s, run.rates_rad_s, strict=True)):
+            ns = round(t * 1e9)
+            events.append((ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w)))
+            if again[k]:
+                events.append((ns + shift_ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w)))
+        for ns, _, topic, msg in sorted(events, key=lambda e: (e[0], e[1])):
+            writer.write(topic, ns, msg)
+    assert (
+        cli.main(['compensate', str(bag), '--coeffs', str(COEFFS), '-o', str(tmp_path / 'o')]) == 0
+    )
+    said = capsys.readouterr()
+    warnings = [line for line in said.err.splitlines() if line.startswith('WARNING')]
+    # each replayed message, between two live ones, jumps back (the live one after it, forth)
+    jumps = f'{int(again.sum())} time jumps'
+    assert len(warnings) == 1 and jumps in warnings[0], warnings
+    assert 'before the first temperature or after a time jump' in said.out

@@ -137,9 +137,18 @@ def _report_written(
             f'to {run.output_used} (choose another with --output-topic)',
             file=stdout,
         )
+    if counters.time_jumps:
+        print(
+            f'WARNING: {run.in_bag}: {counters.time_jumps} time jumps (a gyro stamp behind the '
+            'one before by the time-jump threshold, 1 s by default, or more: stamps out of order '
+            'in the bag, or a stretch recorded twice) restarted the correction, which waited '
+            'for a temperature after each',
+            file=sys.stderr,
+        )
+    after = ' or after a time jump' if counters.time_jumps else ''
     print(
         f'wrote {out_bag}: {n_out} corrected Imu on {run.output_used} '
-        f'({counters.imu_awaiting_temperature} before the first temperature and '
+        f'({counters.imu_awaiting_temperature} before the first temperature{after} and '
         f'{counters.imu_duplicate} duplicates not written, '
         f'{counters.imu_uncorrected} passed through uncorrected)',
         file=stdout,
