@@ -1,4 +1,7 @@
-"""What ``calibrate`` leaves out of a recorded run: gyro outliers and temperature glitches.
+"""What ``calibrate`` leaves out of recorded runs: repeats, gyro outliers, temperature glitches.
+
+A run given twice (the same bag twice, through a symlink, or a copy) would count twice in the
+fit and, worse, be held out against itself in the cross-validation: the repeat is left out.
 
 A bump of the turntable throws a gyro bin far off (:mod:`fog_temp_comp.core.gyro_outliers`);
 a sensor's error code is a temperature the node's glitch guard rejects
@@ -24,7 +27,11 @@ __all__ = [
     'check_degrees_celsius',
     'check_gyro_rate_changes',
     'without_outliers',
+    'without_repeats',
 ]
+
+#: records whose time spans overlap by more than this (s) are warned about: counted twice
+OVERLAP_WARN_S = 60.0
 
 #: a record whose median temperature lies outside this range (degC) is not in degrees Celsius;
 #: kelvin passes (an offset, which the fit takes as it is), millidegrees or tenths do not
@@ -80,6 +87,58 @@ def _rate_changes(rates_rad_s: np.ndarray) -> bool:
     return False
 
 
+def without_repeats(
+    records: Sequence[ChamberRecord],
+) -> tuple[list[ChamberRecord], list[str], list[str]]:
+    """The records less those that repeat an earlier one; warnings; the repeats' paths.
+
+    A repeat has the same gyro stamps and rates and the same temperatures. Records that only
+    overlap in time by more than :data:`OVERLAP_WARN_S` (the same hours in two bags) are kept,
+    with a warning.
+    """
+    kept: list[ChamberRecord] = []
+    warnings, repeated = [], []
+    for record in records:
+        same = next((k for k in kept if _same_data(k, record)), None)
+        if same is not None:
+            warnings.append(
+                f'{record.path}: the same data as {same.path} (the same run given twice?): '
+                'left out, so that it is neither fitted twice nor held out against itself'
+            )
+            repeated.append(str(record.path))
+            continue
+        for other in kept:
+            overlap = _overlap_s(other, record)
+            if overlap > OVERLAP_WARN_S:
+                warnings.append(
+                    f'{record.path}: {overlap:.0f} s of its gyro stamps are also in '
+                    f'{other.path} (the same hours recorded twice?): the fit counts them twice'
+                )
+        kept.append(record)
+    return kept, warnings, repeated
+
+
+def _same_data(a: ChamberRecord, b: ChamberRecord) -> bool:
+    return all(
+        x.shape == y.shape and np.array_equal(x, y, equal_nan=True)
+        for x, y in (
+            (a.imu_stamps_s, b.imu_stamps_s),
+            (a.rates_rad_s, b.rates_rad_s),
+            (a.temp_stamps_s, b.temp_stamps_s),
+            (a.temperature_degC, b.temperature_degC),
+        )
+    )
+
+
+def _overlap_s(a: ChamberRecord, b: ChamberRecord) -> float:
+    """How long (s) the gyro stamp spans of two records overlap (0 if either is empty)."""
+    if not (a.imu_stamps_s.size and b.imu_stamps_s.size):
+        return 0.0
+    start = max(a.imu_stamps_s[0], b.imu_stamps_s[0])
+    end = min(a.imu_stamps_s[-1], b.imu_stamps_s[-1])
+    return max(float(end - start), 0.0)
+
+
 def without_outliers(
     records: Sequence[ChamberRecord],
     settings: DenoiseSettings,
@@ -88,7 +147,8 @@ def without_outliers(
     """The records without their temperature glitches and gyro outlier bins.
 
     Temperatures that are not degrees Celsius, and a gyro rate that never changes, are refused
-    first (:func:`check_degrees_celsius`, :func:`check_gyro_rate_changes`).
+    first (:func:`check_degrees_celsius`, :func:`check_gyro_rate_changes`), and a record that
+    repeats another is left out (:func:`without_repeats`; provenance ``repeated_bags``).
 
     Gyro bins of ``settings.tdot_period_s``; the glitch rule is the node's default guard's.
     Returns the records, a warning per record and kind, and ``provenance`` with the entries
@@ -98,8 +158,11 @@ def without_outliers(
     """
     check_degrees_celsius(records)
     check_gyro_rate_changes(records)
+    records, warnings, repeated = without_repeats(records)
+    if repeated:
+        provenance = {**(provenance or {}), 'repeated_bags': repeated}
     period_s = settings.tdot_period_s
-    cleaned, warnings = [], []
+    cleaned = []
     glitched: dict[str, Any] = {}
     dropped: dict[str, Any] = {}
     for record in records:
