@@ -77,7 +77,9 @@ def evaluate_command(
 def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) -> list[str]:
     """Say when the calibrated-range guard limited or extrapolated the correction of a run."""
     notes = []
-    total = max(counters.imu_total, 1)
+    # the samples whose correction was computed (the counts below are of those; a message
+    # sent twice, dropped, is not one)
+    total = max(counters.imu_corrected, 1)
     model = coeffs.model
     t_rng, r_rng = model.temperature_range_degC, model.tdot_range_degC_per_min
     for count, text in (

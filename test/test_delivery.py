@@ -1,4 +1,6 @@
-"""A gyro delivered in bursts, behind its temperature: corrected, not held at nothing.
+"""How messages are delivered: in bursts, out of order, twice.
+
+A gyro delivered in bursts, behind its temperature, is corrected, not held at nothing:
 
 A driver or a recorder that delivers in bursts (a buffered serial link, a bag recorded over a
 network) hands the node 20 s of temperature before the gyro of those 20 s, so the first gyro
@@ -208,3 +210,38 @@ def test_compensate_says_when_time_jumps_restarted_the_correction(
     jumps = f'{int(again.sum())} time jumps'
     assert len(warnings) == 1 and jumps in warnings[0], warnings
     assert 'before the first temperature or after a time jump' in said.out
+
+
+def test_evaluate_notes_count_a_message_sent_twice_once(
+    tmp_path: Path, short_cycle: SimulatedRun, short_cycle_fast: SimulatedRun
+) -> None:
+    """The share of samples whose Tdot left the calibrated range, with every gyro message twice."""
+    run = short_cycle_fast
+    twice = tmp_path / 'twice'
+    with BagWriter(twice, 'mcap') as writer:
+        writer.add_topic('/imu/temperature', TEMPERATURE_TYPE)
+        writer.add_topic('/imu/data_raw', IMU_TYPE)
+        events = [
+            (round(t * 1e9), 0, '/imu/temperature', bagio.make_temperature(round(t * 1e9), 'f', v))
+            for t, v in zip(run.temp_stamps_s, run.temperature_degC, strict=True)
+        ]
+        for t, w in zip(run.imu_stamps_s, run.rates_rad_s, strict=True):
+            ns = round(t * 1e9)
+            events += [(ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w))] * 2
+        for ns, _, topic, msg in sorted(events, key=lambda e: (e[0], e[1])):
+            writer.write(topic, ns, msg)
+    plain = write_run(tmp_path / 'plain', 'mcap', run)
+    coeffs = tmp_path / 'c.yaml'  # fitted on a 0.5 degC/min cycle: the 1 degC/min one leaves it
+    assert (
+        commands.calibrate_command(
+            [write_run(tmp_path / 'cal', 'mcap', short_cycle)], coeffs, stdout=io.StringIO()
+        )
+        == 0
+    )
+    notes = []
+    for bag in (twice, plain):
+        said = io.StringIO()
+        assert commands.evaluate_command([bag], coeffs, stdout=said) == 0
+        lines = said.getvalue().splitlines()  # 'note: <bag>: <text>'
+        notes.append([line.split(': ', 2)[2] for line in lines if line.startswith('note:')])
+    assert notes[0] and notes[0] == notes[1], notes
