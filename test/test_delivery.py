@@ -245,3 +245,22 @@ def test_evaluate_notes_count_a_message_sent_twice_once(
         lines = said.getvalue().splitlines()  # 'note: <bag>: <text>'
         notes.append([line.split(': ', 2)[2] for line in lines if line.startswith('note:')])
     assert notes[0] and notes[0] == notes[1], notes
+
+
+def test_compensate_refuses_a_bag_it_reads_no_gyro_message_from(
+    tmp_path: Path, short_cycle_fast: SimulatedRun, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An empty gyro topic: one ERROR line and no output, not an empty bag and status 0."""
+    run = short_cycle_fast
+    bag = tmp_path / 'no_gyro'
+    with BagWriter(bag, 'sqlite3') as writer:
+        writer.add_topic('/imu/temperature', TEMPERATURE_TYPE)
+        writer.add_topic('/imu/data_raw', IMU_TYPE)
+        for t, v in zip(run.temp_stamps_s[:100], run.temperature_degC[:100], strict=True):
+            ns = round(t * 1e9)
+            writer.write('/imu/temperature', ns, bagio.make_temperature(ns, 'f', v))
+    out = tmp_path / 'out'
+    assert cli.main(['compensate', str(bag), '--coeffs', str(COEFFS), '-o', str(out)]) == 1
+    errors = [e for e in capsys.readouterr().err.splitlines() if e.startswith('ERROR: ')]
+    assert len(errors) == 1 and 'no gyro message' in errors[0], errors
+    assert not out.exists()

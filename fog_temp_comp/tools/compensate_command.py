@@ -188,9 +188,12 @@ def _replay_atomically(
                 salvage,
             ):
                 result = run.into(target, source, salvage)
-        if in_bag.is_file() and out_bag.suffix == {'mcap': '.mcap', 'sqlite3': '.db3'}.get(
-            run.fmt
-        ):
+        if not result[0][1].imu_total:  # an output without a corrected gyro is not a result
+            raise BagError(
+                f'{in_bag}: no gyro message was read (an empty gyro topic, or a bag whose '
+                'metadata.yaml does not match its data)'
+            )
+        if in_bag.is_file() and out_bag.suffix == _FILE_SUFFIX.get(run.fmt):
             _as_single_file(target)
         return result
 
