@@ -2,10 +2,18 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from fog_temp_comp.bag.bagio import IMU_TYPE, BagWriter, make_imu, write_chamber_bag
+from fog_temp_comp.bag.bagio import (
+    IMU_TYPE,
+    TEMPERATURE_TYPE,
+    BagWriter,
+    make_imu,
+    make_temperature,
+    write_chamber_bag,
+)
 from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig
 
 #: a short chamber: 10..30 degC cycles with 10 min soaks, 1 Hz gyro and temperature
@@ -62,4 +70,40 @@ def write_unsorted_imu_bag(path: Path, fmt: str, topic: str) -> Path:
         writer.add_topic(topic, IMU_TYPE)
         for k, ns in enumerate(UNSORTED_STAMPS_NS):
             writer.write(topic, ns, make_imu(ns, f'f{k}', [k, 0, 0]))
+    return path
+
+
+#: a message to write: (log time ns, rank among equal log times, topic, message)
+Event = tuple[int, int, str, Any]
+#: the chamber topics, registered temperature first (readers break log-time ties by it)
+CHAMBER_TOPICS = {'/imu/temperature': TEMPERATURE_TYPE, '/imu/data_raw': IMU_TYPE}
+
+
+def temperature_events(
+    run: SimulatedRun, frame_id: str = 'imu_link', log: Callable[[float], int] | None = None
+) -> list[Event]:
+    """``run``'s readings on ``/imu/temperature``, logged at their stamps (or ``log(stamp_s)``)."""
+    events = []
+    for t, value in zip(run.temp_stamps_s, run.temperature_degC, strict=True):
+        ns = round(t * 1e9)
+        events.append(
+            (
+                ns if log is None else log(t),
+                0,
+                '/imu/temperature',
+                make_temperature(ns, frame_id, value),
+            )
+        )
+    return events
+
+
+def write_events(
+    path: Path, fmt: str, events: Sequence[Event], topics: dict[str, str] = CHAMBER_TOPICS
+) -> Path:
+    """A bag of ``events`` in (log time, rank) order; ``topics`` ({name: type}) added first."""
+    with BagWriter(path, fmt) as writer:
+        for topic, msgtype in topics.items():
+            writer.add_topic(topic, msgtype)
+        for ns, _, topic, msg in sorted(events, key=lambda e: (e[0], e[1])):
+            writer.write(topic, ns, msg)
     return path

@@ -22,7 +22,6 @@ from rclpy.parameter import Parameter
 from rosharness import Harness, rate_of
 
 from fog_temp_comp.bag import bagio
-from fog_temp_comp.bag.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagWriter
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.compensator import Compensator
@@ -31,7 +30,7 @@ from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.simulate import SimulatedRun
 
-from simdata import write_run
+from simdata import temperature_events, write_events, write_run
 
 COEFFS = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
 BURST_S = 20.0
@@ -109,21 +108,12 @@ def write_bursts(path: Path, run: SimulatedRun) -> Path:
     """``run`` as a bag whose log times are the ends of 20 s windows (header stamps kept)."""
     t0 = run.imu_stamps_s[0]
     log = lambda t: round((t0 + BURST_S * (np.floor((t - t0) / BURST_S) + 1)) * 1e9)  # noqa: E731
-    events = [
-        (log(t), 0, '/imu/temperature', bagio.make_temperature(round(t * 1e9), 'imu_link', v))
-        for t, v in zip(run.temp_stamps_s, run.temperature_degC, strict=True)
-    ]
+    events = temperature_events(run, log=log)
     events += [
         (log(t), 1, '/imu/data_raw', bagio.make_imu(round(t * 1e9), 'imu_link', w))
         for t, w in zip(run.imu_stamps_s, run.rates_rad_s, strict=True)
     ]
-    events.sort(key=lambda e: (e[0], e[1]))
-    with BagWriter(path, 'mcap') as writer:
-        writer.add_topic('/imu/temperature', TEMPERATURE_TYPE)
-        writer.add_topic('/imu/data_raw', IMU_TYPE)
-        for ns, _, topic, msg in events:
-            writer.write(topic, ns, msg)
-    return path
+    return write_events(path, 'mcap', events)
 
 
 @pytest.mark.parametrize('fast', [True, False])
@@ -186,21 +176,13 @@ def test_compensate_says_when_time_jumps_restarted_the_correction(
         run.imu_stamps_s < run.imu_stamps_s[0] + 660
     )
     shift_ns = 700 * 10**9  # logged 700 s later, with its own header stamps
-    bag = tmp_path / 'twice'
-    with BagWriter(bag, 'mcap') as writer:
-        writer.add_topic('/imu/temperature', TEMPERATURE_TYPE)
-        writer.add_topic('/imu/data_raw', IMU_TYPE)
-        events = [
-            (round(t * 1e9), 0, '/imu/temperature', bagio.make_temperature(round(t * 1e9), 'f', v))
-            for t, v in zip(run.temp_stamps_s, run.temperature_degC, strict=True)
-        ]
-        for k, (t, w) in enumerate(zip(run.imu_stamps_s, run.rates_rad_s, strict=True)):
-            ns = round(t * 1e9)
-            events.append((ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w)))
-            if again[k]:
-                events.append((ns + shift_ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w)))
-        for ns, _, topic, msg in sorted(events, key=lambda e: (e[0], e[1])):
-            writer.write(topic, ns, msg)
+    events = temperature_events(run)
+    for k, (t, w) in enumerate(zip(run.imu_stamps_s, run.rates_rad_s, strict=True)):
+        ns = round(t * 1e9)
+        events.append((ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w)))
+        if again[k]:
+            events.append((ns + shift_ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w)))
+    bag = write_events(tmp_path / 'twice', 'mcap', events)
     assert (
         cli.main(['compensate', str(bag), '--coeffs', str(COEFFS), '-o', str(tmp_path / 'o')]) == 0
     )
@@ -217,19 +199,11 @@ def test_evaluate_notes_count_a_message_sent_twice_once(
 ) -> None:
     """The share of samples whose Tdot left the calibrated range, with every gyro message twice."""
     run = short_cycle_fast
-    twice = tmp_path / 'twice'
-    with BagWriter(twice, 'mcap') as writer:
-        writer.add_topic('/imu/temperature', TEMPERATURE_TYPE)
-        writer.add_topic('/imu/data_raw', IMU_TYPE)
-        events = [
-            (round(t * 1e9), 0, '/imu/temperature', bagio.make_temperature(round(t * 1e9), 'f', v))
-            for t, v in zip(run.temp_stamps_s, run.temperature_degC, strict=True)
-        ]
-        for t, w in zip(run.imu_stamps_s, run.rates_rad_s, strict=True):
-            ns = round(t * 1e9)
-            events += [(ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w))] * 2
-        for ns, _, topic, msg in sorted(events, key=lambda e: (e[0], e[1])):
-            writer.write(topic, ns, msg)
+    events = temperature_events(run)
+    for t, w in zip(run.imu_stamps_s, run.rates_rad_s, strict=True):
+        ns = round(t * 1e9)
+        events += [(ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w))] * 2
+    twice = write_events(tmp_path / 'twice', 'mcap', events)
     plain = write_run(tmp_path / 'plain', 'mcap', run)
     coeffs = tmp_path / 'c.yaml'  # fitted on a 0.5 degC/min cycle: the 1 degC/min one leaves it
     assert (
@@ -252,13 +226,7 @@ def test_compensate_refuses_a_bag_it_reads_no_gyro_message_from(
 ) -> None:
     """An empty gyro topic: one ERROR line and no output, not an empty bag and status 0."""
     run = short_cycle_fast
-    bag = tmp_path / 'no_gyro'
-    with BagWriter(bag, 'sqlite3') as writer:
-        writer.add_topic('/imu/temperature', TEMPERATURE_TYPE)
-        writer.add_topic('/imu/data_raw', IMU_TYPE)
-        for t, v in zip(run.temp_stamps_s[:100], run.temperature_degC[:100], strict=True):
-            ns = round(t * 1e9)
-            writer.write('/imu/temperature', ns, bagio.make_temperature(ns, 'f', v))
+    bag = write_events(tmp_path / 'no_gyro', 'sqlite3', temperature_events(run)[:100])
     out = tmp_path / 'out'
     assert cli.main(['compensate', str(bag), '--coeffs', str(COEFFS), '-o', str(out)]) == 1
     errors = [e for e in capsys.readouterr().err.splitlines() if e.startswith('ERROR: ')]

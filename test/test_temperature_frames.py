@@ -22,7 +22,7 @@ from rclpy.parameter import Parameter
 from rosharness import Harness, core_output, make_temperature, rate_of
 
 from fog_temp_comp.bag import bagio
-from fog_temp_comp.bag.bagio import FORMATS, IMU_TYPE, TEMPERATURE_TYPE, BagWriter
+from fog_temp_comp.bag.bagio import FORMATS, IMU_TYPE
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.frame_lock import SWITCH_READINGS, WAIT_READINGS, FrameLock
@@ -30,7 +30,7 @@ from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.simulate import SimulatedRun
 
-from simdata import bag_path, write_run
+from simdata import CHAMBER_TOPICS, bag_path, temperature_events, write_events, write_run
 
 #: the sensors on the topic, in the order the driver publishes them each second, and their
 #: offsets from the coil sensor fog_x (degC): the other coils and the board
@@ -144,13 +144,7 @@ def write_sensors(path: Path, fmt: str, run: SimulatedRun) -> Path:
         for k, (frame, offset) in enumerate(SENSORS.items()):
             msg = bagio.make_temperature(ns, frame, value + offset)
             events.append((ns, 1 + k, '/imu/temperature', msg))
-    events.sort(key=lambda e: (e[0], e[1]))
-    with BagWriter(path, fmt) as writer:
-        writer.add_topic('/imu/data_raw', IMU_TYPE)
-        writer.add_topic('/imu/temperature', TEMPERATURE_TYPE)
-        for ns, _, topic, msg in events:
-            writer.write(topic, ns, msg)
-    return path
+    return write_events(path, fmt, events, {'/imu/data_raw': IMU_TYPE, **CHAMBER_TOPICS})
 
 
 def notes_of(capsys: pytest.CaptureFixture[str]) -> list[str]:
@@ -224,21 +218,12 @@ def test_temp_frame_id_chooses_another_sensor(
 
 def write_two_gyros(path: Path, run: SimulatedRun, rates_b: np.ndarray) -> Path:
     """``run`` as gyro fog_a, and a second gyro fog_b of ``rates_b`` on the same Imu topic."""
-    events = []
+    events = temperature_events(run, 'fog_a')
     for t, a, b in zip(run.imu_stamps_s, run.rates_rad_s, rates_b, strict=True):
         ns = round(t * 1e9)
         events.append((ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'fog_b', b)))
         events.append((ns + 1000, 2, '/imu/data_raw', bagio.make_imu(ns + 1000, 'fog_a', a)))
-    for t, value in zip(run.temp_stamps_s, run.temperature_degC, strict=True):
-        ns = round(t * 1e9)
-        events.append((ns, 0, '/imu/temperature', bagio.make_temperature(ns, 'fog_a', value)))
-    events.sort(key=lambda e: (e[0], e[1]))
-    with BagWriter(path, 'mcap') as writer:
-        writer.add_topic('/imu/data_raw', IMU_TYPE)
-        writer.add_topic('/imu/temperature', TEMPERATURE_TYPE)
-        for ns, _, topic, msg in events:
-            writer.write(topic, ns, msg)
-    return path
+    return write_events(path, 'mcap', events)
 
 
 def test_two_gyros_on_one_topic_are_calibrated_and_evaluated_one_at_a_time(
