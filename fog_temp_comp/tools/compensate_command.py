@@ -21,6 +21,7 @@ from typing import Any, TextIO
 
 from fog_temp_comp.bag import bagio, mcapwrite
 from fog_temp_comp.bag.bagio import BagError, BagWriter
+from fog_temp_comp.bag.one_clock import on_one_clock
 from fog_temp_comp.bag.repair import repaired_bag
 from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.stream import resolve_any_topic
@@ -159,12 +160,12 @@ def _on_one_clock(
     run: _Compensate, in_bag: Path, out_bag: Path, strict: bool
 ) -> tuple[tuple[int, CompensatorCounters], Compensator]:
     """:func:`_replay_atomically`, again by receive time where the clocks are hours apart."""
-    try:
-        return _replay_atomically(run, in_bag, out_bag, strict)
-    except ClocksApartError as apart:
-        print(apart.note(in_bag), file=sys.stderr)
-        run.by_receive = True
-        return _replay_atomically(run, in_bag, out_bag, strict)
+
+    def replay(bag: Path, time_source: str) -> tuple[tuple[int, CompensatorCounters], Compensator]:
+        run.by_receive = time_source == 'receive'
+        return _replay_atomically(run, bag, out_bag, strict)
+
+    return on_one_clock(replay, in_bag, time_source='receive' if run.by_receive else 'header')
 
 
 def _replay_atomically(
