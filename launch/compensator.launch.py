@@ -3,8 +3,8 @@
     ros2 launch fog_temp_comp compensator.launch.py coefficients_file:=/path/to/coeffs.yaml
     ros2 launch fog_temp_comp compensator.launch.py params_file:=my.yaml namespace:=fog_x
 
-``params_file`` defaults to the installed ``config/compensator.yaml``; ``coefficients_file``,
-when given, overrides the one the params file names.
+``params_file`` defaults to the installed ``config/compensator.yaml``; ``coefficients_file``
+is required unless the params file names one (the shipped one does not), and overrides it.
 """
 
 import os
@@ -48,8 +48,8 @@ def generate_launch_description():
             DeclareLaunchArgument(
                 'coefficients_file',
                 default_value='',
-                description='coefficients YAML from `fog-temp-comp calibrate`; empty = as in '
-                'the params file',
+                description='coefficients YAML from `fog-temp-comp calibrate` of your unit '
+                '(required unless params_file sets it; the shipped one does not)',
             ),
             DeclareLaunchArgument(
                 'namespace', default_value='', description='namespace of the topics'

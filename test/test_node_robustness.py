@@ -104,6 +104,29 @@ def test_diagnostics_report_state_values_and_provenance(harness: Harness) -> Non
     assert float(values['temperature_stale_after_s']) == 10.0  # the file has no interval
     assert values['imu_corrected'] == '1'
     assert status.hardware_id == 'imu_link'
+    assert status.name == 'fog_temp_compensator: FOG temperature compensation'
+
+
+def test_diagnostics_name_the_node_with_its_namespace(
+    ros_context: object, coeffs_file: Path
+) -> None:
+    """Two gyros' compensators in their namespaces are told apart on the shared /diagnostics."""
+    names = []
+    for namespace in ('/fog_x', '/fog_y'):
+        node = CompensatorNode(
+            context=ros_context,
+            namespace=namespace,
+            parameter_overrides=[Parameter('coefficients_file', value=str(coeffs_file))],
+        )
+        h = Harness(ros_context, node, namespace=namespace)
+        try:
+            names.append(h.diagnose().name)
+        finally:
+            h.close()
+    assert names == [
+        'fog_x/fog_temp_compensator: FOG temperature compensation',
+        'fog_y/fog_temp_compensator: FOG temperature compensation',
+    ]
 
 
 def test_diagnostics_timer_publishes_periodically(ros_context: object, coeffs_file: Path) -> None:
@@ -691,10 +714,16 @@ def test_runtime_reload_of_coefficients(
     data['axes']['x']['d0_deg_h'] = -20.0
     other.write_text(yaml.safe_dump(data))
     assert node.set_parameters([Parameter('coefficients_file', value=str(other))])[0].successful
+    expected = load(other).model.drift_deg_h(25.0, 0.0) * RAD_S_PER_DEG_H
+    # the gyro goes on at once with the new coefficients, not waiting for the next temperature
+    out = harness.send_imu(T0 + 0.2, RATE)
+    assert out is not None
+    assert_allclose(rate_of(out), RATE - expected, rtol=1e-12)
     harness.send_temperature(T0 + 1, 25.0)
     out = harness.send_imu(T0 + 1.1, RATE)
-    expected = load(other).model.drift_deg_h(25.0, 0.0) * RAD_S_PER_DEG_H
     assert_allclose(rate_of(out), RATE - expected, rtol=1e-12)
+    counters = node.compensator.status.counters
+    assert (counters.imu_awaiting_temperature, counters.temperature_accepted) == (0, 2)
     # a broken file is refused with the reason, and the running coefficients stay
     missing = node.set_parameters([Parameter('coefficients_file', value='/nope.yaml')])[0]
     assert not missing.successful and 'cannot read' in missing.reason

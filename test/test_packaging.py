@@ -268,7 +268,7 @@ def compensator_process(
     tmp_path: Path,
     request: pytest.FixtureRequest,
 ) -> Iterator[tuple[subprocess.Popen[bytes], Callable[[], str]]]:
-    """The installed node with the installed example parameters, on each executor."""
+    """The installed node with the installed parameters and example coefficients, per executor."""
     params = install_base / PACKAGE / 'share' / PACKAGE / 'config' / 'compensator.yaml'
     log = tmp_path / 'compensator.log'
     with log.open('wb') as out:
@@ -278,6 +278,8 @@ def compensator_process(
                 '--ros-args',
                 '--params-file',
                 str(params),
+                '-p',
+                'coefficients_file:=package://fog_temp_comp/config/example_coefficients.yaml',
                 '-p',
                 f'executor:={request.param}',
             ],

@@ -88,6 +88,8 @@ class Compensator(_BlockCorrection):
         self._estimator: TdotEstimator = make_estimator(denoise)
         self.status = CompensatorStatus()
         self._correction = (0.0, 0.0, 0.0)  # rad/s
+        #: whether ``_correction`` was computed from a temperature: what holding may hold
+        self._correction_valid = False
         self._last_rates: tuple[float, float, float] = (math.nan, math.nan, math.nan)  # rad/s
         self._pending: list[tuple[float, float]] = []  # candidate samples of a temperature step
         self._last_temperature = math.nan
@@ -150,10 +152,15 @@ class Compensator(_BlockCorrection):
         return self._stale_after_s
 
     def reset(self) -> None:
-        """Forget the temperature history (keeps the counters)."""
+        """Forget the temperature history (keeps the counters and the last correction).
+
+        The last correction stays what a stale temperature holds: a temperature sensor whose
+        clock jumps back resets the state, and its next readings may be stale against the gyro.
+        """
         self._estimator.reset()
-        self.status = CompensatorStatus(counters=self.status.counters)
-        self._correction = (0.0, 0.0, 0.0)
+        self.status = CompensatorStatus(
+            counters=self.status.counters, correction_deg_h=self.status.correction_deg_h
+        )
         self._pending = []
         self._last_temperature = math.nan
         self._held.reset()
@@ -349,13 +356,15 @@ class Compensator(_BlockCorrection):
                     counters.imu_awaiting_temperature += 1
                     return None
             counters.imu_uncorrected += 1
-            self._set_correction((0.0, 0.0, 0.0))
+            self._set_correction((0.0, 0.0, 0.0), valid=False)
             return (x, y, z)
         # stale: older than the gyro by more; a temperature ahead of the gyro (a driver that
         # delivers the gyro late, in bursts) is the newest there is, not stale
         if stamp_ok and stamp_s - status.last_temperature_stamp_s > self._stale_after_s:
             status.temperature_stale = True
-            if guard.stale_policy == 'none':
+            if guard.stale_policy == 'none' or not self._correction_valid:
+                # nothing to hold: no correction computed yet (a first temperature far older
+                # than the gyro) or none since the gyro waited for temperature
                 counters.imu_uncorrected += 1
                 return (x, y, z)
             counters.imu_held += 1
@@ -375,7 +384,11 @@ class Compensator(_BlockCorrection):
             bx, by, bz = self.rest.applied_rad_s
         return (x - bx, y - by, z - bz)
 
-    def _set_correction(self, correction_deg_h: tuple[float, float, float]) -> None:
+    def _set_correction(
+        self, correction_deg_h: tuple[float, float, float], valid: bool = True
+    ) -> None:
+        """The drift (deg/h) subtracted from now on; ``valid``: computed from a temperature."""
+        self._correction_valid = valid
         self.status.correction_deg_h = correction_deg_h
         k = RAD_S_PER_DEG_H
         self._correction = (

@@ -48,7 +48,8 @@ class _BlockCorrection:
     # the compensator's per-message methods, which the block path runs or falls back on
     add_temperature: Callable[[float, float], bool]
     correct_xyz: Callable[..., tuple[float, float, float] | None]
-    _set_correction: Callable[[tuple[float, float, float]], None]
+    _correction_valid: bool
+    _set_correction: Callable[..., None]
 
     def correct_block(
         self,
@@ -256,40 +257,40 @@ class _BlockCorrection:
         # stamp_s - status.last_temperature_stamp_s > self._stale_after_s
         stale = has & (t - last_s[seg] > self._stale_after_s)
         fresh = has & ~stale
-        n_stale = int(np.count_nonzero(stale))
+        # the rows that set the correction: no temperature (zero), fresh with an estimate
+        update = np.flatnonzero(fresh & ok_s[seg])
+        setter = ~has
+        setter[update] = True
+        source = np.maximum.accumulate(np.where(setter, np.arange(n), -1))
+        # held: stale where a correction computed from a temperature is there to hold
+        # (not self._correction_valid: none yet); the others pass through uncorrected
+        held = stale & (guard.stale_policy == 'hold')
+        held &= np.where(source >= 0, has[np.maximum(source, 0)], self._correction_valid)
+        n_held = int(np.count_nonzero(held))
         n_fresh = int(np.count_nonzero(fresh))
-        # no temperature yet: never here (correct_interleaved takes the start-up one at a time)
-        counters.imu_uncorrected += n - n_stale - n_fresh
-        if guard.stale_policy == 'none':
-            counters.imu_uncorrected += n_stale
-        else:
-            counters.imu_held += n_stale
+        counters.imu_uncorrected += n - n_held - n_fresh
+        counters.imu_held += n_held
         counters.imu_corrected += n_fresh
         if has.any():
             last_has = int(np.flatnonzero(has)[-1])
             if not any(accepted[seg[last_has] :]):  # no temperature accepted after it
                 status.temperature_stale = bool(stale[last_has])
-        # the rows that set the correction: no temperature (zero), fresh with an estimate
-        update = np.flatnonzero(fresh & ok_s[seg])
         rows = seg[update]
         deg_h = self._drift_deg_h(
             t[update], e_stamp_s[rows], e_temp_s[rows], e_tdot_s[rows], e_lag_s[rows]
         )
         table = np.zeros((n, 3))
         table[update] = deg_h * RAD_S_PER_DEG_H
-        setter = ~has
-        setter[update] = True
-        source = np.maximum.accumulate(np.where(setter, np.arange(n), -1))
         applied = np.where((source >= 0)[:, None], table[source], carried)
         out = rates - applied
-        passed = ~has if guard.stale_policy == 'hold' else ~fresh
+        passed = ~(fresh | held)
         out[passed] = rates[passed]
         if setter.any():
             last = int(np.flatnonzero(setter)[-1])
             if has[last]:
                 self._set_correction(tuple(deg_h[-1].tolist()))
             else:
-                self._set_correction((0.0, 0.0, 0.0))
+                self._set_correction((0.0, 0.0, 0.0), valid=False)
         return out, kept
 
     def _snapshot(self) -> tuple[bool, float, bool, float, float, float, float]:

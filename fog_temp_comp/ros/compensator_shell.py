@@ -19,6 +19,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
@@ -131,6 +132,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         #: temperature stamps against the gyro's latest on arrival: two clocks, seen live
         self._arrival = ArrivalOffsets()
         self._imu_total_at_temperature = 0
+        #: the last temperature reading the compensator accepted: (stamp s, degC)
+        self._last_reading: tuple[float, float] | None = None
         self._load_learned_bias()
 
     def _create_output(self, *args: Any, **kwargs: Any) -> Publisher:
@@ -214,6 +217,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             self.compensator = Compensator(
                 config.coefficients.model, config.settings, config.guard, config.rest
             )
+            if self._last_reading is not None:  # the gyro goes on corrected, not waiting
+                self.compensator.add_temperature(*self._last_reading)
             self.compensator.status.counters = counters
             self._load_learned_bias()
             self.reconfigurations += 1
@@ -256,7 +261,9 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             stamp_s = self._unset_stamp_s()
         status = self.compensator.status
         was_ready = status.estimator_ready
-        if self.compensator.add_temperature(stamp_s, temperature.degC(msg)):
+        degC = temperature.degC(msg)
+        if self.compensator.add_temperature(stamp_s, degC):
+            self._last_reading = (stamp_s, degC)
             self._track_warm_up(stamp_s, was_ready)
             imu_total = status.counters.imu_total
             if imu_total > self._imu_total_at_temperature:  # the gyro flows: compare clocks
@@ -308,7 +315,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         if expected_frame and msg.header.frame_id != expected_frame:
             self.frame_mismatches += 1
             if self._require_frame_match:
-                self._publisher.publish(msg)
+                self._send(self._publisher, msg)
                 return
         compensator = self.compensator
         # a header stamp of 0 gets the core's current correction
@@ -323,7 +330,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         w.x, w.y, w.z = rate
         if self._inflate_covariance:
             self._inflate(msg)
-        self._publisher.publish(msg)
+        self._send(self._publisher, msg)
 
     def _inflate(self, msg: Imu) -> None:
         cov = msg.angular_velocity_covariance
@@ -372,11 +379,23 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self._last_report_time = now
         status = DiagnosticStatus(
             level=bytes([report.level]),
-            name=f'{self.get_name()}: FOG temperature compensation',
+            name=f'{self.get_fully_qualified_name().lstrip("/")}: FOG temperature compensation',
             message=report.message,
             hardware_id=self.config.coefficients.frame_id,
             values=[KeyValue(key=k, value=v) for k, v in report.values],
         )
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
-        self._diag_pub.publish(array)
+        self._send(self._diag_pub, array)
+
+    def _send(self, publisher: Publisher, msg: Any) -> None:
+        """Publish ``msg``; dropped without a word once rclpy is shutting down.
+
+        A SIGINT or SIGTERM invalidates the context while a callback may still be running:
+        its publish would raise, and the executor would print the traceback and exit with 1.
+        """
+        try:
+            publisher.publish(msg)
+        except RCLError:
+            if self.context.ok():
+                raise

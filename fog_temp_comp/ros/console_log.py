@@ -74,7 +74,7 @@ class ConsoleLogMixin(ParametersMixin):
         if uncorrected and not status.has_temperature:
             log.warning(
                 f'no temperature received on {topic}: gyro passed through uncorrected '
-                f'({uncorrected} messages)',
+                f'({counters.imu_uncorrected} messages so far)',
                 throttle_duration_sec=every,
             )
         if counters.temperature_rejected > previous.temperature_rejected:
@@ -96,7 +96,12 @@ class ConsoleLogMixin(ParametersMixin):
             log.error(
                 f'fallback to pass-through: temperature on {topic} stale, last sample '
                 f'{age_s:.1f} s before the gyro stamp ({_stale_rule(self.compensator)}, '
-                'stale_policy none): gyro not corrected',
+                + (
+                    'stale_policy none'
+                    if guard.stale_policy == 'none'
+                    else 'no correction computed yet to hold'
+                )
+                + '): gyro not corrected',
                 throttle_duration_sec=every,
             )
         if self._arrival.two_clocks:

@@ -201,7 +201,7 @@ def _temperature_reasons(
             reasons.append((WARN, 'waiting for gyro and temperature messages'))
         return reasons
     if status.temperature_stale:
-        reasons.append((WARN, 'temperature stale: ' + _stale_action(counters, previous)))
+        reasons.append(_stale_reason(counters, previous))
     if not status.estimator_ready:
         reasons.append((WARN, 'Tdot filter warming up'))
     if status.temperature_clamped:
@@ -280,10 +280,13 @@ def _rest_values(rest: RestStatus) -> list[tuple[str, str]]:
     return values
 
 
-def _stale_action(counters: CompensatorCounters, previous: CompensatorCounters) -> str:
+def _stale_reason(counters: CompensatorCounters, previous: CompensatorCounters) -> tuple[int, str]:
+    """(level, text) of a stale temperature, by what the gyro messages since got."""
+    if counters.imu_uncorrected > previous.imu_uncorrected:
+        return WARN, 'temperature stale: gyro passed through uncorrected'
     if counters.imu_held > previous.imu_held:
-        return 'holding last correction'
-    return 'gyro passed through uncorrected'
+        return WARN, 'temperature stale: holding last correction'
+    return WARN, 'temperature stale'
 
 
 def _num(value: float) -> str:

@@ -72,6 +72,9 @@ def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> i
         return 1
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RCLError:  # a callback still running as SIGINT/SIGTERM invalidated the context
+        if node is None or node.context.ok():
+            raise
     finally:
         if executor is not None:
             executor.shutdown()
