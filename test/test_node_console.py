@@ -116,7 +116,8 @@ def test_temperature_missing_warns_throttled(
         'WARN',
         r'^no temperature received on /imu/temperature: gyro passed through uncorrected',
     )
-    assert lines[0].endswith('(1 messages)')
+    assert lines[0].endswith('(1 messages so far)')
+    assert lines[1].endswith('(3 messages so far)')
 
 
 def test_temperature_stale_warns_throttled(
@@ -133,6 +134,25 @@ def test_temperature_stale_warns_throttled(
         r'^temperature on /imu/temperature stale: .* holding the last correction$',
     )
     assert 'last sample 60.0 s before the gyro stamp (temperature_timeout_s 10)' in lines[0]
+
+
+def test_time_jumps_warn_throttled(
+    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Two gyros on one topic on clocks 2 s apart reset the filter at every message."""
+    h = harness_factory()
+    h.send_temperature(T0, 25.0)
+
+    def cause(k: int) -> None:
+        h.send_imu(T0 + 10 * k + 3.0, RATE)
+        h.send_imu(T0 + 10 * k + 1.0, RATE)  # the other gyro's clock, 2 s behind
+
+    lines = three_times(Console(capfd), h, cause, 'WARN', r'^time jump: ')
+    assert lines[0].startswith(
+        'time jump: a gyro or temperature stamp 1 s or more before the one before it '
+        '(1 since the last report, 1 in all): filter reset'
+    )
+    assert '(1 since the last report, 3 in all)' in lines[1]
 
 
 def test_two_clocks_warn_throttled(

@@ -104,6 +104,15 @@ class ConsoleLogMixin(ParametersMixin):
                 + '): gyro not corrected',
                 throttle_duration_sec=every,
             )
+        jumps = counters.time_jumps - previous.time_jumps
+        if jumps:
+            log.warning(
+                f'time jump: a gyro or temperature stamp {guard.time_jump_threshold_s:g} s or '
+                f'more before the one before it ({jumps} since the last report, '
+                f'{counters.time_jumps} in all): filter reset, the gyro waits for the next '
+                'temperature (a driver restarted, a bag looped, or two clocks on one topic?)',
+                throttle_duration_sec=every,
+            )
         if self._arrival.two_clocks:
             log.warning(
                 f'{topic}: {two_clocks_text(self._arrival.offset_s)}: the correction is '
