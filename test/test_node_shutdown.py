@@ -1,4 +1,6 @@
-"""A callback still running as SIGINT or SIGTERM shuts rclpy down: no traceback, exit 0.
+"""How the node stops: SIGINT/SIGTERM while a callback runs; a remapping loop at start-up.
+
+A callback still running as SIGINT or SIGTERM shuts rclpy down: no traceback, exit 0.
 
 The signal invalidates the context while the executor may be inside a callback; the
 callback's publish then raised ``RCLError`` (publisher's context is invalid), the executor
@@ -9,6 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 import rclpy
 from rclpy.context import Context
 from rclpy.parameter import Parameter
@@ -44,3 +47,25 @@ def test_callbacks_after_the_context_shut_down_do_not_raise() -> None:
         assert node.compensator.status.counters.imu_corrected == 2
     finally:
         node.destroy_node()
+
+
+@pytest.mark.parametrize(
+    'remap',
+    [
+        ['-r', 'imu/data:=imu/data_raw'],
+        ['-r', 'imu/data_raw:=/fog/out', '-r', 'imu/data:=/fog/out'],
+    ],
+)
+def test_output_remapped_onto_the_gyro_input_is_refused(remap: list[str]) -> None:
+    """A loop would correct the node's own output again and again (0, 20, 40 ... deg/h)."""
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        with pytest.raises(ValueError, match='remapped onto the gyro input'):
+            CompensatorNode(
+                context=context,
+                cli_args=['--ros-args', *remap],
+                parameter_overrides=[Parameter('coefficients_file', value=str(COEFFS))],
+            )
+    finally:
+        rclpy.try_shutdown(context=context)

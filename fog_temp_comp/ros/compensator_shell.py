@@ -115,6 +115,12 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
 
     def _configure(self) -> None:
         """Load and validate the coefficients, build the compensator (raises on bad ones)."""
+        output, gyro = self.resolve_topic_name('imu/data'), self.resolve_topic_name('imu/data_raw')
+        if output == gyro:
+            raise ValueError(
+                f'the output topic imu/data is remapped onto the gyro input {gyro}: the node '
+                'would correct its own output again and again; remap one of them elsewhere'
+            )
         self.config = self._build_config({})
         self.compensator = Compensator(
             self.config.coefficients.model,
