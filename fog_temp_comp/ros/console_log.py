@@ -60,6 +60,33 @@ class ConsoleLogMixin(ParametersMixin):
             )
         self._warm_up_start_s = None
 
+    def _log_stale(self, counters: Any, previous: Any, topic: str) -> None:
+        """The throttled lines of a stale temperature: holding, or passing through."""
+        status = self.compensator.status
+        log = self.get_logger()
+        age_s = status.last_imu_stamp_s - status.last_temperature_stamp_s
+        if counters.imu_held > previous.imu_held:
+            log.warning(
+                f'temperature on {topic} stale: last sample {age_s:.1f} s before the gyro '
+                f'stamp ({_stale_rule(self.compensator)}): holding the '
+                'last correction',
+                throttle_duration_sec=self._throttle_s,
+            )
+        uncorrected = counters.imu_uncorrected > previous.imu_uncorrected
+        if uncorrected and status.has_temperature and status.temperature_stale:
+            policy = self.compensator.guard.stale_policy
+            log.error(
+                f'fallback to pass-through: temperature on {topic} stale, last sample '
+                f'{age_s:.1f} s before the gyro stamp ({_stale_rule(self.compensator)}, '
+                + (
+                    'stale_policy none'
+                    if policy == 'none'
+                    else 'no correction computed yet to hold'
+                )
+                + '): gyro not corrected',
+                throttle_duration_sec=self._throttle_s,
+            )
+
     def _log_console(self, counters: Any, previous: Any) -> None:
         """Throttled console lines for what went wrong since the last report.
 
@@ -84,26 +111,7 @@ class ConsoleLogMixin(ParametersMixin):
                 throttle_duration_sec=every,
             )
         guard = self.compensator.guard
-        age_s = status.last_imu_stamp_s - status.last_temperature_stamp_s
-        if counters.imu_held > previous.imu_held:
-            log.warning(
-                f'temperature on {topic} stale: last sample {age_s:.1f} s before the gyro '
-                f'stamp ({_stale_rule(self.compensator)}): holding the '
-                'last correction',
-                throttle_duration_sec=every,
-            )
-        if uncorrected and status.has_temperature and status.temperature_stale:
-            log.error(
-                f'fallback to pass-through: temperature on {topic} stale, last sample '
-                f'{age_s:.1f} s before the gyro stamp ({_stale_rule(self.compensator)}, '
-                + (
-                    'stale_policy none'
-                    if guard.stale_policy == 'none'
-                    else 'no correction computed yet to hold'
-                )
-                + '): gyro not corrected',
-                throttle_duration_sec=every,
-            )
+        self._log_stale(counters, previous, topic)
         jumps = counters.time_jumps - previous.time_jumps
         if jumps:
             log.warning(
