@@ -366,7 +366,10 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             temperature_rate_hz=(counters.temperature_total - previous.temperature_total)
             / elapsed,
             stale_after_s=self.compensator.stale_after_s,
-            frame_mismatches=self.frame_mismatches,
+            frame_mismatches=(
+                self.frame_mismatches,
+                self.frame_mismatches - self._last_frame_mismatches,
+            ),
             unstamped=self.unstamped,
             temperature_stamp_offset_s=self._arrival.offset_s,
             two_clocks=self._arrival.two_clocks,

@@ -64,7 +64,7 @@ def build_report(
     imu_rate_hz: float,
     temperature_rate_hz: float,
     stale_after_s: float = math.nan,
-    frame_mismatches: int = 0,
+    frame_mismatches: tuple[int, int] = (0, 0),
     unstamped: int = 0,
     temperature_stamp_offset_s: float = math.nan,
     two_clocks: bool = False,
@@ -83,7 +83,8 @@ def build_report(
     arrival nearest zero (s) and ``two_clocks`` whether it says two clocks
     (:class:`~fog_temp_comp.core.stamp_offset.ArrivalOffsets`); ``clocks_apart_s`` the offset
     of header clocks hours apart that made the node time both on arrival (nan: it did not);
-    ``frames`` which frame_id's temperatures the node keeps.
+    ``frames`` which frame_id's temperatures the node keeps; ``frame_mismatches`` the gyro
+    messages of another frame_id in all and since the last report (which set the level).
     """
     counters = status.counters
     reasons = _temperature_reasons(status, previous)
@@ -91,7 +92,7 @@ def build_report(
         delta = getattr(counters, name) - getattr(previous, name)
         if delta > 0:
             reasons.append((WARN, f'{text} ({delta})'))
-    if frame_mismatches:
+    if frame_mismatches[1]:
         level = ERROR if require_frame_match else WARN
         action = 'passed through uncorrected' if require_frame_match else 'corrected anyway'
         reasons.append((level, f'gyro frame_id differs from calibrated one ({action})'))
@@ -117,7 +118,7 @@ def build_report(
     ]
     values += _coefficients_values(coefficients, coefficients_file)
     values += [
-        ('frame_id_mismatches', str(frame_mismatches)),
+        ('frame_id_mismatches', str(frame_mismatches[0])),
         ('temperature_unstamped', str(unstamped)),
         *frame_values,
     ]
