@@ -115,10 +115,11 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
 
     def _configure(self) -> None:
         """Load and validate the coefficients, build the compensator (raises on bad ones)."""
-        output, gyro = self.resolve_topic_name('imu/data'), self.resolve_topic_name('imu/data_raw')
-        if output == gyro:
+        resolve = getattr(self, 'resolve_topic_name', None)  # guarded: not in every rclpy
+        if resolve is not None and resolve('imu/data') == resolve('imu/data_raw'):
             raise ValueError(
-                f'the output topic imu/data is remapped onto the gyro input {gyro}: the node '
+                f'the output topic imu/data is remapped onto the gyro input '
+                f'{resolve("imu/data_raw")}: the node '
                 'would correct its own output again and again; remap one of them elsewhere'
             )
         self.config = self._build_config({})
