@@ -19,14 +19,15 @@ setup(
     ],
     install_requires=[
         'setuptools',
-        'numpy',
-        'scipy',
-        'PyWavelets',
-        'PyYAML',
+        # the minimums are Ubuntu 22.04's (ROS 2 Humble's rosdep keys), checked on Python 3.10
+        'numpy>=1.21.5',
+        'scipy>=1.8.0',
+        'PyWavelets>=1.1.1',
+        'PyYAML>=5.4.1',
         'rosbags',
         'apsw',  # rosbags' SQLite binding; sqlitescan reads with it too
         'backports.zstd; python_version < "3.14"',  # MCAP chunks (rosbags uses it too)
-        'matplotlib',
+        'matplotlib>=3.5.1',
         'allantools',
         'dask[distributed]',  # fleet commands only (imported when they run)
     ],

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 from scipy import special, stats
+from scipy.integrate import trapezoid
 
 from fog_temp_comp.core.quantized_likelihood import (
     erfcx,
@@ -67,9 +68,9 @@ def posterior_by_quadrature(m, s2, y, q, sigma2):
     s = math.sqrt(sigma2)
     like = stats.norm.cdf((y + q / 2 - z) / s) - stats.norm.cdf((y - q / 2 - z) / s)
     w = prior * like
-    mass = np.trapezoid(w, z)
-    mean = np.trapezoid(z * w, z) / mass
-    return mean, np.trapezoid((z - mean) ** 2 * w, z) / mass, math.log(mass)
+    mass = trapezoid(w, z)
+    mean = trapezoid(z * w, z) / mass
+    return mean, trapezoid((z - mean) ** 2 * w, z) / mass, math.log(mass)
 
 
 @pytest.mark.parametrize(

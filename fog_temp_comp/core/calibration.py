@@ -477,6 +477,6 @@ def records_provenance(records: Sequence[ChamberRecord]) -> dict[str, Any]:
         'bags': [str(r.path) for r in records],
         'gyro_topics': sorted({r.imu_topic for r in records}),
         'temperature_topics': sorted({r.temp_topic for r in records}),
-        'created_utc': dt.datetime.now(dt.UTC).strftime('%Y-%m-%dT%H:%M:%SZ'),
+        'created_utc': dt.datetime.now(dt.timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ'),
         'package_version': __version__,
     }

@@ -249,7 +249,7 @@ def _store(out_dir: Path, result: UnitResult) -> dict[str, Any]:
     state = {
         'digest': result.digest,
         'status': result.status,
-        'finished_utc': dt.datetime.now(dt.UTC).strftime('%Y-%m-%dT%H:%M:%S.%fZ'),
+        'finished_utc': dt.datetime.now(dt.timezone.utc).strftime('%Y-%m-%dT%H:%M:%S.%fZ'),
         'row': row,
     }
     _replace_text(state_path, json.dumps(state, indent=1))

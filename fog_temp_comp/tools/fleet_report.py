@@ -138,7 +138,7 @@ def _page(rows: Sequence[dict[str, Any]], figures: Sequence[tuple[str, str]]) ->
         f'<p>{len(rows)} units: {counts["ok"]} calibrated, {counts["failed"]} failed'
         + (f', {counts["pending"]} not run' if counts['pending'] else '')
         + f'. fog_temp_comp {_e(__version__)}, '
-        f'{dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")}.</p>',
+        f'{dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}.</p>',
         f'<h2>Outliers ({len(flagged)})</h2><p>Robust rule: modified z-score '
         f'0.6745 (x - median) / MAD beyond {OUTLIER_Z} on a coefficient, or above it on the '
         'residual std, over the calibrated units.</p>',

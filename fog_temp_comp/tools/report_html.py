@@ -64,7 +64,7 @@ def html_page(
     context: Mapping[str, str],
 ) -> str:
     """The whole ``index.html`` text: context, warnings, fit, figures and the tables."""
-    created = dt.datetime.now(dt.UTC).strftime('%Y-%m-%d %H:%M:%SZ')
+    created = dt.datetime.now(dt.timezone.utc).strftime('%Y-%m-%d %H:%M:%SZ')
     out = [
         '<!DOCTYPE html>',
         '<html lang="en"><head><meta charset="utf-8">',

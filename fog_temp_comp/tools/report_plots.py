@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
+import matplotlib
 import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
@@ -227,19 +228,30 @@ def _plot_timeseries(
         ax.grid(True, alpha=0.3)
         handles = [h_raw, h_cor, h_temp]
     axes[-1, 0].set_xlabel('time since start of run [h]')
-    fig.legend(
+    save_options = _legend_below(
+        fig,
         handles,
         [
             'raw (before), mean removed',
             'compensated (after), mean removed',
             f'temperature ({TEMPERATURE_WINDOW_S:g} s means, right axis)',
         ],
-        loc='outside lower center',
-        ncols=3,
-        fontsize=9,
     )
     fig.suptitle(f'{run.name}: gyro output in {PLOT_WINDOW_S:g} s means, before and after')
-    fig.savefig(path)
+    fig.savefig(path, **save_options)
+
+
+def _legend_below(fig: Figure, handles: list[Any], labels: list[str]) -> dict[str, Any]:
+    """One row of legend below the axes; the ``savefig`` options that keep it in the file.
+
+    matplotlib 3.7 and later make room for it in the constrained layout; older ones (Ubuntu
+    22.04's 3.5, what ROS 2 Humble users have) put it under the figure's edge, saved tight.
+    """
+    if tuple(int(part) for part in matplotlib.__version__.split('.')[:2]) >= (3, 7):
+        fig.legend(handles, labels, loc='outside lower center', ncols=3, fontsize=9)
+        return {}
+    fig.legend(handles, labels, loc='upper center', bbox_to_anchor=(0.5, 0.0), ncol=3, fontsize=9)
+    return {'bbox_inches': 'tight'}
 
 
 def _plot_allan(

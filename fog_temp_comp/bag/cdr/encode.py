@@ -50,11 +50,16 @@ def _encode(
             stamp = 4
         size = float_offset + 8 * n_floats
         names = ['sec', 'nanosec', 'length', 'floats']
-        formats: list[Any] = [order + 'i4', order + 'u4', order + 'u4', (order + 'u8', n_floats)]
+        formats: list[Any] = [
+            order + 'i4',
+            order + 'u4',
+            order + 'u4',
+            (order + 'u8', (n_floats,)),
+        ]
         offsets = [stamp, stamp + 4, stamp + 8, float_offset]
         if text:
             names.append('text')
-            formats.append(('u1', len(text)))
+            formats.append(('u1', (len(text),)))
             offsets.append(head)
         if ros1 and header_seq:
             names.append('seq')
