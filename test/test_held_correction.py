@@ -65,7 +65,7 @@ def test_nothing_to_hold_passes_through_uncorrected(policy: str) -> None:
     got, kept = blocks.correct_interleaved(
         t,
         np.tile(RATE, (200, 1)),
-        T0 - 1000.0 + t[::10] - T0,
+        t[::10] - 1000.0,  # the stamps first_temperature_far_behind gives
         np.full(20, 25.0),
         np.arange(0, 200, 10),
     )
