@@ -93,6 +93,7 @@ class Compensator(_BlockCorrection):
         self._last_rates: tuple[float, float, float] = (math.nan, math.nan, math.nan)  # rad/s
         self._pending: list[tuple[float, float]] = []  # candidate samples of a temperature step
         self._last_temperature = math.nan
+        self._last_reading_stamp_s = math.nan
         # scalar evaluation of the model (the per-message hot path; no small numpy arrays)
         self._term_functions: list[Callable[[float, float, float], float]] = [
             scalar_term_function(term) for term in model.terms
@@ -138,6 +139,13 @@ class Compensator(_BlockCorrection):
         """The stale age and the extrapolation horizon (s) of the guard."""
         self._stale_after_s = stale_after_s(self._guard, self.denoise.temperature_period_s)
         self._horizon_s = 2 * self.denoise.tdot_period_s + self._stale_after_s
+
+    @property
+    def last_reading(self) -> tuple[float, float] | None:
+        """The last temperature reading accepted since the last reset: (stamp s, degC)."""
+        if math.isnan(self._last_temperature):
+            return None
+        return (self._last_reading_stamp_s, self._last_temperature)
 
     @property
     def stale_after_s(self) -> float:
@@ -209,6 +217,7 @@ class Compensator(_BlockCorrection):
             return False
         counters.temperature_accepted += 1
         self._last_temperature = temperature_degC
+        self._last_reading_stamp_s = stamp_s
         if self.rest is not None:
             self.rest.temperature_degC = temperature_degC
         self._held.real(stamp_s, temperature_degC)

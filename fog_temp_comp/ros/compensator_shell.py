@@ -139,8 +139,6 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         #: temperature stamps against the gyro's latest on arrival: two clocks, seen live
         self._arrival = ArrivalOffsets()
         self._imu_total_at_temperature = 0
-        #: the last temperature reading the compensator accepted: (stamp s, degC)
-        self._last_reading: tuple[float, float] | None = None
         self._load_learned_bias()
 
     def _create_output(self, *args: Any, **kwargs: Any) -> Publisher:
@@ -221,11 +219,12 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self.config = config
         if rebuild:
             counters = self.compensator.status.counters
+            last_reading = self.compensator.last_reading
             self.compensator = Compensator(
                 config.coefficients.model, config.settings, config.guard, config.rest
             )
-            if self._last_reading is not None:  # the gyro goes on corrected, not waiting
-                self.compensator.add_temperature(*self._last_reading)
+            if last_reading is not None:  # the gyro goes on corrected, not waiting
+                self.compensator.add_temperature(*last_reading)
             self.compensator.status.counters = counters
             self._load_learned_bias()
             self.reconfigurations += 1
@@ -268,9 +267,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             stamp_s = self._unset_stamp_s()
         status = self.compensator.status
         was_ready = status.estimator_ready
-        degC = temperature.degC(msg)
-        if self.compensator.add_temperature(stamp_s, degC):
-            self._last_reading = (stamp_s, degC)
+        if self.compensator.add_temperature(stamp_s, temperature.degC(msg)):
             self._track_warm_up(stamp_s, was_ready)
             imu_total = status.counters.imu_total
             if imu_total > self._imu_total_at_temperature:  # the gyro flows: compare clocks
