@@ -137,6 +137,11 @@ def choose(scores: Sequence[StructureScore], tolerance: float = TOLERANCE) -> St
 #: for a sensor lag (most of ``calibrate``'s time with a fast temperature sensor)
 REFINE_EVALUATIONS = 5
 
+#: the quantized-likelihood filter's refinement of the time constant: within this factor of the
+#: Gaussian filter's, in at most this many cross-validations (:func:`quantized_choice`)
+QUANTIZED_REFINE_FACTOR = 2.0
+QUANTIZED_REFINE_EVALUATIONS = 8
+
 #: the refinement's objective where a time constant is refused (a score is a ratio near 1)
 REFUSED_PENALTY = 1e6
 
@@ -146,12 +151,16 @@ def refine_time_constant(
     records: Sequence[ChamberRecord],
     base: DenoiseSettings,
     heldout: Sequence[ChamberRecord] = (),
+    *,
+    factor: float = 0.0,
+    evaluations: int = REFINE_EVALUATIONS,
 ) -> StructureScore:
     """The chosen structure with its time constant (lead-lag, coil or sensor lag) refined.
 
     A bounded Brent search on log(tau) between the grid's neighbours of the chosen value
-    (:data:`TDOT_LAGS_S`), on the same cross-validated score, to 5 % of tau or
-    :data:`REFINE_EVALUATIONS` scores; the grid value is kept unless the search beats it.
+    (:data:`TDOT_LAGS_S`), or between tau / ``factor`` and tau * ``factor`` if ``factor`` > 1,
+    on the same cross-validated score, to 5 % of tau or ``evaluations`` scores; the starting
+    value is kept unless the search beats it.
     """
     structure = chosen.structure
     field_name = (
@@ -170,6 +179,8 @@ def refine_time_constant(
     k = grid.index(tau)
     low = grid[k - 1] if k > 0 else tau / 2.0
     high = grid[k + 1] if k + 1 < len(grid) else tau * 2.0
+    if factor > 1.0:
+        low, high = tau / factor, tau * factor
     best = chosen
 
     def objective(log_tau: float) -> float:
@@ -189,7 +200,7 @@ def refine_time_constant(
         objective,
         bounds=(math.log(low), math.log(high)),
         method='bounded',
-        options={'xatol': 0.05, 'maxiter': REFINE_EVALUATIONS},
+        options={'xatol': 0.05, 'maxiter': evaluations},
     )
     return best
 
@@ -234,12 +245,27 @@ def quantized_choice(
     overconfident, and its score shows it. It is kept unless its score is worse by more than
     ``tolerance``. Returns the settings and the record for
     ``provenance.selection.quantized_likelihood``.
+
+    The quantized filter follows a fast sensor's steps sooner than the Gaussian one the time
+    constant was refined with (a 10 Hz sensor: its Tdot some 20 s earlier), so a lead-lag's or
+    coil lag's time constant is refined again with it, within a factor
+    :data:`QUANTIZED_REFINE_FACTOR` (``benchmarks/fast_sensor.py``). A sensor lag is not: that
+    filter models the sensor's own lag, not the Tdot estimate's.
     """
     fit = noise_before_quantization(
         records, base.temperature_quantum_degC, base.temperature_noise_degC
     )
     with_noise = dataclasses.replace(base, kalman_quantized_noise_degC=fit.noise_degC)
     (score,) = cross_validate(records, with_noise, [chosen.structure], heldout)
+    if not chosen.structure.sensor_lag_s:
+        score = refine_time_constant(
+            score,
+            records,
+            with_noise,
+            heldout,
+            factor=QUANTIZED_REFINE_FACTOR,
+            evaluations=QUANTIZED_REFINE_EVALUATIONS,
+        )
     used = math.isfinite(score.criterion) and score.criterion <= chosen.criterion * (
         1.0 + tolerance
     )
@@ -247,9 +273,12 @@ def quantized_choice(
         **fit.to_dict(),
         'criterion': score.criterion if math.isfinite(score.criterion) else None,
         'criterion_gaussian': chosen.criterion,
+        'structure': score.structure.name,
         'used': bool(used),
     }
-    return chosen.structure.settings(with_noise if used else base), record
+    if used:
+        return score.structure.settings(with_noise), record
+    return chosen.structure.settings(base), record
 
 
 def format_quantized(record: dict[str, Any]) -> str:
@@ -266,6 +295,7 @@ def format_quantized(record: dict[str, Any]) -> str:
         'quantized-likelihood filter '
         + ('used' if record['used'] else 'not used')
         + f': score {score} against {gaussian:.4f} with Gaussian readings'
+        + (f' ({record["structure"]})' if record['used'] and record.get('structure') else '')
     )
 
 
