@@ -64,11 +64,16 @@ def test_a_quiet_quantized_sensor_gets_its_noise_fitted_and_the_exact_likelihood
     assert len(record['grid_degC']) == len(record['log_likelihood'])
     assert isinstance(kalman_estimator(denoise), QuantizedKalmanTdotEstimator)
     # the final fit ran with that filter: its settings are the chosen structure's plus sigma
-    # (and the sensor's interval between readings, for the node's staleness rule)
+    # (and the sensor's interval between readings, for the node's staleness rule), with the
+    # lead-lag's time constant refined again with that filter, within a factor 2
     assert denoise.temperature_period_s == pytest.approx(1.0 / QUIET.temp_hz, abs=1e-3)
+    assert 'Tdot_lag' in chosen.structure.terms
+    refined = dataclasses.replace(chosen.structure, tdot_lag_s=denoise.tdot_lag_s)
+    assert record['structure'] == refined.name
+    assert chosen.structure.tdot_lag_s / 2 <= denoise.tdot_lag_s <= chosen.structure.tdot_lag_s * 2
     assert dataclasses.replace(
         denoise, kalman_quantized_noise_degC=0.0, temperature_period_s=0.0
-    ) == (chosen.structure.settings(sensor_noise_settings(result)))
+    ) == (refined.settings(sensor_noise_settings(result)))
 
 
 def sensor_noise_settings(result):
@@ -150,12 +155,18 @@ def test_a_dithering_sensor_keeps_its_moment_estimate_and_says_so():
 def test_the_quantized_score_is_a_cross_validation_of_the_chosen_structure(
     quiet_record, quiet_fit
 ):
+    """The refined structure's score, as recorded; the unrefined one's is not better."""
     result, _, chosen = quiet_fit
     record = result.coefficients.provenance['selection']['quantized_likelihood']
     base = sensor_noise([quiet_record]).apply(RECOMMENDED_SETTINGS)
     with_noise = dataclasses.replace(base, kalman_quantized_noise_degC=record['noise_degC'])
-    (again,) = cross_validate([quiet_record], with_noise, [chosen.structure])
+    refined = dataclasses.replace(
+        chosen.structure, tdot_lag_s=result.coefficients.denoise.tdot_lag_s
+    )
+    (again,) = cross_validate([quiet_record], with_noise, [refined])
     assert again.criterion == pytest.approx(record['criterion'], rel=1e-12)
+    (unrefined,) = cross_validate([quiet_record], with_noise, [chosen.structure])
+    assert unrefined.criterion > again.criterion
 
 
 def test_the_cli_prints_the_step_writes_the_yaml_and_takes_gaussian_readings(
@@ -183,3 +194,22 @@ def test_the_cli_prints_the_step_writes_the_yaml_and_takes_gaussian_readings(
     assert cli.main(['calibrate', str(bag), '-o', str(gaussian), '--gaussian-readings']) == 0
     assert 'quantized-likelihood' not in capsys.readouterr().out
     assert load(gaussian).denoise.kalman_quantized_noise_degC == 0.0
+
+
+def test_a_sensor_lag_is_not_refined_again_a_coil_lag_is_within_the_factor(quiet_record):
+    """The sensor-lag filter models the sensor's own lag: its time constant stays as chosen."""
+    base = sensor_noise([quiet_record]).apply(RECOMMENDED_SETTINGS)
+    sensor_lag = Structure(PAPER_TERMS, 0.003, 0.5, sensor_lag_s=120.0)
+    coil_lag = Structure(PAPER_TERMS, 0.003, 0.5, coil_lag_s=300.0)
+    scores = cross_validate([quiet_record], base, [sensor_lag, coil_lag])
+    settings, record = quantized_choice(scores[0], [quiet_record], base, [], tolerance=10.0)
+    assert record['used'] is True
+    assert record['structure'] == sensor_lag.name
+    assert settings.sensor_lag_s == 120.0
+    settings, record = quantized_choice(scores[1], [quiet_record], base, [], tolerance=10.0)
+    assert record['used'] is True
+    assert 150.0 <= settings.coil_lag_s <= 600.0
+    assert (
+        record['structure'] == dataclasses.replace(coil_lag, coil_lag_s=settings.coil_lag_s).name
+    )
+    assert record['structure'] in format_quantized(record)

@@ -138,7 +138,8 @@ def choose(scores: Sequence[StructureScore], tolerance: float = TOLERANCE) -> St
 REFINE_EVALUATIONS = 5
 
 #: the quantized-likelihood filter's refinement of the time constant: within this factor of the
-#: Gaussian filter's, in at most this many cross-validations (:func:`quantized_choice`)
+#: Gaussian filter's, in at most this many cross-validations (:func:`quantized_choice`; a factor
+#: of 1 refines nothing: ``benchmarks/fast_sensor.py`` measures with and without)
 QUANTIZED_REFINE_FACTOR = 2.0
 QUANTIZED_REFINE_EVALUATIONS = 8
 
@@ -257,7 +258,7 @@ def quantized_choice(
     )
     with_noise = dataclasses.replace(base, kalman_quantized_noise_degC=fit.noise_degC)
     (score,) = cross_validate(records, with_noise, [chosen.structure], heldout)
-    if not chosen.structure.sensor_lag_s:
+    if QUANTIZED_REFINE_FACTOR > 1.0 and not chosen.structure.sensor_lag_s:
         score = refine_time_constant(
             score,
             records,
@@ -295,7 +296,11 @@ def format_quantized(record: dict[str, Any]) -> str:
         'quantized-likelihood filter '
         + ('used' if record['used'] else 'not used')
         + f': score {score} against {gaussian:.4f} with Gaussian readings'
-        + (f' ({record["structure"]})' if record['used'] and record.get('structure') else '')
+        + (
+            f'; refined with it: {record["structure"]}'
+            if record['used'] and record.get('structure')
+            else ''
+        )
     )
 
 
