@@ -4,13 +4,15 @@ Run by hand (not in CI)::
 
     .venv/bin/python benchmarks/fast_sensor.py                  # seeds 3 and 5, ~6 min
     .venv/bin/python benchmarks/fast_sensor.py --seeds 3 --rates-hz 10
+    .venv/bin/python benchmarks/fast_sensor.py --sensor-lag-s 180 --quantum-degC 0.1
 
 The simulator's realistic chamber (:data:`fog_temp_comp.tools.simulate.REALISTIC`: a housing
 sensor 180 s ahead of the coil, 1/16 degC steps, 0.02 degC noise, T^2) with Imu at 2 Hz and
-the temperature sensor at each rate. ``calibrate`` with no flags on the 0.2 degC/min cycle
-(:func:`fog_temp_comp.core.model_choice.choose_and_calibrate`), then the 1 degC/min cycle
-through the compensator. Rows: the default, and the default without the second refinement of
-the time constant with the quantized-likelihood filter
+the temperature sensor at each rate; ``--sensor-lag-s`` puts the sensor behind the coil
+instead (that lag, no coil lag), ``--quantum-degC`` sets its step. ``calibrate`` with no
+flags on the 0.2 degC/min cycle (:func:`fog_temp_comp.core.model_choice.choose_and_calibrate`),
+then the 1 degC/min cycle through the compensator. Rows: the default, and the default without
+the second refinement of the time constant with the quantized-likelihood filter
 (:data:`~fog_temp_comp.core.model_choice.QUANTIZED_REFINE_FACTOR` set to 1). Figures: the
 100 s stability after (deg/h, per axis), that of the error against the oracle (the raw rate
 minus the true drift), and the oracle's.
@@ -44,12 +46,20 @@ def stability_100s_deg_h(run, rates_rad_s: np.ndarray) -> list[float]:
     return [s.stability_after_deg_h for s in scores]
 
 
-def one(job: tuple[int, float, str]) -> dict[str, object]:
-    """Calibrate and compensate one seed at one temperature rate, one variant."""
-    seed, rate_hz, variant = job
+def one(job: tuple[int, float, str, float, float]) -> dict[str, object]:
+    """Calibrate and compensate one seed at one temperature rate, one variant.
+
+    ``job``: seed, temperature rate (Hz), variant, the sensor's lag behind the coil (s, 0: the
+    realistic plant's sensor 180 s ahead) and its step (degC).
+    """
+    seed, rate_hz, variant, sensor_lag_s, quantum_degC = job
     if variant != 'default':
         model_choice.QUANTIZED_REFINE_FACTOR = 1.0
-    plant = dataclasses.replace(REALISTIC, imu_hz=2.0, temp_hz=rate_hz)
+    plant = dataclasses.replace(
+        REALISTIC, imu_hz=2.0, temp_hz=rate_hz, temp_quantum_degC=quantum_degC
+    )
+    if sensor_lag_s > 0:
+        plant = dataclasses.replace(plant, coil_lag_s=0.0, sensor_lag_s=sensor_lag_s)
     runs = simulate_plan(plant, seed=seed, runs=[('cycle', 0.2), ('cycle', 1.0)])
     t0 = time.perf_counter()
     result, _, _ = model_choice.choose_and_calibrate(
@@ -76,8 +86,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--seeds', type=int, nargs='+', default=[3, 5])
     parser.add_argument('--rates-hz', type=float, nargs='+', default=[1.0, 10.0])
+    parser.add_argument('--sensor-lag-s', type=float, default=0.0)
+    parser.add_argument('--quantum-degC', type=float, default=REALISTIC.temp_quantum_degC)
     args = parser.parse_args()
-    jobs = [(s, r, v) for s in args.seeds for r in args.rates_hz for v in VARIANTS]
+    jobs = [
+        (s, r, v, args.sensor_lag_s, args.quantum_degC)
+        for s in args.seeds
+        for r in args.rates_hz
+        for v in VARIANTS
+    ]
     with multiprocessing.get_context('spawn').Pool(2) as pool:
         rows = pool.map(one, jobs)
 
