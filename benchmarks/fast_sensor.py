@@ -38,6 +38,7 @@ from fog_temp_comp.core.units import RAD_S_PER_DEG_H
 from fog_temp_comp.tools.simulate import REALISTIC, simulate_plan
 
 VARIANTS = ('default', 'no second refinement')
+REFINE_FACTOR = model_choice.QUANTIZED_REFINE_FACTOR
 
 
 def stability_100s_deg_h(run, rates_rad_s: np.ndarray) -> list[float]:
@@ -53,8 +54,8 @@ def one(job: tuple[int, float, str, float, float]) -> dict[str, object]:
     realistic plant's sensor 180 s ahead) and its step (degC).
     """
     seed, rate_hz, variant, sensor_lag_s, quantum_degC = job
-    if variant != 'default':
-        model_choice.QUANTIZED_REFINE_FACTOR = 1.0
+    # a pool's worker runs several jobs: set the factor for each
+    model_choice.QUANTIZED_REFINE_FACTOR = REFINE_FACTOR if variant == 'default' else 1.0
     plant = dataclasses.replace(
         REALISTIC, imu_hz=2.0, temp_hz=rate_hz, temp_quantum_degC=quantum_degC
     )
