@@ -63,7 +63,7 @@ def one(job: tuple[int, float, str, float, float]) -> dict[str, object]:
         plant = dataclasses.replace(plant, coil_lag_s=0.0, sensor_lag_s=sensor_lag_s)
     runs = simulate_plan(plant, seed=seed, runs=[('cycle', 0.2), ('cycle', 1.0)])
     t0 = time.perf_counter()
-    result, _, _ = model_choice.choose_and_calibrate(
+    result, _, chosen = model_choice.choose_and_calibrate(
         [runs['cycle_0p2'].as_record()], RECOMMENDED_SETTINGS
     )
     seconds = time.perf_counter() - t0
@@ -78,6 +78,7 @@ def one(job: tuple[int, float, str, float, float]) -> dict[str, object]:
         'after': stability_100s_deg_h(run, out),
         'error': stability_100s_deg_h(run, out - oracle),
         'oracle': stability_100s_deg_h(run, oracle),
+        'model': chosen.structure.model,
         'lag_s': max(denoise.coil_lag_s, denoise.tdot_lag_s, denoise.sensor_lag_s),
         'calibrate_s': seconds,
     }
@@ -103,13 +104,13 @@ def main() -> None:
         return ' / '.join(f'{v:.4f}' for v in values)  # type: ignore[attr-defined]
 
     print(
-        '| seed | temperature Hz | pipeline | lag s | 100 s after, x / y / z deg/h '
+        '| seed | temperature Hz | pipeline | model | lag s | 100 s after, x / y / z deg/h '
         '| error vs oracle | oracle | calibrate s |'
     )
-    print('|---|---|---|---|---|---|---|---|')
+    print('|---|---|---|---|---|---|---|---|---|')
     for r in rows:
         print(
-            f'| {r["seed"]} | {r["rate_hz"]:g} | {r["variant"]} | {r["lag_s"]:.0f} '
+            f'| {r["seed"]} | {r["rate_hz"]:g} | {r["variant"]} | {r["model"]} | {r["lag_s"]:.0f} '
             f'| {axes(r["after"])} | {axes(r["error"])} | {axes(r["oracle"])} '
             f'| {r["calibrate_s"]:.0f} |'
         )
