@@ -137,7 +137,7 @@ def choose(scores: Sequence[StructureScore], tolerance: float = TOLERANCE) -> St
 #: for a sensor lag (most of ``calibrate``'s time with a fast temperature sensor)
 REFINE_EVALUATIONS = 5
 
-#: the quantized-likelihood filter's refinement of the time constant: within this factor of the
+#: the quantized-likelihood filter's refinement of a coil lag: within this factor of the
 #: Gaussian filter's, in at most this many cross-validations (:func:`quantized_choice`; a factor
 #: of 1 refines nothing: ``benchmarks/fast_sensor.py`` measures with and without)
 QUANTIZED_REFINE_FACTOR = 2.0
@@ -248,17 +248,25 @@ def quantized_choice(
     ``provenance.selection.quantized_likelihood``.
 
     The quantized filter follows a fast sensor's steps sooner than the Gaussian one the time
-    constant was refined with (a 10 Hz sensor: its Tdot some 20 s earlier), so a lead-lag's or
-    coil lag's time constant is refined again with it, within a factor
-    :data:`QUANTIZED_REFINE_FACTOR` (``benchmarks/fast_sensor.py``). A sensor lag is not: that
-    filter models the sensor's own lag, not the Tdot estimate's.
+    constant was refined with (a 10 Hz sensor: its Tdot some 20 s earlier), so a coil lag, which
+    makes up for the difference between the sensor's Tdot estimate and the coil's, is refined
+    again with it, within a factor :data:`QUANTIZED_REFINE_FACTOR` (``benchmarks/fast_sensor.py``:
+    at 2-10 Hz the 100 s stability on a 1 degC/min cycle 8-32 % better). A lead-lag's time
+    constant is not (refined again, it came out worse on 3 of 4 fast sensors behind the coil),
+    nor a sensor lag (that filter models the sensor's own lag, not the estimate's).
     """
     fit = noise_before_quantization(
         records, base.temperature_quantum_degC, base.temperature_noise_degC
     )
     with_noise = dataclasses.replace(base, kalman_quantized_noise_degC=fit.noise_degC)
     (score,) = cross_validate(records, with_noise, [chosen.structure], heldout)
-    if QUANTIZED_REFINE_FACTOR > 1.0 and not chosen.structure.sensor_lag_s:
+    structure = chosen.structure
+    if (
+        QUANTIZED_REFINE_FACTOR > 1.0
+        and structure.coil_lag_s
+        and not structure.sensor_lag_s
+        and 'Tdot_lag' not in structure.terms
+    ):
         score = refine_time_constant(
             score,
             records,
@@ -275,6 +283,7 @@ def quantized_choice(
         'criterion': score.criterion if math.isfinite(score.criterion) else None,
         'criterion_gaussian': chosen.criterion,
         'structure': score.structure.name,
+        'refined': score.structure != structure,
         'used': bool(used),
     }
     if used:
@@ -298,7 +307,7 @@ def format_quantized(record: dict[str, Any]) -> str:
         + f': score {score} against {gaussian:.4f} with Gaussian readings'
         + (
             f'; refined with it: {record["structure"]}'
-            if record['used'] and record.get('structure')
+            if record['used'] and record.get('refined')
             else ''
         )
     )
