@@ -2,11 +2,12 @@
 
 Run by hand (not in CI)::
 
-    .venv/bin/python benchmarks/bench_choice.py [--temp-hz 1 10] [--rounds 3]
+    .venv/bin/python benchmarks/bench_choice.py [--temp-hz 1 10] [--rounds 3] [--plant 100]
 
 The run is the 0.2 degC/min cycle of a randomly drawn plant (:mod:`fog_temp_comp.tools.plants`,
-seed 100) between -40 and 60 degC with 1 h holds (about 18 h), gyro 2 Hz, written as an MCAP
-bag. Side by side, in fresh processes, each round times:
+seed 100, its sensor behind the coil; ``--plant 105``: ahead of it, a coil lag chosen) between
+-40 and 60 degC with 1 h holds (about 18 h), gyro 2 Hz, written as an MCAP bag.
+Side by side, in fresh processes, each round times:
 
 - ``rosbags read``: ``AnyReader.messages()`` + ``deserialize`` of every message (the floor a
   user's own script would pay);
@@ -55,13 +56,17 @@ def jittered(stamps_s: np.ndarray, jitter_s: float, seed: int) -> np.ndarray:
 
 
 def make_bag(
-    directory: Path, temp_hz: float, jitter_s: float = 0.0, noise_quanta: float | None = None
+    directory: Path,
+    temp_hz: float,
+    jitter_s: float = 0.0,
+    noise_quanta: float | None = None,
+    plant: int = 100,
 ) -> tuple[Path, float]:
     """Write the run; return the bag and its length in hours.
 
-    ``noise_quanta``: the temperature sensor's noise in its steps (None: the plant's, 0.34).
+    ``noise_quanta``: the temperature sensor's noise in its steps (None: the plant's).
     """
-    cfg = dataclasses.replace(draw_plant(100), temp_hz=temp_hz, cycle_soak_s=3600.0)
+    cfg = dataclasses.replace(draw_plant(plant), temp_hz=temp_hz, cycle_soak_s=3600.0)
     if noise_quanta is not None:
         cfg = dataclasses.replace(cfg, temp_noise_degC=noise_quanta * cfg.temp_quantum_degC)
     run = simulate_run('cycle', 0.2, cfg, seed=0)
@@ -103,13 +108,14 @@ def main(argv: list[str] | None = None) -> int:
         help="the temperature sensor's noise in quantization steps (default: the plant's 0.34, "
         'a dithering sensor; below 0.3 calibrate fits it by likelihood)',
     )
+    parser.add_argument('--plant', type=int, default=100, help='the drawn plant (seed)')
     args = parser.parse_args(argv)
     tool = str(Path(sys.executable).with_name('fog-temp-comp'))
     print('| temperature | stamp jitter | run | rosbags read s | calibrate s | ratio |')
     print('|---|---|---|---|---|---|')
     with tempfile.TemporaryDirectory() as tmp:
         for hz, jitter in itertools.product(args.temp_hz, args.jitter_s):
-            bag, hours = make_bag(Path(tmp), hz, jitter, args.temp_noise_quanta)
+            bag, hours = make_bag(Path(tmp), hz, jitter, args.temp_noise_quanta, args.plant)
             out = Path(tmp) / 'c.yaml'
             read, cal = [], []
             for _ in range(args.rounds):
