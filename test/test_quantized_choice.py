@@ -12,19 +12,23 @@ from fog_temp_comp.bag.bagio import write_chamber_bag
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.model_candidates import StructureScore
 from fog_temp_comp.core.model_choice import (
     Structure,
+    choose,
     choose_and_calibrate,
     cross_validate,
+    dynamics_kind,
     format_quantized,
     quantized_choice,
+    quantized_rivals,
     sensor_noise,
 )
 from fog_temp_comp.core.tdot import kalman_estimator
 from fog_temp_comp.core.tdot_kalman_quantized import QuantizedKalmanTdotEstimator
 from fog_temp_comp.tools import cli
 from fog_temp_comp.tools.plants import draw_plant
-from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
+from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, simulate_run
 
 #: a 0.2 degC/min cycle over 10..30 degC with 20 min holds, a quiet sensor (0.08 step of noise)
 QUIET = SimulationConfig(
@@ -89,8 +93,9 @@ def test_the_guard_keeps_gaussian_readings_when_they_score_better(quiet_record, 
     """A tolerance below -100 % makes any score too much worse: the Gaussian settings stay."""
     _, _, chosen = quiet_fit
     base = sensor_noise([quiet_record]).apply(RECOMMENDED_SETTINGS)
-    settings, record = quantized_choice(chosen, [quiet_record], base, [], tolerance=-1.01)
+    settings, record, ran = quantized_choice(chosen, [quiet_record], base, [], tolerance=-1.01)
     assert record['used'] is False
+    assert ran is chosen
     assert settings.kalman_quantized_noise_degC == 0.0
     assert settings == chosen.structure.settings(base)
 
@@ -202,7 +207,8 @@ def test_a_coil_lag_is_refined_again_within_the_factor_a_sensor_lag_or_lead_lag_
     sensor_lag = Structure(PAPER_TERMS, 0.003, 0.5, sensor_lag_s=120.0)
     lead_lag = Structure((*PAPER_TERMS, 'Tdot_lag'), 0.003, 0.5, tdot_lag_s=120.0)
     scores = cross_validate([quiet_record], base, [coil_lag, sensor_lag, lead_lag])
-    settings, record = quantized_choice(scores[0], [quiet_record], base, [], tolerance=10.0)
+    settings, record, ran = quantized_choice(scores[0], [quiet_record], base, [], tolerance=10.0)
+    assert ran.structure == dataclasses.replace(coil_lag, coil_lag_s=settings.coil_lag_s)
     assert record['used'] is True
     assert 150.0 <= settings.coil_lag_s <= 600.0
     assert settings.coil_lag_s != 300.0
@@ -219,9 +225,90 @@ def test_a_coil_lag_is_refined_again_within_the_factor_a_sensor_lag_or_lead_lag_
         (scores[1], 'sensor_lag_s', 120.0),
         (scores[2], 'tdot_lag_s', 120.0),
     ):
-        settings, record = quantized_choice(score, [quiet_record], base, [], tolerance=10.0)
+        settings, record, _ = quantized_choice(score, [quiet_record], base, [], tolerance=10.0)
         assert record['used'] is True
         assert record['structure'] == score.structure.name
         assert record['refined'] is False
         assert getattr(settings, field_name) == value
         assert score.structure.name not in format_quantized(record)
+
+
+def test_the_rivals_are_the_choice_of_each_other_kind_of_dynamics_within_the_window():
+    plain = Structure(PAPER_TERMS, 0.003, 0.5)
+    coil = Structure(PAPER_TERMS, 0.001, 0.5, coil_lag_s=120.0)
+    coil_t2 = Structure((*PAPER_TERMS, 'T2'), 0.001, 0.5, coil_lag_s=120.0)
+    sensor = Structure(PAPER_TERMS, 0.001, 0.5, sensor_lag_s=240.0)
+    lead = Structure((*PAPER_TERMS, 'Tdot_lag'), 0.001, 0.5, tdot_lag_s=60.0)
+    assert [dynamics_kind(s) for s in (plain, coil, sensor, lead)] == [
+        'none',
+        'coil lag',
+        'sensor lag',
+        'lead-lag',
+    ]
+    scores = [
+        StructureScore(lead, 0.270),
+        StructureScore(sensor, 0.290),  # within 10 % of the chosen lead-lag
+        StructureScore(coil, 0.300),  # 11 % worse: not a rival
+        StructureScore(coil_t2, 0.299),
+        StructureScore(plain, 0.280),
+        StructureScore(Structure(PAPER_TERMS, 0.01, 0.5), float('inf'), error='refused'),
+    ]
+    chosen = choose(scores)
+    assert chosen.structure == lead
+    rivals = quantized_rivals(scores, chosen)
+    assert [r.structure for r in rivals] == [sensor, plain]
+    wider = {
+        dynamics_kind(r.structure): r.structure
+        for r in quantized_rivals(scores, chosen, 0.02, 0.2)
+    }
+    assert wider['coil lag'] == coil  # the simpler of the two within the tolerance
+    assert quantized_rivals(scores, chosen, window=0.0) == []
+
+
+@pytest.fixture(scope='module')
+def fast_sensor_behind_the_coil():
+    """A 10 Hz sensor 180 s behind the coil, a short cycle (the realistic plant otherwise)."""
+    plant = dataclasses.replace(
+        REALISTIC,
+        imu_hz=0.5,
+        temp_hz=10.0,
+        coil_lag_s=0.0,
+        sensor_lag_s=180.0,
+        low_degC=0.0,
+        high_degC=40.0,
+        start_degC=20.0,
+        cycle_soak_s=1800.0,
+    )
+    return simulate_run('cycle', 0.2, plant, seed=3).as_record()
+
+
+def test_a_rival_scored_better_with_the_quantized_filter_becomes_the_choice(
+    fast_sensor_behind_the_coil,
+):
+    """A 10 Hz sensor behind the coil: with quantized readings the sensor lag wins.
+
+    With Gaussian readings the lead-lag scores best; the sensor lag, within 10 % of it, is a
+    rival, and with the quantized filter beats the lead-lag's quantized score by more than the
+    tolerance. On the full realistic plant it is the better one on a 1 degC/min cycle
+    (docs/accuracy.md, a fast temperature sensor).
+    """
+    record = fast_sensor_behind_the_coil
+    result, _, chosen = choose_and_calibrate([record], RECOMMENDED_SETTINGS)
+    selection = result.coefficients.provenance['selection']
+    step = selection['quantized_likelihood']
+    assert step['rival_used'] is True
+    assert step['used'] is True
+    assert dynamics_kind(chosen.structure) == 'sensor lag'
+    assert 'Tdot_lag' in step['chosen_gaussian']
+    for rival in step['rivals']:
+        assert rival['criterion_gaussian'] <= step['criterion_gaussian'] * 1.1
+    assert step['criterion'] == min(r['criterion'] for r in step['rivals'])
+    assert step['criterion'] <= step['criterion_gaussian'] * 1.02
+    # the rival is the choice everywhere: the YAML, the final fit, what the node runs
+    assert selection['chosen'] == step['structure'] == chosen.structure.name
+    assert chosen.criterion == pytest.approx(step['criterion'])
+    assert result.coefficients.model.terms == chosen.structure.terms
+    assert dataclasses.replace(
+        result.coefficients.denoise, kalman_quantized_noise_degC=0.0, temperature_period_s=0.0
+    ) == chosen.structure.settings(sensor_noise_settings(result))
+    assert 'another model scores better' in format_quantized(step)

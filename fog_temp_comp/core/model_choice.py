@@ -103,11 +103,13 @@ __all__ = [
     'choose_and_calibrate',
     'cross_validate',
     'default_structures',
+    'dynamics_kind',
     'fold_mode',
     'format_quantized',
     'format_scores',
     'ols_coefficients',
     'quantized_choice',
+    'quantized_rivals',
     'sensor_noise',
 ]
 
@@ -142,6 +144,10 @@ REFINE_EVALUATIONS = 5
 #: of 1 refines nothing: ``benchmarks/fast_sensor.py`` measures with and without)
 QUANTIZED_REFINE_FACTOR = 2.0
 QUANTIZED_REFINE_EVALUATIONS = 8
+
+#: the quantized-likelihood step also scores the choice of each other kind of dynamics whose
+#: Gaussian score is within this fraction of the chosen one's (:func:`quantized_rivals`)
+QUANTIZED_RIVAL_WINDOW = 0.10
 
 #: the refinement's objective where a time constant is refused (a score is a ratio near 1)
 REFUSED_PENALTY = 1e6
@@ -229,13 +235,43 @@ def choose_fit(
     return chosen
 
 
+def dynamics_kind(structure: Structure) -> str:
+    """Sensor-to-coil dynamics: ``'sensor lag'``, ``'lead-lag'``, ``'coil lag'``, ``'none'``."""
+    if structure.sensor_lag_s:
+        return 'sensor lag'
+    if 'Tdot_lag' in structure.terms:
+        return 'lead-lag'
+    return 'coil lag' if structure.coil_lag_s else 'none'
+
+
+def quantized_rivals(
+    scores: Sequence[StructureScore],
+    chosen: StructureScore,
+    tolerance: float = TOLERANCE,
+    window: float = QUANTIZED_RIVAL_WINDOW,
+) -> list[StructureScore]:
+    """The choice of each other kind of dynamics (:func:`dynamics_kind`) within ``window``.
+
+    Per kind, :func:`choose` among its structures (the simplest within ``tolerance`` of its
+    best), kept if its score is within the fraction ``window`` of ``chosen``'s.
+    """
+    groups: dict[str, list[StructureScore]] = {}
+    for s in scores:
+        if math.isfinite(s.criterion):
+            groups.setdefault(dynamics_kind(s.structure), []).append(s)
+    groups.pop(dynamics_kind(chosen.structure), None)
+    best = [choose(group, tolerance) for group in groups.values()]
+    return [s for s in best if s.criterion <= chosen.criterion * (1.0 + window)]
+
+
 def quantized_choice(
     chosen: StructureScore,
     records: Sequence[ChamberRecord],
     base: DenoiseSettings,
     heldout: Sequence[ChamberRecord],
     tolerance: float = TOLERANCE,
-) -> tuple[DenoiseSettings, dict[str, Any]]:
+    rivals: Sequence[StructureScore] = (),
+) -> tuple[DenoiseSettings, dict[str, Any], StructureScore]:
     """The chosen structure's settings with the quantized likelihood if it holds up, and why.
 
     Takes the sensor's noise before quantization (fitted by likelihood unless the sensor
@@ -244,29 +280,69 @@ def quantized_choice(
     cross-validation. That filter takes every raw reading at full weight, which is right for
     white noise; a sensor whose noise is not white (or whose steps are not even) would make it
     overconfident, and its score shows it. It is kept unless its score is worse by more than
-    ``tolerance``. Returns the settings and the record for
-    ``provenance.selection.quantized_likelihood``.
+    ``tolerance``. Returns the settings, the record for
+    ``provenance.selection.quantized_likelihood`` and the structure's score as run (the
+    quantized one if used).
 
     The quantized filter follows a fast sensor's steps sooner than the Gaussian one the time
     constant was refined with (a 10 Hz sensor: its Tdot some 20 s earlier), so a coil lag, which
     makes up for the difference between the sensor's Tdot estimate and the coil's, is refined
     again with it, within a factor :data:`QUANTIZED_REFINE_FACTOR` (``benchmarks/fast_sensor.py``:
-    at 2-10 Hz the 100 s stability on a 1 degC/min cycle 8-32 % better). A lead-lag's time
+    at 2-10 Hz the 100 s stability on a 1 degC/min cycle 8-34 % better). A lead-lag's time
     constant is not (refined again, it came out worse on 3 of 4 fast sensors behind the coil),
     nor a sensor lag (that filter models the sensor's own lag, not the estimate's).
+
+    For the same reason the ranking of the kinds of dynamics can change with the filter (a
+    10 Hz sensor behind the coil: the sensor lag scores worse than the lead-lag with Gaussian
+    readings, better with quantized ones), so ``rivals`` (:func:`quantized_rivals`) are scored
+    with it too, their time constants refined on that score; one replaces the chosen structure
+    only if it beats its quantized score by more than ``tolerance``.
     """
     fit = noise_before_quantization(
         records, base.temperature_quantum_degC, base.temperature_noise_degC
     )
     with_noise = dataclasses.replace(base, kalman_quantized_noise_degC=fit.noise_degC)
+    score = _quantized_score(chosen, records, with_noise, heldout)
+    tried = []
+    best = score
+    for rival in rivals:
+        (again,) = cross_validate(records, with_noise, [rival.structure], heldout)
+        again = refine_time_constant(again, records, with_noise, heldout)
+        tried.append(
+            {
+                'structure': again.structure.name,
+                'criterion': again.criterion if math.isfinite(again.criterion) else None,
+                'criterion_gaussian': rival.criterion,
+            }
+        )
+        if again.criterion < min(best.criterion, score.criterion * (1.0 - tolerance)):
+            best = again
+    used = math.isfinite(best.criterion) and best.criterion <= chosen.criterion * (1.0 + tolerance)
+    record = {
+        **fit.to_dict(),
+        'criterion': best.criterion if math.isfinite(best.criterion) else None,
+        'criterion_gaussian': chosen.criterion,
+        'structure': best.structure.name,
+        'refined': score.structure != chosen.structure,
+        'rivals': tried,
+        'rival_used': best is not score,
+        'used': bool(used),
+    }
+    if used:
+        return best.structure.settings(with_noise), record, best
+    return chosen.structure.settings(base), record, chosen
+
+
+def _quantized_score(
+    chosen: StructureScore,
+    records: Sequence[ChamberRecord],
+    with_noise: DenoiseSettings,
+    heldout: Sequence[ChamberRecord],
+) -> StructureScore:
+    """``chosen`` scored with the quantized filter, its coil lag refined again (not others)."""
     (score,) = cross_validate(records, with_noise, [chosen.structure], heldout)
     structure = chosen.structure
-    if (
-        QUANTIZED_REFINE_FACTOR > 1.0
-        and structure.coil_lag_s
-        and not structure.sensor_lag_s
-        and 'Tdot_lag' not in structure.terms
-    ):
+    if QUANTIZED_REFINE_FACTOR > 1.0 and dynamics_kind(structure) == 'coil lag':
         score = refine_time_constant(
             score,
             records,
@@ -275,20 +351,7 @@ def quantized_choice(
             factor=QUANTIZED_REFINE_FACTOR,
             evaluations=QUANTIZED_REFINE_EVALUATIONS,
         )
-    used = math.isfinite(score.criterion) and score.criterion <= chosen.criterion * (
-        1.0 + tolerance
-    )
-    record = {
-        **fit.to_dict(),
-        'criterion': score.criterion if math.isfinite(score.criterion) else None,
-        'criterion_gaussian': chosen.criterion,
-        'structure': score.structure.name,
-        'refined': score.structure != structure,
-        'used': bool(used),
-    }
-    if used:
-        return score.structure.settings(with_noise), record
-    return chosen.structure.settings(base), record
+    return score
 
 
 def format_quantized(record: dict[str, Any]) -> str:
@@ -305,12 +368,40 @@ def format_quantized(record: dict[str, Any]) -> str:
         'quantized-likelihood filter '
         + ('used' if record['used'] else 'not used')
         + f': score {score} against {gaussian:.4f} with Gaussian readings'
-        + (
-            f'; refined with it: {record["structure"]}'
-            if record['used'] and record.get('refined')
-            else ''
-        )
+        + _quantized_structure(record)
     )
+
+
+def _quantized_step(
+    scores: Sequence[StructureScore],
+    chosen: StructureScore,
+    records: Sequence[ChamberRecord],
+    base: DenoiseSettings,
+    heldout: Sequence[ChamberRecord],
+    tolerance: float,
+    selection: dict[str, Any],
+) -> tuple[DenoiseSettings, StructureScore]:
+    """:func:`quantized_choice` with rivals, recorded in ``selection``: settings, choice."""
+    rivals = quantized_rivals(scores, chosen, tolerance)
+    final, record, ran = quantized_choice(chosen, records, base, heldout, tolerance, rivals)
+    selection['quantized_likelihood'] = record
+    if record['used'] and record['rival_used']:
+        # another kind of dynamics won with the quantized filter: it is the choice
+        record['chosen_gaussian'] = selection['chosen']
+        selection['chosen'], selection['fit'] = ran.structure.name, ran.structure.fit
+        return final, ran
+    return final, chosen
+
+
+def _quantized_structure(record: dict[str, Any]) -> str:
+    """What :func:`format_quantized` says of the structure the quantized step ran, if changed."""
+    if not record['used']:
+        return ''
+    if record.get('rival_used'):
+        return f'; with it another model scores better: {record["structure"]}'
+    if record.get('refined'):
+        return f'; refined with it: {record["structure"]}'
+    return ''
 
 
 def choose_and_calibrate(
@@ -436,8 +527,8 @@ def _choose_and_calibrate(
     selection = _selection(scores, chosen, mode, tolerance, noise)
     final = chosen.structure.settings(base)
     if quantized_likelihood and noise.quantum_degC > 0.0 and base.kalman_hysteresis_quanta == 0:
-        final, selection['quantized_likelihood'] = quantized_choice(
-            chosen, records, base, heldout, tolerance
+        final, chosen = _quantized_step(
+            scores, chosen, records, base, heldout, tolerance, selection
         )
     result = calibrate_detailed(
         records,
