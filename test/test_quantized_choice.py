@@ -96,8 +96,19 @@ def test_the_guard_keeps_gaussian_readings_when_they_score_better(quiet_record, 
     settings, record, ran = quantized_choice(chosen, [quiet_record], base, [], tolerance=-1.01)
     assert record['used'] is False
     assert ran is chosen
+    assert record['structure'] == chosen.structure.name
     assert settings.kalman_quantized_noise_degC == 0.0
     assert settings == chosen.structure.settings(base)
+    # a rival that beats the chosen structure's quantized score is not used either, nor said to be
+    (poor,) = cross_validate([quiet_record], base, [Structure(PAPER_TERMS, 0.01, 3.0)])
+    settings, record, ran = quantized_choice(
+        poor, [quiet_record], base, [], tolerance=-1.01, rivals=[chosen]
+    )
+    assert record['criterion'] == record['rivals'][0]['criterion'] < poor.criterion
+    assert (record['used'], record['rival_used'], record['refined']) == (False, False, False)
+    assert record['structure'] == poor.structure.name
+    assert ran is poor
+    assert settings == poor.structure.settings(base)
 
 
 @pytest.mark.parametrize(('correlation_s', 'used'), [(0.0, True), (10.0, False)])

@@ -318,14 +318,15 @@ def quantized_choice(
         if again.criterion < min(best.criterion, score.criterion * (1.0 - tolerance)):
             best = again
     used = math.isfinite(best.criterion) and best.criterion <= chosen.criterion * (1.0 + tolerance)
+    ran = best if used else chosen
     record = {
         **fit.to_dict(),
         'criterion': best.criterion if math.isfinite(best.criterion) else None,
         'criterion_gaussian': chosen.criterion,
-        'structure': best.structure.name,
-        'refined': score.structure != chosen.structure,
+        'structure': ran.structure.name,
+        'refined': bool(used) and best is score and score.structure != chosen.structure,
         'rivals': tried,
-        'rival_used': best is not score,
+        'rival_used': bool(used) and best is not score,
         'used': bool(used),
     }
     if used:
