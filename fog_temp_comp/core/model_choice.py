@@ -148,6 +148,8 @@ QUANTIZED_REFINE_EVALUATIONS = 8
 #: the quantized-likelihood step also scores the choice of each other kind of dynamics whose
 #: Gaussian score is within this fraction of the chosen one's (:func:`quantized_rivals`)
 QUANTIZED_RIVAL_WINDOW = 0.10
+#: cross-validations of a sensor-lag rival's refinement (:func:`quantized_choice`)
+SENSOR_LAG_RIVAL_EVALUATIONS = 2
 
 #: the refinement's objective where a time constant is refused (a score is a ratio near 1)
 REFUSED_PENALTY = 1e6
@@ -295,10 +297,10 @@ def quantized_choice(
     For the same reason the ranking of the kinds of dynamics can change with the filter (a
     10 Hz sensor behind the coil: the sensor lag scores worse than the lead-lag with Gaussian
     readings, better with quantized ones), so ``rivals`` (:func:`quantized_rivals`) are scored
-    with it too, a coil lag's or lead-lag's time constant refined on that score (not a sensor
-    lag's: every value tried reruns the filter, which at 10 Hz made ``calibrate`` 4x slower);
-    one replaces the chosen structure only if it beats its quantized score by more than
-    ``tolerance``.
+    with it too, their time constants refined on that score (a sensor lag's in
+    :data:`SENSOR_LAG_RIVAL_EVALUATIONS` scores: every value tried reruns the filter, which at
+    10 Hz made ``calibrate`` 4x slower with the usual 5); one replaces the chosen structure
+    only if it beats its quantized score by more than ``tolerance``.
     """
     fit = noise_before_quantization(
         records, base.temperature_quantum_degC, base.temperature_noise_degC
@@ -309,8 +311,13 @@ def quantized_choice(
     best = score
     for rival in rivals:
         (again,) = cross_validate(records, with_noise, [rival.structure], heldout)
-        if dynamics_kind(rival.structure) != 'sensor lag':  # that one reruns the filter
-            again = refine_time_constant(again, records, with_noise, heldout)
+        # a sensor lag's every value tried reruns the filter: fewer of them
+        evaluations = (
+            SENSOR_LAG_RIVAL_EVALUATIONS
+            if dynamics_kind(rival.structure) == 'sensor lag'
+            else REFINE_EVALUATIONS
+        )
+        again = refine_time_constant(again, records, with_noise, heldout, evaluations=evaluations)
         tried.append(
             {
                 'structure': again.structure.name,
