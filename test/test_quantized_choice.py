@@ -79,6 +79,11 @@ def test_a_quiet_quantized_sensor_gets_its_noise_fitted_and_the_exact_likelihood
     ) == (chosen.structure.settings(sensor_noise_settings(result)))
 
 
+def with_noise_of(base, record):
+    """``base`` with the quantized filter's noise that ``record`` says was fitted."""
+    return dataclasses.replace(base, kalman_quantized_noise_degC=record['noise_degC'])
+
+
 def sensor_noise_settings(result):
     """The base settings calibrate measured (method kalman, the sensor's step and noise)."""
     sensor = result.coefficients.provenance['selection']['sensor']
@@ -100,11 +105,13 @@ def test_the_guard_keeps_gaussian_readings_when_they_score_better(quiet_record, 
     assert settings.kalman_quantized_noise_degC == 0.0
     assert settings == chosen.structure.settings(base)
     # a rival that beats the chosen structure's quantized score is not used either, nor said to be
-    (poor,) = cross_validate([quiet_record], base, [Structure(PAPER_TERMS, 0.01, 3.0)])
+    (poor,) = cross_validate([quiet_record], base, [Structure(PAPER_TERMS, 0.01, 0.5)])
     settings, record, ran = quantized_choice(
         poor, [quiet_record], base, [], tolerance=-1.01, rivals=[chosen]
     )
-    assert record['criterion'] == record['rivals'][0]['criterion'] < poor.criterion
+    assert record['rivals'][0]['criterion'] < record['criterion']  # it beat the chosen one's
+    (again,) = cross_validate([quiet_record], with_noise_of(base, record), [poor.structure])
+    assert record['criterion'] == pytest.approx(again.criterion, rel=1e-12)
     assert (record['used'], record['rival_used'], record['refined']) == (False, False, False)
     assert record['structure'] == poor.structure.name
     assert ran is poor

@@ -329,9 +329,10 @@ def quantized_choice(
             best = again
     used = math.isfinite(best.criterion) and best.criterion <= chosen.criterion * (1.0 + tolerance)
     ran = best if used else chosen
+    quantized = best if used else score  # the score of what ran, or of the chosen structure
     record = {
         **fit.to_dict(),
-        'criterion': best.criterion if math.isfinite(best.criterion) else None,
+        'criterion': quantized.criterion if math.isfinite(quantized.criterion) else None,
         'criterion_gaussian': chosen.criterion,
         'structure': ran.structure.name,
         'refined': bool(used) and best is score and score.structure != chosen.structure,
