@@ -155,6 +155,24 @@ SENSOR_LAG_RIVAL_EVALUATIONS = 2
 REFUSED_PENALTY = 1e6
 
 
+def dynamics_kind(structure: Structure) -> str:
+    """Sensor-to-coil dynamics: ``'lead-lag'``, ``'coil lag'``, ``'sensor lag'``, ``'none'``."""
+    if 'Tdot_lag' in structure.terms:
+        return 'lead-lag'
+    if structure.coil_lag_s:
+        return 'coil lag'
+    return 'sensor lag' if structure.sensor_lag_s else 'none'
+
+
+#: the Structure field holding each kind's time constant (:func:`refine_time_constant`)
+_TIME_CONSTANT_FIELD = {
+    'lead-lag': 'tdot_lag_s',
+    'coil lag': 'coil_lag_s',
+    'sensor lag': 'sensor_lag_s',
+    'none': '',
+}
+
+
 def refine_time_constant(
     chosen: StructureScore,
     records: Sequence[ChamberRecord],
@@ -172,15 +190,7 @@ def refine_time_constant(
     value is kept unless the search beats it.
     """
     structure = chosen.structure
-    field_name = (
-        'tdot_lag_s'
-        if 'Tdot_lag' in structure.terms
-        else 'coil_lag_s'
-        if structure.coil_lag_s
-        else 'sensor_lag_s'
-        if structure.sensor_lag_s
-        else ''
-    )
+    field_name = _TIME_CONSTANT_FIELD[dynamics_kind(structure)]
     if not field_name or not math.isfinite(chosen.criterion):
         return chosen
     tau = getattr(structure, field_name)
@@ -235,15 +245,6 @@ def choose_fit(
     if gls.criterion < chosen.criterion * (1.0 - tolerance):
         return gls
     return chosen
-
-
-def dynamics_kind(structure: Structure) -> str:
-    """Sensor-to-coil dynamics: ``'sensor lag'``, ``'lead-lag'``, ``'coil lag'``, ``'none'``."""
-    if structure.sensor_lag_s:
-        return 'sensor lag'
-    if 'Tdot_lag' in structure.terms:
-        return 'lead-lag'
-    return 'coil lag' if structure.coil_lag_s else 'none'
 
 
 def quantized_rivals(
