@@ -197,15 +197,32 @@ def test_temperature_clamped_warns_throttled(
     harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
 ) -> None:
     h = harness_factory()
-    h.send_temperature(T0, 95.0)
+    h.send_temperature(T0, 75.0)  # within temperature_fault_margin_degC of the range
     lines = three_times(
         Console(capfd),
         h,
         lambda k: h.send_imu(T0 + 0.1 * (k + 1), RATE),
         'WARN',
-        r'^temperature 95\.00 degC outside the calibrated \[-40\.00, 60\.00\] degC: clamped',
+        r'^temperature 75\.00 degC outside the calibrated \[-40\.00, 60\.00\] degC: clamped',
     )
     assert lines[0].endswith('clamped to 60.00 degC')
+
+
+def test_temperature_sensor_fault_errors_throttled(
+    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
+) -> None:
+    h = harness_factory()
+    h.send_temperature(T0, 25.0)
+    lines = three_times(
+        Console(capfd),
+        h,
+        lambda k: h.send_temperature(T0 + 1 + k, -127.0),
+        'ERROR',
+        r'^temperature on /imu/temperature reads -127 degC, outside the plausible '
+        r'\[-60\.0, 80\.0\] degC \(the calibrated range \+- temperature_fault_margin_degC 20\)'
+        r': a sensor fault\? 1 readings rejected, the gyro gets stale_policy hold$',
+    )
+    assert len(lines) == 2
 
 
 def test_tdot_clamped_warns_throttled(

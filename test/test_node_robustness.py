@@ -505,6 +505,32 @@ def test_single_50_degC_glitch_is_rejected(harness: Harness, coefficients: Coeff
     assert 'glitch' in harness.diagnose().message
 
 
+def test_a_stuck_sensor_fault_is_an_error_and_the_correction_held(
+    harness: Harness, coefficients: Coefficients
+) -> None:
+    """-127 degC for a minute (a connector open): never a confirmed step, never clamped."""
+    for k in range(5):
+        harness.send_temperature(T0 + k, 25.0)
+    harness.send_imu(T0 + 4.5, RATE)
+    for k in range(5, 65):
+        harness.send_temperature(T0 + k, -127.0)
+    status = harness.node.compensator.status
+    assert status.counters.temperature_faults == 60 and status.counters.temperature_steps == 0
+    out = harness.send_imu(T0 + 64.5, RATE)  # stale: the correction at 25 degC held
+    assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0), rtol=1e-12)
+    diag = harness.diagnose()
+    assert diag.level == ERROR
+    assert (
+        'temperature sensor fault: 60 readings outside the plausible [-60.0, 80.0] degC '
+        'rejected (the last -127 degC)'
+    ) in diag.message
+    assert 'temperature stale: holding last correction' in diag.message
+    values = diag_values(diag)
+    assert values['temperature_plausible_degC'] == '[-60.000, 80.000]'
+    assert values['temperature_last_fault_degC'] == '-127'
+    assert values['temperature_faults'] == '60'
+
+
 def test_persistent_50_degC_step_is_accepted_after_confirmation(harness: Harness) -> None:
     for k in range(5):
         harness.send_temperature(T0 + k, 0.0)
@@ -518,16 +544,28 @@ def test_persistent_50_degC_step_is_accepted_after_confirmation(harness: Harness
     assert abs(status.tdot_degC_per_min) < 1e-9
 
 
-def test_temperature_far_outside_calibrated_range_is_clamped(
-    harness: Harness, coefficients: Coefficients
+@pytest.mark.parametrize(('degC', 'margin_degC'), [(75.0, None), (95.0, 1e6)])
+def test_temperature_outside_calibrated_range_is_clamped(
+    ros_context: object,
+    coeffs_file: Path,
+    coefficients: Coefficients,
+    degC: float,
+    margin_degC: float | None,
 ) -> None:
-    harness.send_temperature(T0, 95.0)
-    out = harness.send_imu(T0 + 0.5, RATE)
-    assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 60.0), rtol=1e-12)
-    status = harness.diagnose()
-    assert status.level == WARN and 'temperature outside calibrated range, clamped' in (
-        status.message
-    )
+    """Within temperature_fault_margin_degC of the range (20 degC), or with the guard off."""
+    params = {} if margin_degC is None else {'temperature_fault_margin_degC': margin_degC}
+    h = Harness(ros_context, start(ros_context, coeffs_file, **params))
+    try:
+        h.send_temperature(T0, degC)
+        out = h.send_imu(T0 + 0.5, RATE)
+        assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 60.0), rtol=1e-12)
+        status = h.diagnose()
+        assert status.level == WARN and 'temperature outside calibrated range, clamped' in (
+            status.message
+        )
+        assert h.node.compensator.status.counters.temperature_faults == 0
+    finally:
+        h.close()
 
 
 @pytest.mark.parametrize('clamp', [True, False])

@@ -136,9 +136,17 @@ class Compensator(_BlockCorrection):
         self._set_stale_rule()
 
     def _set_stale_rule(self) -> None:
-        """The stale age and the extrapolation horizon (s) of the guard."""
+        """The stale age, the extrapolation horizon (s) and the fault band (degC) of the guard."""
         self._stale_after_s = stale_after_s(self._guard, self.denoise.temperature_period_s)
         self._horizon_s = 2 * self.denoise.tdot_period_s + self._stale_after_s
+        calibrated = self.model.temperature_range_degC
+        margin = self._guard.temperature_fault_margin_degC
+        self._fault_band = (calibrated.low - margin, calibrated.high + margin)
+
+    @property
+    def plausible_temperature_degC(self) -> tuple[float, float]:
+        """(low, high) degC: readings outside are sensor faults (calibrated range +- margin)."""
+        return self._fault_band
 
     @property
     def last_reading(self) -> tuple[float, float] | None:
@@ -167,7 +175,9 @@ class Compensator(_BlockCorrection):
         """
         self._estimator.reset()
         self.status = CompensatorStatus(
-            counters=self.status.counters, correction_deg_h=self.status.correction_deg_h
+            counters=self.status.counters,
+            correction_deg_h=self.status.correction_deg_h,
+            last_fault_degC=self.status.last_fault_degC,
         )
         self._pending = []
         self._last_temperature = math.nan
@@ -181,8 +191,10 @@ class Compensator(_BlockCorrection):
         """Feed one temperature sample (degC at ``stamp_s`` seconds); return whether it was used.
 
         Rejected (and counted): non-finite values, a repeated stamp, a stamp slightly earlier
-        than the previous one, an implausible jump. A stamp far earlier (time jump) resets the
-        state first; a gap longer than :attr:`stale_after_s` restarts the Tdot estimate.
+        than the previous one, a sensor fault (a reading outside
+        :attr:`plausible_temperature_degC`), an implausible jump. A stamp far earlier (time
+        jump) resets the state first; a gap longer than :attr:`stale_after_s` restarts the
+        Tdot estimate.
         """
         status = self.status
         counters = status.counters
@@ -200,10 +212,18 @@ class Compensator(_BlockCorrection):
         if stamp_s == last:
             counters.temperature_duplicate += 1
             return False
+        if stamp_s < last and last - stamp_s < guard.time_jump_threshold_s:
+            counters.temperature_out_of_order += 1
+            return False
+        if not self._fault_band[0] <= temperature_degC <= self._fault_band[1]:
+            # a sensor fault: nothing of the sensor's is bridged over it (no held value put
+            # back after it), so the gyro gets the stale rule
+            counters.temperature_faults += 1
+            status.last_fault_degC = temperature_degC
+            self._held.reset()
+            self._held_due_s = math.inf
+            return False
         if stamp_s < last:
-            if last - stamp_s < guard.time_jump_threshold_s:
-                counters.temperature_out_of_order += 1
-                return False
             counters.time_jumps += 1
             self.reset()
             status = self.status

@@ -15,6 +15,7 @@ from fog_temp_comp.core.names import TDOT_LIMIT_DEGC_PER_MIN
 __all__ = [
     'STALE_POLICIES',
     'STALE_SAMPLE_INTERVALS',
+    'TEMPERATURE_FAULT_MARGIN_DEGC',
     'CompensatorCounters',
     'CompensatorStatus',
     'GuardSettings',
@@ -26,6 +27,11 @@ STALE_POLICIES = ('hold', 'none')
 #: sensor's nominal intervals (``DenoiseSettings.temperature_period_s``): one reading lost, and
 #: the next late, is not yet a gap
 STALE_SAMPLE_INTERVALS = 3.0
+
+#: a reading further than this (degC) outside the calibrated range is a sensor fault: wide
+#: enough for a unit run somewhat beyond its chamber's range (clamped, reported), narrow
+#: enough for the common error codes (-127, 85 with a -40..60 calibration, -273.15, 4095)
+TEMPERATURE_FAULT_MARGIN_DEGC = 20.0
 
 
 @dataclass(frozen=True)
@@ -60,6 +66,11 @@ class GuardSettings:
         the elapsed time) from the previous one is rejected as a glitch, unless
         ``step_confirm_samples`` consecutive samples agree on the new level (a real step, which
         restarts the Tdot estimate).
+    temperature_fault_margin_degC : float
+        A reading further than this outside the calibrated temperature range is a sensor
+        fault (a disconnected sensor's -127 or -273.15, a driver's error code, a wrong
+        scale), rejected whatever follows it: never confirmed as a step, never taken after a
+        gap. The gyro then gets the stale rule (``stale_policy``). ``inf`` turns it off.
 
     """
 
@@ -72,6 +83,7 @@ class GuardSettings:
     max_temperature_step_degC: float = 2.0
     max_temperature_rate_degC_per_min: float = 20.0
     step_confirm_samples: int = 5
+    temperature_fault_margin_degC: float = TEMPERATURE_FAULT_MARGIN_DEGC
 
     def __post_init__(self) -> None:
         if self.stale_policy not in STALE_POLICIES:
@@ -88,6 +100,11 @@ class GuardSettings:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and value > 0 and math.isfinite(value)):
                 raise ValueError(f'{name} must be a finite number > 0, got {value!r}')
+        margin = self.temperature_fault_margin_degC
+        if not (isinstance(margin, (int, float)) and margin >= 0 and not math.isnan(margin)):
+            raise ValueError(
+                f'temperature_fault_margin_degC must be a number >= 0 (inf: off), got {margin!r}'
+            )
         if not (isinstance(self.step_confirm_samples, int) and self.step_confirm_samples >= 1):
             raise ValueError(
                 f'step_confirm_samples must be an integer >= 1, got {self.step_confirm_samples!r}'
@@ -127,6 +144,7 @@ class CompensatorCounters:
     temperature_duplicate: int = 0
     temperature_out_of_order: int = 0
     temperature_glitches: int = 0  # implausible jump, rejected
+    temperature_faults: int = 0  # outside the calibrated range by more than the margin
     temperature_steps: int = 0  # confirmed step, estimate restarted
     temperature_gaps: int = 0  # gap longer than the timeout, estimate restarted
     time_jumps: int = 0
@@ -151,6 +169,7 @@ class CompensatorCounters:
             + self.temperature_duplicate
             + self.temperature_out_of_order
             + self.temperature_glitches
+            + self.temperature_faults
         )
 
 
@@ -180,5 +199,7 @@ class CompensatorStatus:
     last_imu_stamp_s: float = -math.inf
     #: stamp (s) of the first gyro message waiting for the first temperature (NaN: none)
     awaiting_temperature_since_s: float = math.nan
+    #: the last reading rejected as a sensor fault, degC (NaN: none yet)
+    last_fault_degC: float = math.nan
     correction_deg_h: tuple[float, float, float] = (0.0, 0.0, 0.0)
     counters: CompensatorCounters = field(default_factory=CompensatorCounters)

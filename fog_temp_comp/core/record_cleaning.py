@@ -176,6 +176,12 @@ def without_outliers(
                 f'readings dropped as glitches, as the node drops them (the first '
                 f'{glitches.values_degC[0]:.4g} degC, {glitches.stamps_s[0] - start:.0f} s '
                 'into the run): a sensor error code?'
+                + (
+                    f' ({glitches.dropout_readings} of them a sensor dropout: a level stepped '
+                    'to and back from, or far outside the rest)'
+                    if glitches.dropout_readings
+                    else ''
+                )
             )
             glitched[str(record.path)] = glitches.to_dict()
         if outliers is not None:

@@ -9,6 +9,15 @@ noise 0.9 degC instead of 0.01 and the calibration's 100 s stability 3.7x the or
 instead of 1.4x. :func:`glitch_mask` applies the same rule to a whole record (tested against
 the compensator), :func:`without_temperature_glitches` drops those readings. Temperatures in
 degC, stamps in s.
+
+A sensor that stays wrong for longer (a connector that opens in the cold and reads -127 for
+ten minutes) passes the node's glitch rule as a confirmed step; the node then rejects what lies
+beyond its calibrated range (``temperature_fault_margin_degC``), but ``calibrate`` has no
+calibrated range yet, and ten minutes of -127 degC in a training run made its 100 s stability
+22x worse. Offline the whole run is known, so :func:`dropout_mask` finds such a spell: a
+temperature cannot step, so a level stepped to and later left for one that continues the level
+before it is the sensor's fault, as is a level at either end of the run, never bridged, further
+outside the rest's range than the node's margin.
 """
 
 from __future__ import annotations
@@ -24,7 +33,7 @@ from fog_temp_comp.core.compensator_types import GuardSettings
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.units import S_PER_MIN
 
-__all__ = ['TemperatureGlitches', 'glitch_mask', 'without_temperature_glitches']
+__all__ = ['TemperatureGlitches', 'dropout_mask', 'glitch_mask', 'without_temperature_glitches']
 
 
 @dataclass(frozen=True)
@@ -34,11 +43,14 @@ class TemperatureGlitches:
     stamps_s: NDArray[np.float64]
     values_degC: NDArray[np.float64]
     readings: int
+    #: of the readings dropped, those of a sensor dropout (:func:`dropout_mask`)
+    dropout_readings: int = 0
 
     def to_dict(self, first: int = 10) -> dict[str, object]:
         """For the YAML's provenance: the count and the first readings dropped."""
         return {
             'readings_dropped': int(self.stamps_s.size),
+            'dropout_readings_dropped': self.dropout_readings,
             'readings': self.readings,
             'first_stamps_s': [round(float(t), 3) for t in self.stamps_s[:first]],
             'first_values_degC': [round(float(v), 4) for v in self.values_degC[:first]],
@@ -93,11 +105,73 @@ def glitch_mask(
     return rejected
 
 
+def dropout_mask(
+    stamps_s: NDArray[np.float64],
+    temperature_degC: NDArray[np.float64],
+    accepted: NDArray[np.bool_],
+    guard: GuardSettings | None = None,
+) -> NDArray[np.bool_]:
+    """Which readings (M,) belong to a sensor dropout, among the ``accepted`` ones (M,).
+
+    The accepted readings (what :func:`glitch_mask` leaves, in stamp order) split into levels
+    at each step the glitch rule confirmed. The level with the most readings is trusted; a
+    later level that continues the last trusted one (within ``max_temperature_step_degC`` plus
+    ``max_temperature_rate_degC_per_min`` times the minutes between) is trusted too and the
+    levels between are a dropout; earlier levels alike, backwards. Levels never bridged are
+    kept unless they lie further outside the trusted readings' range than
+    ``temperature_fault_margin_degC`` (what the node would reject against a calibration).
+    """
+    guard = guard or GuardSettings()
+    t = np.asarray(stamps_s, dtype=np.float64)
+    v = np.asarray(temperature_degC, dtype=np.float64)
+    dropout = np.zeros(v.shape, dtype=bool)
+    index = np.flatnonzero(accepted)
+    if index.size < 2:
+        return dropout
+
+    def reach(elapsed_s: NDArray[np.float64] | float) -> NDArray[np.float64] | float:
+        return guard.max_temperature_step_degC + guard.max_temperature_rate_degC_per_min * (
+            np.abs(elapsed_s) / S_PER_MIN
+        )
+
+    steps = np.flatnonzero(np.abs(np.diff(v[index])) > reach(np.diff(t[index]))) + 1
+    if not steps.size:
+        return dropout
+    levels = np.split(index, steps)
+    anchor = max(range(len(levels)), key=lambda k: levels[k].size)
+    trusted = {anchor}
+    for order in (range(anchor + 1, len(levels)), range(anchor - 1, -1, -1)):
+        edge = levels[anchor][-1] if order.step > 0 else levels[anchor][0]
+        for k in order:
+            near = levels[k][0] if order.step > 0 else levels[k][-1]
+            if abs(v[near] - v[edge]) <= reach(t[near] - t[edge]):
+                trusted.add(k)
+                edge = levels[k][-1] if order.step > 0 else levels[k][0]
+        lost = [k for k in order if k not in trusted]
+        bridged = [k for k in lost if (k < max(trusted) if order.step > 0 else k > min(trusted))]
+        for k in bridged:
+            dropout[levels[k]] = True
+    kept = np.concatenate([levels[k] for k in sorted(trusted)])
+    low = float(v[kept].min()) - guard.temperature_fault_margin_degC
+    high = float(v[kept].max()) + guard.temperature_fault_margin_degC
+    for k, level in enumerate(levels):
+        if k not in trusted and not dropout[level[0]]:
+            values = v[level]
+            if values.min() < low or values.max() > high:
+                dropout[level] = True
+    return dropout
+
+
 def without_temperature_glitches(
     record: ChamberRecord, guard: GuardSettings | None = None
 ) -> tuple[ChamberRecord, TemperatureGlitches | None]:
-    """``record`` without the readings :func:`glitch_mask` rejects (None: there were none)."""
+    """``record`` without the readings :func:`glitch_mask` rejects (None: there were none).
+
+    Nor those of a sensor dropout (:func:`dropout_mask`).
+    """
     rejected = glitch_mask(record.temp_stamps_s, record.temperature_degC, guard)
+    dropout = dropout_mask(record.temp_stamps_s, record.temperature_degC, ~rejected, guard)
+    rejected |= dropout
     if not rejected.any():
         return record, None
     cleaned = dataclasses.replace(
@@ -106,6 +180,9 @@ def without_temperature_glitches(
         temperature_degC=record.temperature_degC[~rejected],
     )
     glitches = TemperatureGlitches(
-        record.temp_stamps_s[rejected], record.temperature_degC[rejected], int(rejected.size)
+        record.temp_stamps_s[rejected],
+        record.temperature_degC[rejected],
+        int(rejected.size),
+        int(dropout.sum()),
     )
     return cleaned, glitches

@@ -374,6 +374,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             clocks_apart_s=self.clocks_apart_s,
             require_frame_match=self._require_frame_match,
             frames=self.temperature_frames,
+            plausible_degC=self.compensator.plausible_temperature_degC,
             rest=None if self.compensator.rest is None else self.compensator.rest.finish(),
             rest_bias_file=(
                 (self.config.rest_bias_file, self._rest_bias_state)

@@ -111,6 +111,17 @@ class ConsoleLogMixin(ParametersMixin):
                 throttle_duration_sec=every,
             )
         guard = self.compensator.guard
+        faults = counters.temperature_faults - previous.temperature_faults
+        if faults:
+            low, high = self.compensator.plausible_temperature_degC
+            log.error(
+                f'temperature on {topic} reads {status.last_fault_degC:.6g} degC, outside the '
+                f'plausible [{low:.1f}, {high:.1f}] degC (the calibrated range +- '
+                f'temperature_fault_margin_degC {guard.temperature_fault_margin_degC:g}): a '
+                f'sensor fault? {faults} readings rejected, the gyro gets stale_policy '
+                f'{guard.stale_policy}',
+                throttle_duration_sec=every,
+            )
         self._log_stale(counters, previous, topic)
         jumps = counters.time_jumps - previous.time_jumps
         if jumps:

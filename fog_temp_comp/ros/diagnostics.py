@@ -73,12 +73,13 @@ def build_report(
     rest: RestStatus | None = None,
     rest_bias_file: tuple[str, str] | None = None,
     frames: FrameLock | None = None,
+    plausible_degC: tuple[float, float] = (-math.inf, math.inf),
 ) -> Report:
     """Summarise ``status``; ``previous`` are the counters at the last report (for deltas).
 
     ``rest_bias_file`` is (path, what happened to it: loaded, refused and why, written, ...);
-    ``stale_after_s`` the age (s) past which temperature is stale (the compensator's
-    :attr:`~fog_temp_comp.core.compensator.Compensator.stale_after_s`);
+    ``stale_after_s`` (s) and ``plausible_degC`` (low, high degC) the compensator's
+    :attr:`~fog_temp_comp.core.compensator.Compensator.stale_after_s` and ``plausible_...``;
     ``temperature_stamp_offset_s`` the recent temperature stamp minus the gyro's latest on
     arrival nearest zero (s) and ``two_clocks`` whether it says two clocks
     (:class:`~fog_temp_comp.core.stamp_offset.ArrivalOffsets`); ``clocks_apart_s`` the offset
@@ -87,7 +88,7 @@ def build_report(
     messages of another frame_id in all and since the last report (which set the level).
     """
     counters = status.counters
-    reasons = _temperature_reasons(status, previous)
+    reasons = _temperature_reasons(status, previous, plausible_degC)
     for name, text in _WARN_COUNTERS.items():
         delta = getattr(counters, name) - getattr(previous, name)
         if delta > 0:
@@ -118,6 +119,7 @@ def build_report(
     ]
     values += _coefficients_values(coefficients, coefficients_file)
     values += [
+        *_fault_values(status, plausible_degC),
         ('frame_id_mismatches', str(frame_mismatches[0])),
         ('temperature_unstamped', str(unstamped)),
         *frame_values,
@@ -185,12 +187,43 @@ def two_clocks_text(offset_s: float) -> str:
     )
 
 
-def _temperature_reasons(
-    status: CompensatorStatus, previous: CompensatorCounters
+def _fault_reasons(
+    status: CompensatorStatus,
+    previous: CompensatorCounters,
+    plausible_degC: tuple[float, float],
 ) -> list[tuple[int, str]]:
-    """(level, text) of the temperature input: missing, stale, warming up, out of range."""
+    """An ERROR for temperature readings rejected as a sensor fault since the last report."""
+    faults = status.counters.temperature_faults - previous.temperature_faults
+    if not faults:
+        return []
+    low, high = plausible_degC
+    return [
+        (
+            ERROR,
+            f'temperature sensor fault: {faults} readings outside the plausible '
+            f'[{low:.1f}, {high:.1f}] degC rejected (the last {status.last_fault_degC:.6g} degC)',
+        )
+    ]
+
+
+def _fault_values(
+    status: CompensatorStatus, plausible_degC: tuple[float, float]
+) -> list[tuple[str, str]]:
+    """The band (degC) outside which a reading is a sensor fault, and the last such reading."""
+    return [
+        ('temperature_plausible_degC', f'[{plausible_degC[0]:.3f}, {plausible_degC[1]:.3f}]'),
+        ('temperature_last_fault_degC', _num(status.last_fault_degC)),
+    ]
+
+
+def _temperature_reasons(
+    status: CompensatorStatus,
+    previous: CompensatorCounters,
+    plausible_degC: tuple[float, float] = (-math.inf, math.inf),
+) -> list[tuple[int, str]]:
+    """(level, text) of the temperature input: faulty, missing, stale, warming up, clamped."""
     counters = status.counters
-    reasons: list[tuple[int, str]] = []
+    reasons = _fault_reasons(status, previous, plausible_degC)
     if not status.has_temperature:
         if counters.imu_uncorrected:
             reasons.append((ERROR, 'no temperature received: gyro passed through uncorrected'))

@@ -185,6 +185,11 @@ GUARD_PARAMETERS: dict[str, tuple[Any, str]] = {
         _GUARD_DEFAULTS.max_temperature_rate_degC_per_min,
         'plausible temperature rate (degC/min) added to the glitch threshold',
     ),
+    'temperature_fault_margin_degC': (
+        _GUARD_DEFAULTS.temperature_fault_margin_degC,
+        'a temperature further than this (degC) outside the calibrated range is a sensor fault '
+        '(an error code such as -127): rejected, the gyro gets stale_policy (1e6: off)',
+    ),
 }
 
 

@@ -117,6 +117,7 @@ def compensate_command(
     )
     (n_out, counters), compensator = _on_one_clock(run, in_bag, out_bag, strict)
     _report_written(run, out_bag, n_out, counters, chosen=output_topic is None, stdout=stdout)
+    _report_faults(run.in_bag, compensator)
     if compensator.rest is not None:
         _report_rest(compensator.rest, coeffs_path, rest_bias_out, stdout)
     return 0
@@ -154,6 +155,26 @@ def _report_written(
         f'{counters.imu_uncorrected} passed through uncorrected)',
         file=stdout,
     )
+
+
+def _report_faults(in_bag: Path, compensator: Compensator) -> None:
+    """A ``WARNING`` line where readings were rejected as a sensor fault."""
+    status = compensator.status
+    faults = status.counters.temperature_faults
+    if faults:
+        low, high = compensator.plausible_temperature_degC
+        print(
+            f'WARNING: {in_bag}: {faults} temperature readings outside the plausible '
+            f'[{low:.1f}, {high:.1f}] degC (the calibrated range +- '
+            f'{compensator.guard.temperature_fault_margin_degC:g} degC) rejected as a sensor '
+            f'fault (the last {status.last_fault_degC:.6g} degC): meanwhile the gyro '
+            + (
+                'got the last correction held'
+                if compensator.guard.stale_policy == 'hold'
+                else 'passed through uncorrected'
+            ),
+            file=sys.stderr,
+        )
 
 
 def _on_one_clock(

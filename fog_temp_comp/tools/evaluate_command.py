@@ -75,7 +75,7 @@ def evaluate_command(
 
 
 def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) -> list[str]:
-    """Say when the calibrated-range guard limited or extrapolated the correction of a run."""
+    """Say when the calibrated-range guards limited, extrapolated or held the correction."""
     notes = []
     # the samples whose correction was computed (the counts below are of those; a message
     # sent twice, dropped, is not one)
@@ -103,6 +103,12 @@ def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) 
             notes.append(
                 f'note: {name}: {text} for {100 * count / total:.0f} % of the gyro samples'
             )
+    if counters.temperature_faults:
+        notes.append(
+            f'note: {name}: {counters.temperature_faults} temperature readings further outside '
+            'the calibrated range than temperature_fault_margin_degC were rejected as a sensor '
+            f'fault; {counters.imu_held} gyro samples got the last correction held'
+        )
     return notes
 
 
