@@ -14,7 +14,7 @@ A sensor that stays wrong for longer (a connector that opens in the cold and rea
 ten minutes) passes the node's glitch rule as a confirmed step; the node then rejects what lies
 beyond its calibrated range (``temperature_fault_margin_degC``), but ``calibrate`` has no
 calibrated range yet, and ten minutes of -127 degC in a training run made its 100 s stability
-22x worse. Offline the whole run is known, so :func:`dropout_mask` finds such a spell: a
+21x worse. Offline the whole run is known, so :func:`dropout_mask` finds such a spell: a
 temperature cannot step, so a level stepped to and later left for one that continues the level
 before it is the sensor's fault, as is a level at either end of the run, never bridged, further
 outside the rest's range than the node's margin.
