@@ -20,6 +20,8 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fog_temp_comp.core.bounded_search import minimize_bounded
+
 FloatArray = NDArray[np.float64]
 
 __all__ = ['CoilLag', 'affine_scan', 'coil_lag', 'foh_lag_coefficients', 'search_time_constant']
@@ -248,8 +250,9 @@ def search_time_constant(
     """Minimise ``objective(tau)`` over a time constant by a coarse scan and a bounded refine.
 
     The scan evaluates ``bounds_s[0]`` and ``coarse_points`` geometrically spaced values up to
-    ``bounds_s[1]``; a bounded Brent search (``scipy.optimize.minimize_scalar``) then refines
-    between the neighbours of the best scan point. So a minimum at 0 (no lag) is found exactly,
+    ``bounds_s[1]``; a bounded Brent search (SciPy's, in
+    :func:`~fog_temp_comp.core.bounded_search.minimize_bounded`) then refines between the
+    neighbours of the best scan point. So a minimum at 0 (no lag) is found exactly,
     and a curve with several local minima is not trapped by the first one.
 
     Parameters
@@ -291,11 +294,7 @@ def search_time_constant(
     lo = grid[max(best - 1, 0)]
     hi = grid[min(best + 1, len(grid) - 1)]
     if hi > lo:
-        from scipy import optimize
-
-        result = optimize.minimize_scalar(
-            f, bounds=(lo, hi), method='bounded', options={'xatol': tolerance_s}
-        )
-        if float(result.fun) < values[best]:
-            return float(result.x), evaluations
+        tau, value, _ = minimize_bounded(f, lo, hi, xatol=tolerance_s)
+        if value < values[best]:
+            return tau, evaluations
     return grid[best], evaluations

@@ -40,6 +40,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from fog_temp_comp.core.bounded_search import minimize_bounded
 from fog_temp_comp.core.calibration import (
     CalibrationError,
     CalibrationResult,
@@ -213,14 +214,7 @@ def refine_time_constant(
         # a refused time constant scores inf, which turns Brent's parabola into nan
         return score.criterion if math.isfinite(score.criterion) else REFUSED_PENALTY
 
-    from scipy import optimize  # here: not every calibration needs it (start-up)
-
-    optimize.minimize_scalar(
-        objective,
-        bounds=(math.log(low), math.log(high)),
-        method='bounded',
-        options={'xatol': 0.05, 'maxiter': evaluations},
-    )
+    minimize_bounded(objective, math.log(low), math.log(high), xatol=0.05, maxiter=evaluations)
     return best
 
 
