@@ -6,6 +6,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from numpy.testing import assert_allclose
+
 from fog_temp_comp.bag.bagio import (
     IMU_TYPE,
     TEMPERATURE_TYPE,
@@ -14,6 +16,10 @@ from fog_temp_comp.bag.bagio import (
     make_temperature,
     write_chamber_bag,
 )
+from fog_temp_comp.core.calibration import CalibrationResult, calibrate_detailed
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig
 
 #: a short chamber: 10..30 degC cycles with 10 min soaks, 1 Hz gyro and temperature
@@ -107,3 +113,19 @@ def write_events(
         for ns, _, topic, msg in sorted(events, key=lambda e: (e[0], e[1])):
             writer.write(topic, ns, msg)
     return path
+
+
+def fits_as_clean(clean: SimulatedRun, hit: ChamberRecord) -> CalibrationResult:
+    """The paper-terms fit of ``hit`` (``clean`` with bad readings), asserted to be ``clean``'s.
+
+    Coefficients within 1 % (or 1e-3 deg/h per unit) of those fitted on the clean run.
+    """
+    reference = calibrate_detailed([clean.as_record()], RECOMMENDED_SETTINGS, terms=PAPER_TERMS)
+    fitted = calibrate_detailed([hit], RECOMMENDED_SETTINGS, terms=PAPER_TERMS)
+    assert_allclose(
+        fitted.coefficients.model.coefficients,
+        reference.coefficients.model.coefficients,
+        rtol=0.01,
+        atol=1e-3,
+    )
+    return fitted

@@ -178,17 +178,35 @@ def test_two_clocks_warn_throttled(
     assert lines[0].endswith('misaligned by that much (and stale beyond the stale time)')
 
 
-def test_nonfinite_temperature_warns_throttled(
-    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
+@pytest.mark.parametrize(
+    ('values', 'level', 'pattern'),
+    [
+        (
+            [math.nan, math.inf, -math.inf],
+            'WARN',
+            r'^non-finite temperature on /imu/temperature: samples rejected \(1\)$',
+        ),
+        (
+            [-127.0] * 3,
+            'ERROR',
+            r'^temperature on /imu/temperature reads -127 degC, outside the plausible '
+            r'\[-60\.0, 80\.0\] degC \(the calibrated range \+- temperature_fault_margin_degC '
+            r'20\): a sensor fault\? 1 readings rejected, the gyro gets stale_policy hold$',
+        ),
+    ],
+    ids=['non-finite', 'sensor fault'],
+)
+def test_rejected_temperatures_log_throttled(
+    harness_factory: Callable[..., Harness],
+    capfd: pytest.CaptureFixture[str],
+    values: list[float],
+    level: str,
+    pattern: str,
 ) -> None:
     h = harness_factory()
     h.send_temperature(T0, 25.0)
     lines = three_times(
-        Console(capfd),
-        h,
-        lambda k: h.send_temperature(T0 + 1 + k, [math.nan, math.inf, -math.inf][k]),
-        'WARN',
-        r'^non-finite temperature on /imu/temperature: samples rejected \(1\)$',
+        Console(capfd), h, lambda k: h.send_temperature(T0 + 1 + k, values[k]), level, pattern
     )
     assert len(lines) == 2
 
@@ -206,23 +224,6 @@ def test_temperature_clamped_warns_throttled(
         r'^temperature 75\.00 degC outside the calibrated \[-40\.00, 60\.00\] degC: clamped',
     )
     assert lines[0].endswith('clamped to 60.00 degC')
-
-
-def test_temperature_sensor_fault_errors_throttled(
-    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
-) -> None:
-    h = harness_factory()
-    h.send_temperature(T0, 25.0)
-    lines = three_times(
-        Console(capfd),
-        h,
-        lambda k: h.send_temperature(T0 + 1 + k, -127.0),
-        'ERROR',
-        r'^temperature on /imu/temperature reads -127 degC, outside the plausible '
-        r'\[-60\.0, 80\.0\] degC \(the calibrated range \+- temperature_fault_margin_degC 20\)'
-        r': a sensor fault\? 1 readings rejected, the gyro gets stale_policy hold$',
-    )
-    assert len(lines) == 2
 
 
 def test_tdot_clamped_warns_throttled(
