@@ -19,7 +19,12 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.coefficients import load
-from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
+from fog_temp_comp.core.compensator import (
+    Compensator,
+    CompensatorCounters,
+    GuardSettings,
+    replay,
+)
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.evaluate import compensate_record, replay_record
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
@@ -77,6 +82,12 @@ def test_a_stuck_sensor_is_rejected_and_the_correction_held(model: DriftModel) -
     # back on the ramp, corrected from the temperature again (a gap restarts Tdot)
     assert counters.temperature_gaps == 1
     assert comp.status.temperature_used_degC == pytest.approx(values[-1], abs=0.01)
+    # the block path (compensate, replay) is the per-message path, bit for bit
+    blocks = Compensator(model, DenoiseSettings('iir'))
+    k = np.arange(values.size, dtype=np.float64)
+    replayed = replay(blocks, T0 + k + 0.5, np.zeros((k.size, 3)), T0 + k, values)
+    assert_array_equal(-replayed / RAD_S_PER_DEG_H, corrections)
+    assert blocks.status.counters == comp.status.counters
     # without the guard the spell is a confirmed step to -127, clamped to -40 degC
     unguarded = Compensator(
         model, DenoiseSettings('iir'), GuardSettings(temperature_fault_margin_degC=math.inf)
