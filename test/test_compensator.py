@@ -246,8 +246,15 @@ def test_memory_stays_bounded_per_message(method: str) -> None:
     assert min(growth) < 5_000, f'{method}: bytes kept per 10k messages: {growth}'
 
 
-def test_a_marked_hole_restarts_the_tdot_estimate_however_short(model: DriftModel) -> None:
-    """A skipped chunk of a bag (2 s here, far under the 10 s timeout) is not bridged."""
+@pytest.mark.parametrize('how', ['no bridge', 'iir'])
+def test_a_marked_hole_restarts_the_tdot_estimate_however_short(
+    model: DriftModel, how: str
+) -> None:
+    """A skipped chunk of a bag (2 s here, far under the 10 s timeout) is a gap.
+
+    Restarted by a grid estimator (its bins must not straddle the hole), or with the Kalman
+    filter's bridge off (a bridged hole: :func:`test_a_gap_is_bridged_by_the_kalman_filter`).
+    """
     t0 = 1.7e9
     lost = (300, 301)  # 1 Hz, 0.5 degC/min, two samples lost
 
@@ -256,14 +263,20 @@ def test_a_marked_hole_restarts_the_tdot_estimate_however_short(model: DriftMode
             if k not in lost:
                 comp.add_temperature(t0 + k, 0.5 / 60 * k)
 
-    plain, holed = Compensator(model, DenoiseSettings()), Compensator(model, DenoiseSettings())
+    settings = DenoiseSettings(method='iir' if how == 'iir' else 'kalman')
+    guard = GuardSettings(temperature_bridge_s=0.0 if how == 'no bridge' else 600.0)
+
+    def new() -> Compensator:
+        return Compensator(model, settings, guard)
+
+    plain, holed = new(), new()
     holed.mark_holes([(t0 + 299.5, t0 + 301.5)])
     ramp(plain, 310)
     ramp(holed, 310)
     assert plain.status.counters.temperature_gaps == 0
     assert holed.status.counters.temperature_gaps == 1
     # from the hole on, the same as a compensator started after it (and unlike the plain one)
-    fresh = Compensator(model, DenoiseSettings())
+    fresh = new()
     ramp(fresh, 310, start=302)
 
     def state(comp: Compensator) -> tuple[float, float, bool]:
@@ -277,6 +290,59 @@ def test_a_marked_hole_restarts_the_tdot_estimate_however_short(model: DriftMode
     holed.mark_holes([(t0 + 10.0, t0 + 11.0)])  # a hole already passed changes nothing
     holed.add_temperature(t0 + 600, 5.0)
     assert holed.status.counters.temperature_gaps == 1
+
+
+@pytest.mark.parametrize('quantum_degC', [0.0, 1 / 16])
+def test_a_gap_is_bridged_by_the_kalman_filter(model: DriftModel, quantum_degC: float) -> None:
+    """A gap up to ``temperature_bridge_s``: the Tdot terms go on from the next reading.
+
+    A 0.5 degC/min ramp read at 1 Hz loses 60 s of readings (a driver restarting). Bridged, the
+    correction after the gap is the one without the gap to 1 % of its Tdot term; restarted (the
+    bridge off, or a gap longer than it), the Tdot term is 0 until the filter has warmed up
+    again: an error of DTdot * 0.5 deg/h on every axis for a minute or more.
+    """
+    t0 = 1.7e9
+    settings = DenoiseSettings(method='kalman', temperature_quantum_degC=quantum_degC)
+    if quantum_degC:
+        settings = dataclasses.replace(settings, kalman_quantized_noise_degC=0.01)
+    lost = range(1500, 1560)
+
+    def run(guard: GuardSettings, skip: range = range(0)) -> tuple[Compensator, np.ndarray]:
+        comp = Compensator(model, settings, guard)
+        after = []
+        for k in range(1620):
+            if k not in skip:
+                temperature = 0.5 / 60 * k
+                if quantum_degC:
+                    temperature = quantum_degC * np.round(temperature / quantum_degC)
+                comp.add_temperature(t0 + k, temperature)
+            comp.correct_xyz(t0 + k + 0.5, 0.0, 0.0, 0.0)
+            if k == lost.stop:
+                after.append((comp.status.estimator_ready, comp.status.tdot_degC_per_min))
+            if k >= lost.stop:
+                after.append(comp.status.correction_deg_h)
+        return comp, np.array(after[1:])
+
+    _, reference = run(GuardSettings())
+    bridged, corrections = run(GuardSettings(), lost)
+    tdot_term = np.abs(model.coefficients[2]) * 0.5  # deg/h per axis
+    assert bridged.status.counters.temperature_gaps_bridged == 1
+    assert bridged.status.counters.temperature_gaps == 0
+    assert bridged.status.estimator_ready
+    assert np.all(np.abs(corrections - reference) < 0.01 * tdot_term)
+    for guard in (GuardSettings(temperature_bridge_s=0.0), GuardSettings(temperature_bridge_s=59)):
+        restarted, corrections = run(guard, lost)
+        assert restarted.status.counters.temperature_gaps == 1
+        assert restarted.status.counters.temperature_gaps_bridged == 0
+        missing = np.abs(corrections[0] - reference[0])
+        assert_allclose(missing, tdot_term, rtol=0.05)  # the Tdot term left out after it
+
+
+@pytest.mark.parametrize('bridge', [-1.0, math.nan, '600'])
+def test_the_bridge_must_be_a_number_at_least_zero(bridge: object) -> None:
+    with pytest.raises(ValueError, match='temperature_bridge_s'):
+        GuardSettings(temperature_bridge_s=bridge)  # type: ignore[arg-type]
+    assert GuardSettings(temperature_bridge_s=math.inf).temperature_bridge_s == math.inf
 
 
 def test_gyro_before_the_first_temperature_waits_for_it_then_passes_through(
@@ -339,13 +405,17 @@ def test_a_sensor_read_every_20_s_is_not_a_gap_at_every_reading(model: DriftMode
             comp.correct_xyz(t0 + k + 0.5, 0.0, 0.0, 0.0)
 
     unknown = Compensator(model, settings)
+    restarted = Compensator(model, settings, GuardSettings(temperature_bridge_s=0.0))
     slow = Compensator(model, dataclasses.replace(settings, temperature_period_s=20.0))
     assert (unknown.stale_after_s, slow.stale_after_s) == (10.0, 60.0)
-    run(unknown, 7200)
-    run(slow, 7200)
-    # without the interval every reading is a gap: Tdot restarts and never warms up
-    assert unknown.status.counters.temperature_gaps == 7200 // 20 - 1
-    assert not unknown.status.estimator_ready
+    for comp in (unknown, restarted, slow):
+        run(comp, 7200)
+    # without the interval every reading is a gap, and the gyro between is held; the Kalman
+    # filter bridges each gap, but without the bridge Tdot would restart and never warm up
+    assert unknown.status.counters.temperature_gaps_bridged == 7200 // 20 - 1
+    assert unknown.status.estimator_ready
+    assert restarted.status.counters.temperature_gaps == 7200 // 20 - 1
+    assert not restarted.status.estimator_ready
     assert unknown.status.counters.imu_held > 3000
     assert slow.status.counters.temperature_gaps == 0
     assert slow.status.counters.imu_held == 0
@@ -353,9 +423,9 @@ def test_a_sensor_read_every_20_s_is_not_a_gap_at_every_reading(model: DriftMode
     assert slow.status.tdot_degC_per_min == pytest.approx(0.5, rel=0.02)
     # one reading lost is not a gap; a sensor silent for longer than 60 s is
     run(slow, 7400, 7200, skip=range(7300, 7301))
-    assert slow.status.counters.temperature_gaps == 0
+    assert slow.status.counters.temperature_gaps_bridged == 0
     run(slow, 7600, 7400, skip=range(7420, 7500))
-    assert slow.status.counters.temperature_gaps == 1
+    assert slow.status.counters.temperature_gaps_bridged == 1
     assert slow.status.counters.imu_held == 40  # gyro 60.5-99.5 s after the reading at 7400
     # a guard timeout longer than 3 intervals is kept
     longer = Compensator(model, slow.denoise, GuardSettings(temperature_timeout_s=90.0))
@@ -495,6 +565,7 @@ def _assert_same_state(a: Compensator, b: Compensator) -> None:
         ('kalman', PAPER_TERMS, {'stale_policy': 'none'}),
         ('kalman', (*PAPER_TERMS, 'T2', 'T_Tdot', 'Tdot_lag'), {'clamp_tdot': True}),
         ('kalman', PAPER_TERMS, {'clamp_temperature': False, 'tdot_limit_degC_per_min': 1.0}),
+        ('kalman', PAPER_TERMS, {'temperature_bridge_s': 0.0}),
         ('iir', (*PAPER_TERMS, 'T2', 'T3'), {}),
         ('kalman', (*PAPER_TERMS, 'T_above_18', 'T_above_22'), {}),
         ('none', PAPER_TERMS, {'stale_policy': 'none', 'temperature_timeout_s': 2.0}),
@@ -525,7 +596,9 @@ def test_correct_block_equals_correct_xyz_bit_for_bit(
     # the stream exercises what it claims to
     assert counters.imu_duplicate and counters.imu_repeated_stamp
     assert counters.imu_out_of_order and counters.imu_zero_stamp
-    assert counters.time_jumps and counters.temperature_gaps and counters.imu_nonfinite
+    assert counters.time_jumps and counters.imu_nonfinite
+    bridges = method == 'kalman' and GuardSettings(**guard).temperature_bridge_s > 0  # type: ignore[arg-type]
+    assert (counters.temperature_gaps_bridged if bridges else counters.temperature_gaps) > 0
     assert counters.imu_corrected and counters.imu_awaiting_temperature  # gyro before temperature
     if one.stale_after_s < 5.0:  # the first temperature comes 6 s after the gyro: waited, passed
         assert counters.imu_uncorrected > 150
@@ -603,7 +676,7 @@ def test_correct_block_equals_correct_xyz_with_a_sensor_read_every_20_s() -> Non
     # the stream exercises the rule: without the interval it is a gap at every reading
     unknown = Compensator(model, dataclasses.replace(settings, temperature_period_s=0.0))
     _drive(unknown, events, 'each')
-    assert unknown.status.counters.temperature_gaps > 100
+    assert unknown.status.counters.temperature_gaps_bridged > 100
 
 
 def test_a_reading_published_on_change_is_put_back_while_it_holds(model: DriftModel) -> None:
@@ -649,7 +722,7 @@ def test_a_reading_published_on_change_is_put_back_while_it_holds(model: DriftMo
     assert_array_equal(_drive(blocks, sent, 'block', seed=1), _drive(each, sent, 'each'))
     _assert_same_state(blocks, each)
     # a hole (a lost chunk of a damaged bag): nothing is put back past its midpoint, and the
-    # next reading restarts the estimate there, as for a sensor published at its rate
+    # next reading is after a gap there, as for a sensor published at its rate
     holed = Compensator(model, dataclasses.replace(settings, temperature_hold_s=900.0))
     holed.mark_holes([(t0 + 500.0, t0 + 502.0)])
     last_before: list[float] = []
@@ -661,7 +734,7 @@ def test_a_reading_published_on_change_is_put_back_while_it_holds(model: DriftMo
         else:
             holed.correct_xyz(stamp, *values)
     assert t0 + 500.0 <= last_before[0] <= t0 + 501.0
-    assert holed.status.counters.temperature_gaps == 1
+    assert holed.status.counters.temperature_gaps_bridged == 1
     # silent for longer than the hold: the held readings stop, and the temperature is stale
     for k in range(1100, 2200):
         on_change.correct_xyz(t0 + k + 0.25, 1e-4, 0.0, 0.0)

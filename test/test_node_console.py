@@ -294,7 +294,13 @@ def test_warm_up_done_is_one_info_line_with_its_duration(
         'full correction from now on (Tdot terms included)'
     ]
     assert 10.0 < ready_at - T0 < 60.0
-    # a temperature gap restarts the estimate: it warms up again and says so once more
+    # a gap the Kalman filter bridges (80 s) goes on warm; one longer than temperature_bridge_s
+    # (1800 s) restarts the estimate: it warms up again and says so once more
     for k in range(int(120 * hz)):
         h.send_temperature(T0 + 200.0 + k / hz, 21.0)
+    assert h.node.compensator.status.counters.temperature_gaps_bridged == 1
+    assert len(console.matching('INFO', r'warmed up after')) == 1
+    for k in range(int(120 * hz)):
+        h.send_temperature(T0 + 2200.0 + k / hz, 21.0)
+    assert h.node.compensator.status.counters.temperature_gaps == 1
     assert len(console.matching('INFO', r'warmed up after')) == 2

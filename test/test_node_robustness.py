@@ -418,6 +418,47 @@ def test_a_temperature_published_on_change_holds_on_the_node(
         h.close()
 
 
+@pytest.mark.parametrize('bridge_s', [None, 0.0])
+def test_a_temperature_gap_is_bridged_by_the_kalman_filter(
+    ros_context: object, tmp_path: Path, coefficients: Coefficients, bridge_s: float | None
+) -> None:
+    """60 s without temperature on a 0.5 degC/min ramp: the Tdot term goes on after it.
+
+    With ``temperature_bridge_s`` 0 the gap restarts the estimate instead, and the gyro after
+    it is corrected without the Tdot term until the filter has warmed up again.
+    """
+    import dataclasses
+
+    kalman = dataclasses.replace(coefficients, denoise=DenoiseSettings(method='kalman'))
+    path = tmp_path / 'kalman.yaml'
+    save(kalman, path)
+    params = {} if bridge_s is None else {'temperature_bridge_s': bridge_s}
+    h = Harness(ros_context, start(ros_context, path, **params))
+    try:
+        for k in range(0, 660):  # gyro at 1 Hz; readings 600-659 s lost
+            if not 600 <= k < 660:
+                h.send_temperature(T0 + k, 20.0 + 0.5 / 60 * k)
+            h.send_imu(T0 + k + 0.5, RATE)
+        h.diagnose()
+        h.send_temperature(T0 + 660.0, 25.5)
+        after = h.send_imu(T0 + 660.5, RATE)
+        assert after is not None
+        counters = h.node.compensator.status.counters
+        status = h.diagnose()
+        tdot = 0.5 if bridge_s is None else 0.0  # the Tdot term, or none while warming up
+        expected = RATE - expected_correction(coefficients, 25.5 + 0.5 / 120, tdot)
+        assert_allclose(rate_of(after), expected, rtol=0, atol=2e-3 * RAD_S_PER_DEG_H)
+        if bridge_s is None:
+            assert (counters.temperature_gaps_bridged, counters.temperature_gaps) == (1, 0)
+            assert 'temperature gap, bridged by the Kalman filter' in status.message
+            assert diag_values(status)['temperature_gaps_bridged'] == '1'
+        else:
+            assert (counters.temperature_gaps_bridged, counters.temperature_gaps) == (0, 1)
+            assert 'temperature gap, Tdot restarted' in status.message
+    finally:
+        h.close()
+
+
 @pytest.mark.parametrize('period_s', [20.0, 0.0])
 def test_a_sensor_read_every_20_s_is_fresh_with_its_calibrated_interval(
     ros_context: object, tmp_path: Path, coefficients: Coefficients, period_s: float

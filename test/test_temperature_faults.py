@@ -113,7 +113,7 @@ def test_a_fault_after_a_gap_is_still_rejected(model: DriftModel) -> None:
     assert comp.add_temperature(T0, 25.0)
     assert not comp.add_temperature(T0 + 60.0, -127.0)  # a gap would accept any reading
     assert comp.add_temperature(T0 + 61.0, 25.5)
-    assert comp.status.counters.temperature_gaps == 1
+    assert comp.status.counters.temperature_gaps_bridged == 1
 
 
 @pytest.mark.parametrize('margin', [-1.0, math.nan, '20'])
@@ -182,8 +182,22 @@ def test_compensate_says_it_rejected_a_faulty_sensor(
     assert (
         'rejected as a sensor fault (the last -127 degC): meanwhile the gyro got the last ' in err
     )
+    counters = compensate_counters(bag, coeffs)
+    assert (counters.temperature_gaps_bridged, counters.temperature_gaps) == (1, 0)
+    held = counters.imu_held
+    assert (
+        f'NOTE: {bag}: 1 temperature gaps (1 bridged by the Kalman filter); {held} gyro '
+        'messages in all got the last correction held while the temperature was stale'
+    ) in err
+    # a grid estimator restarts after the gap, and that is a warning
+    out_iir = str(tmp_path / 'out_iir')
+    args = ['compensate', str(bag), '--coeffs', str(coeffs), '-o', out_iir, '--denoise', 'iir']
+    assert cli.main(args) == 0
+    assert (
+        f'WARNING: {bag}: 1 temperature gaps (1 restarted the Tdot estimate, whose terms '
+        'waited for its warm-up); '
+    ) in capsys.readouterr().err
     assert cli.main(['evaluate', str(bag), '--coeffs', str(coeffs)]) == 0
-    held = compensate_counters(bag, coeffs).imu_held
     assert held > 100
     assert (
         f'note: {bag.name}: 120 temperature readings further outside the calibrated range than '

@@ -110,8 +110,9 @@ class Compensator(_BlockCorrection):
         """Spans (start, end in s) where input is known lost (a skipped chunk of a bag).
 
         The first temperature at or after a span's midpoint, when the previous one came before
-        it, restarts the Tdot estimate as a temperature gap does (counted in
-        ``temperature_gaps``): no estimate is bridged across a hole, however short.
+        it, is taken as after a temperature gap, however short: the Kalman filter bridges it
+        (``temperature_bridge_s``, counted in ``temperature_gaps_bridged``), another estimator
+        restarts (``temperature_gaps``), so that no grid bin straddles the hole.
         """
         self._holes = sorted((a + b) / 2 for a, b in spans_s)
         self._next_hole = self._holes[0] if self._holes else math.inf
@@ -157,7 +158,7 @@ class Compensator(_BlockCorrection):
 
     @property
     def stale_after_s(self) -> float:
-        """Age (s) past which temperature is stale and a gap restarts Tdot.
+        """Age (s) past which temperature is stale and a pause between readings is a gap.
 
         The guard's ``temperature_timeout_s``, or 3 of the sensor's calibrated intervals
         (``denoise.temperature_period_s``) where longer (:func:`stale_after_s`). A sensor
@@ -193,8 +194,8 @@ class Compensator(_BlockCorrection):
         Rejected (and counted): non-finite values, a repeated stamp, a stamp slightly earlier
         than the previous one, a sensor fault (a reading outside
         :attr:`plausible_temperature_degC`), an implausible jump. A stamp far earlier (time
-        jump) resets the state first; a gap longer than :attr:`stale_after_s` restarts the
-        Tdot estimate.
+        jump) resets the state first; a gap longer than :attr:`stale_after_s` is bridged or
+        restarts the Tdot estimate (:meth:`_after_gap`).
         """
         status = self.status
         counters = status.counters
@@ -231,8 +232,7 @@ class Compensator(_BlockCorrection):
             stamp_s - last > self._stale_after_s
             or (stamp_s >= self._next_hole and self._crosses_hole(stamp_s))
         ):
-            counters.temperature_gaps += 1
-            self._restart_estimate()
+            self._after_gap(stamp_s - last)
         elif not self._plausible(stamp_s, temperature_degC):
             return False
         counters.temperature_accepted += 1
@@ -272,6 +272,24 @@ class Compensator(_BlockCorrection):
             status.tdot_raw_degC_per_min = estimate.raw_tdot_degC_per_min
             status.tdot_std_degC_per_min = estimate.tdot_std_degC_per_min
         status.estimator_ready = self._estimator.ready
+
+    def _after_gap(self, gap_s: float) -> None:
+        """A gap of ``gap_s`` s before a reading: bridged by the Kalman filter, or a restart.
+
+        The Kalman filter predicts over a gap up to ``guard.temperature_bridge_s`` as over any
+        interval (as ``calibrate`` runs it over a whole record), so the Tdot terms go on from
+        the first reading after it; a restart would leave them out for the filter's warm-up.
+        What the sensor held before the gap is not put back after it either way.
+        """
+        counters = self.status.counters
+        if self.denoise.method == 'kalman' and gap_s <= self._guard.temperature_bridge_s:
+            counters.temperature_gaps_bridged += 1
+            self._pending = []
+            self._held.reset()
+            self._held_due_s = math.inf
+        else:
+            counters.temperature_gaps += 1
+            self._restart_estimate()
 
     def _restart_estimate(self) -> None:
         self._estimator.reset()

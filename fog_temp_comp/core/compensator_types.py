@@ -15,6 +15,7 @@ from fog_temp_comp.core.names import TDOT_LIMIT_DEGC_PER_MIN
 __all__ = [
     'STALE_POLICIES',
     'STALE_SAMPLE_INTERVALS',
+    'TEMPERATURE_BRIDGE_S',
     'TEMPERATURE_FAULT_MARGIN_DEGC',
     'CompensatorCounters',
     'CompensatorStatus',
@@ -23,7 +24,7 @@ __all__ = [
 ]
 
 STALE_POLICIES = ('hold', 'none')
-#: temperature is stale (and a gap between readings restarts Tdot) only past this many of the
+#: temperature is stale (and a gap between readings is a gap) only past this many of the
 #: sensor's nominal intervals (``DenoiseSettings.temperature_period_s``): one reading lost, and
 #: the next late, is not yet a gap
 STALE_SAMPLE_INTERVALS = 3.0
@@ -33,6 +34,14 @@ STALE_SAMPLE_INTERVALS = 3.0
 #: enough for the common error codes (-127, 85 with a -40..60 calibration, -273.15, 4095)
 TEMPERATURE_FAULT_MARGIN_DEGC = 20.0
 
+#: a gap between temperature readings up to this long (s) is bridged by the Kalman filter's
+#: prediction: on 0.5-1 degC/min cycles a restart costs its warm-up without the Tdot terms (a
+#: median 2.2-4.1 times the clean run's 10 s range for any gap from 15 s to 30 min), a bridge
+#: nothing up to 2 min, a median 1.00-1.34 times up to 15 min and 1.13-2.26 at 30 min, with
+#: the correction held meanwhile (``benchmarks/temperature_gap.py``); after an hour the two
+#: are alike, and a restart's warm-up keeps a long-lost estimate out
+TEMPERATURE_BRIDGE_S = 1800.0
+
 
 @dataclass(frozen=True)
 class GuardSettings:
@@ -41,10 +50,10 @@ class GuardSettings:
     Attributes
     ----------
     temperature_timeout_s : float
-        Temperature older (or newer) than this relative to a gyro stamp is stale; a gap this long
-        between temperature samples restarts the Tdot estimate. A slow sensor gets longer: the
-        compensator waits :func:`stale_after_s`, at least :data:`STALE_SAMPLE_INTERVALS` of the
-        sensor's calibrated interval.
+        Temperature older (or newer) than this relative to a gyro stamp is stale; a pause this
+        long between temperature samples is a gap (``temperature_bridge_s``). A slow sensor
+        gets longer: the compensator waits :func:`stale_after_s`, at least
+        :data:`STALE_SAMPLE_INTERVALS` of the sensor's calibrated interval.
     stale_policy : str
         With stale temperature: ``'hold'`` keeps applying the last correction, ``'none'`` passes
         the gyro rate through uncorrected.
@@ -71,6 +80,12 @@ class GuardSettings:
         fault (a disconnected sensor's -127 or -273.15, a driver's error code, a wrong
         scale), rejected whatever follows it: never confirmed as a step, never taken after a
         gap. The gyro then gets the stale rule (``stale_policy``). ``inf`` turns it off.
+    temperature_bridge_s : float
+        A gap between temperature readings up to this long (s) is bridged by the Kalman Tdot
+        filter's own prediction, as ``calibrate`` runs it over a whole record: the estimate
+        goes on from the first reading after the gap, Tdot terms included. A longer gap, and
+        any gap with another estimator, restarts the estimate, whose Tdot terms then wait for
+        its warm-up. 0 restarts after every gap.
 
     """
 
@@ -84,6 +99,7 @@ class GuardSettings:
     max_temperature_rate_degC_per_min: float = 20.0
     step_confirm_samples: int = 5
     temperature_fault_margin_degC: float = TEMPERATURE_FAULT_MARGIN_DEGC
+    temperature_bridge_s: float = TEMPERATURE_BRIDGE_S
 
     def __post_init__(self) -> None:
         if self.stale_policy not in STALE_POLICIES:
@@ -105,6 +121,9 @@ class GuardSettings:
             raise ValueError(
                 f'temperature_fault_margin_degC must be a number >= 0 (inf: off), got {margin!r}'
             )
+        bridge = self.temperature_bridge_s
+        if not (isinstance(bridge, (int, float)) and bridge >= 0 and not math.isnan(bridge)):
+            raise ValueError(f'temperature_bridge_s must be a number >= 0 s, got {bridge!r}')
         if not (isinstance(self.step_confirm_samples, int) and self.step_confirm_samples >= 1):
             raise ValueError(
                 f'step_confirm_samples must be an integer >= 1, got {self.step_confirm_samples!r}'
@@ -112,7 +131,7 @@ class GuardSettings:
 
 
 def stale_after_s(guard: GuardSettings, temperature_period_s: float) -> float:
-    """Age (s) past which temperature is stale and a gap between readings restarts Tdot.
+    """Age (s) past which temperature is stale and a pause between readings is a gap.
 
     ``guard.temperature_timeout_s``, or :data:`STALE_SAMPLE_INTERVALS` of the sensor's nominal
     interval ``temperature_period_s`` (s; 0: unknown) where that is longer.
@@ -147,6 +166,7 @@ class CompensatorCounters:
     temperature_faults: int = 0  # outside the calibrated range by more than the margin
     temperature_steps: int = 0  # confirmed step, estimate restarted
     temperature_gaps: int = 0  # gap longer than the timeout, estimate restarted
+    temperature_gaps_bridged: int = 0  # gap bridged by the Kalman filter (temperature_bridge_s)
     time_jumps: int = 0
 
     @property

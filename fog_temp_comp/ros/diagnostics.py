@@ -28,6 +28,7 @@ _WARN_COUNTERS = {
     'temperature_glitches': 'temperature glitches rejected',
     'temperature_steps': 'temperature step, Tdot restarted',
     'temperature_gaps': 'temperature gap, Tdot restarted',
+    'temperature_gaps_bridged': 'temperature gap, bridged by the Kalman filter',
     'time_jumps': 'time jump, filter reset',
 }
 

@@ -190,6 +190,11 @@ GUARD_PARAMETERS: dict[str, tuple[Any, str]] = {
         'a temperature further than this (degC) outside the calibrated range is a sensor fault '
         '(an error code such as -127): rejected, the gyro gets stale_policy (1e6: off)',
     ),
+    'temperature_bridge_s': (
+        _GUARD_DEFAULTS.temperature_bridge_s,
+        'a gap between temperature readings up to this long (s) is bridged by the Kalman '
+        "filter's prediction (Tdot terms go on); a longer one restarts it (0: every gap)",
+    ),
 }
 
 
@@ -436,8 +441,9 @@ class ParametersMixin(_NodeBase):
         for name, (default, text) in GUARD_PARAMETERS.items():
             descriptor = ParameterDescriptor(description=text)
             if isinstance(default, float):
+                low = 0.0 if name == 'temperature_bridge_s' else 0.001  # 0: never bridged
                 descriptor.floating_point_range = [
-                    FloatingPointRange(from_value=0.001, to_value=1e6, step=0.0)
+                    FloatingPointRange(from_value=low, to_value=1e6, step=0.0)
                 ]
             self._declare(name, default, descriptor)
         for name, (_, default, text) in REST_PARAMETERS.items():

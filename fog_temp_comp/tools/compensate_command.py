@@ -118,6 +118,7 @@ def compensate_command(
     (n_out, counters), compensator = _on_one_clock(run, in_bag, out_bag, strict)
     _report_written(run, out_bag, n_out, counters, chosen=output_topic is None, stdout=stdout)
     _report_faults(run.in_bag, compensator)
+    _report_gaps(run.in_bag, compensator.status.counters)
     if compensator.rest is not None:
         _report_rest(compensator.rest, coeffs_path, rest_bias_out, stdout)
     return 0
@@ -175,6 +176,28 @@ def _report_faults(in_bag: Path, compensator: Compensator) -> None:
             ),
             file=sys.stderr,
         )
+
+
+def _report_gaps(in_bag: Path, counters: CompensatorCounters) -> None:
+    """A line where the temperature paused for longer than the stale time (a gap).
+
+    ``NOTE`` where the Kalman filter bridged every gap, ``WARNING`` where one restarted the
+    Tdot estimate (its terms left out until the filter warmed up again).
+    """
+    bridged, restarted = counters.temperature_gaps_bridged, counters.temperature_gaps
+    if not (bridged or restarted):
+        return
+    parts = [f'{bridged} bridged by the Kalman filter'] if bridged else []
+    if restarted:
+        parts.append(
+            f'{restarted} restarted the Tdot estimate, whose terms waited for its warm-up'
+        )
+    print(
+        f'{"WARNING" if restarted else "NOTE"}: {in_bag}: {bridged + restarted} temperature '
+        f'gaps ({"; ".join(parts)}); {counters.imu_held} gyro messages in all got the last '
+        'correction held while the temperature was stale',
+        file=sys.stderr,
+    )
 
 
 def _on_one_clock(
@@ -329,7 +352,8 @@ class _Compensate:
         """Write ``target`` from ``source``; (written, counters) and the compensator used.
 
         ``salvage`` (a repaired copy) is reported on stderr, and the spans it skipped inside
-        the run restart the Tdot estimate (no correction bridged across a hole).
+        the run are temperature gaps (:meth:`Compensator.mark_holes`): the Kalman filter
+        bridges them, another estimator restarts there.
         """
         if salvage is not None:
             Salvaged().add(salvage)
