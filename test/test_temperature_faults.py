@@ -186,7 +186,7 @@ def test_compensate_says_it_rejected_a_faulty_sensor(
     assert (counters.temperature_gaps_bridged, counters.temperature_gaps) == (1, 0)
     held = counters.imu_held
     assert (
-        f'NOTE: {bag}: 1 temperature gaps (1 bridged by the Kalman filter); {held} gyro '
+        f'NOTE: {bag}: 1 temperature gap (1 bridged by the Kalman filter); {held} gyro '
         'messages in all got the last correction held while the temperature was stale'
     ) in err
     # a grid estimator restarts after the gap, and that is a warning
@@ -194,7 +194,7 @@ def test_compensate_says_it_rejected_a_faulty_sensor(
     args = ['compensate', str(bag), '--coeffs', str(coeffs), '-o', out_iir, '--denoise', 'iir']
     assert cli.main(args) == 0
     assert (
-        f'WARNING: {bag}: 1 temperature gaps (1 restarted the Tdot estimate, whose terms '
+        f'WARNING: {bag}: 1 temperature gap (1 restarted the Tdot estimate, whose terms '
         'waited for its warm-up); '
     ) in capsys.readouterr().err
     assert cli.main(['evaluate', str(bag), '--coeffs', str(coeffs)]) == 0

@@ -284,15 +284,17 @@ class Compensator(_BlockCorrection):
         counters = self.status.counters
         if self.denoise.method == 'kalman' and gap_s <= self._guard.temperature_bridge_s:
             counters.temperature_gaps_bridged += 1
-            self._pending = []
-            self._held.reset()
-            self._held_due_s = math.inf
+            self._forget_readings()
         else:
             counters.temperature_gaps += 1
             self._restart_estimate()
 
     def _restart_estimate(self) -> None:
         self._estimator.reset()
+        self._forget_readings()
+
+    def _forget_readings(self) -> None:
+        """Drop the readings awaiting a step's confirmation and the sensor's held value."""
         self._pending = []
         self._held.reset()
         self._held_due_s = math.inf

@@ -36,7 +36,7 @@ TEMPERATURE_FAULT_MARGIN_DEGC = 20.0
 
 #: a gap between temperature readings up to this long (s) is bridged by the Kalman filter's
 #: prediction: on 0.5-1 degC/min cycles a restart costs its warm-up without the Tdot terms (a
-#: median 2.2-4.1 times the clean run's 10 s range for any gap from 15 s to 30 min), a bridge
+#: median 1.5-4.1 times the clean run's 10 s range for any gap from 15 s to 30 min), a bridge
 #: nothing up to 2 min, a median 1.00-1.34 times up to 15 min and 1.13-2.26 at 30 min, with
 #: the correction held meanwhile (``benchmarks/temperature_gap.py``); after an hour the two
 #: are alike, and a restart's warm-up keeps a long-lost estimate out

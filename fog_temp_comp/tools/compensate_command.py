@@ -192,10 +192,11 @@ def _report_gaps(in_bag: Path, counters: CompensatorCounters) -> None:
         parts.append(
             f'{restarted} restarted the Tdot estimate, whose terms waited for its warm-up'
         )
+    gaps = bridged + restarted
     print(
-        f'{"WARNING" if restarted else "NOTE"}: {in_bag}: {bridged + restarted} temperature '
-        f'gaps ({"; ".join(parts)}); {counters.imu_held} gyro messages in all got the last '
-        'correction held while the temperature was stale',
+        f'{"WARNING" if restarted else "NOTE"}: {in_bag}: {gaps} temperature '
+        f'gap{"s" if gaps > 1 else ""} ({"; ".join(parts)}); {counters.imu_held} gyro messages '
+        'in all got the last correction held while the temperature was stale',
         file=sys.stderr,
     )
 
