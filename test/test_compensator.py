@@ -338,6 +338,22 @@ def test_a_gap_is_bridged_by_the_kalman_filter(model: DriftModel, quantum_degC: 
         assert_allclose(missing, tdot_term, rtol=0.05)  # the Tdot term left out after it
 
 
+def test_a_fast_sensor_is_bridged_through_its_averaged_readings(model: DriftModel) -> None:
+    """At 10 Hz the filter takes 0.5 s means: the one that spans the gap lies on the ramp."""
+    t0 = 1.7e9
+    comp = Compensator(model, DenoiseSettings(method='kalman', temperature_quantum_degC=0.0))
+    for k in range(15_602):  # 0.5 degC/min at 10 Hz, 60 s lost after 1500 s
+        if not 15_000 <= k < 15_600:
+            comp.add_temperature(t0 + k / 10, 0.5 / 600 * k)
+    assert comp.status.counters.temperature_gaps_bridged == 1
+    assert comp.status.estimator_ready
+    assert comp.status.tdot_degC_per_min == pytest.approx(0.5, rel=1e-3)
+    # the mean of the last readings before the gap and the first after it: on the ramp
+    estimate = comp._estimator.estimate
+    assert estimate is not None and t0 + 1500 < estimate.stamp_s < t0 + 1560
+    assert estimate.temperature_degC == pytest.approx(0.5 / 60 * (estimate.stamp_s - t0), abs=1e-3)
+
+
 @pytest.mark.parametrize('bridge', [-1.0, math.nan, '600'])
 def test_the_bridge_must_be_a_number_at_least_zero(bridge: object) -> None:
     with pytest.raises(ValueError, match='temperature_bridge_s'):
