@@ -109,6 +109,14 @@ def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) 
             'the calibrated range than temperature_fault_margin_degC were rejected as a sensor '
             f'fault; {counters.imu_held} gyro samples got the last correction held'
         )
+    bridged, restarted = counters.temperature_gaps_bridged, counters.temperature_gaps
+    if bridged or restarted:
+        gaps = bridged + restarted
+        notes.append(
+            f'note: {name}: {gaps} temperature gap{"s" if gaps > 1 else ""} longer than the '
+            f'stale time: {bridged} bridged by the Kalman filter, {restarted} restarted the Tdot '
+            'estimate'
+        )
     return notes
 
 
