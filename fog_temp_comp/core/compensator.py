@@ -180,10 +180,8 @@ class Compensator(_BlockCorrection):
             correction_deg_h=self.status.correction_deg_h,
             last_fault_degC=self.status.last_fault_degC,
         )
-        self._pending = []
         self._last_temperature = math.nan
-        self._held.reset()
-        self._held_due_s = math.inf
+        self._forget_readings()
         if self.rest is not None:
             self.rest.reset()
 
@@ -221,8 +219,7 @@ class Compensator(_BlockCorrection):
             # back after it), so the gyro gets the stale rule
             counters.temperature_faults += 1
             status.last_fault_degC = temperature_degC
-            self._held.reset()
-            self._held_due_s = math.inf
+            self._forget_held()
             return False
         if stamp_s < last:
             counters.time_jumps += 1
@@ -296,6 +293,10 @@ class Compensator(_BlockCorrection):
     def _forget_readings(self) -> None:
         """Drop the readings awaiting a step's confirmation and the sensor's held value."""
         self._pending = []
+        self._forget_held()
+
+    def _forget_held(self) -> None:
+        """Put back no held value of an on-change sensor after this point."""
         self._held.reset()
         self._held_due_s = math.inf
 
