@@ -533,21 +533,28 @@ def test_the_gyros_temperature_is_told_from_the_chambers_by_its_namespace(
     'temp_topics',
     [['/a/temperature', '/b/temperature'], ['/fog/a/temperature', '/fog/b/temperature']],
 )
-def test_temperatures_that_the_namespace_does_not_tell_apart_are_refused(
+def test_temperatures_that_the_namespace_does_not_tell_apart_are_each_calibrated_on(
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
     short_cycle_fast: SimulatedRun,
     temp_topics: list[str],
 ) -> None:
+    """Each topic gets the model choice; the better score is kept and named in the YAML.
+
+    (Before, calibrate refused; with ``--terms`` it still does: ``test_temperature_sources``.)
+    """
     bag = write_with_chamber_air(
         tmp_path / 'two', 'mcap', short_cycle_fast, temp_topics, '/fog/rate'
     )
     out = tmp_path / 'coeffs.yaml'
-    assert cli.main(['calibrate', str(bag), '-o', str(out)]) == 1
-    line = error_line(capsys)
-    assert 'several sensor_msgs/msg/Temperature topics' in line and '--temp-topic' in line
-    assert all(topic in line for topic in temp_topics)
-    assert not out.exists()
+    assert cli.main(['calibrate', str(bag), '-o', str(out)]) == 0
+    sources = yaml.safe_load(out.read_text())['provenance']['selection']['temperature_sources']
+    scores = {s['topic']: s['criterion'] for s in sources['sources']}
+    assert list(scores) == sorted(temp_topics)
+    # the first by name within the tolerance (2 %) of the best score
+    best = next(t for t in scores if scores[t] <= min(scores.values()) * 1.02)
+    assert sources['chosen'] == best and load(out).temperature_topic == best
+    assert f'{best} ' in capsys.readouterr().out
 
 
 @pytest.mark.parametrize('command', ['calibrate', 'compensate', 'evaluate'])

@@ -38,6 +38,17 @@ class BagError(Exception):
     """A bag cannot be read or written, or lacks what was asked of it."""
 
 
+class AmbiguousTopicError(BagError):
+    """A bag has several topics of the type asked for and their names do not tell which."""
+
+    def __init__(self, message: str, msgtype: str, candidates: Sequence[str]) -> None:
+        super().__init__(message)
+        #: the message type asked for
+        self.msgtype = msgtype
+        #: the topics of that type, sorted
+        self.candidates = tuple(candidates)
+
+
 @cache
 def typestore() -> Typestore:
     """ROS 2 Jazzy message types (also used for ROS 1 bags of the same types)."""
@@ -224,7 +235,9 @@ def resolve_topic_in(
         paired = raw_imu_topic(candidates) if msgtype == IMU_TYPE else None
         why = "the raw rate by the topics' names"
     if paired is None:
-        raise BagError(f'several {msgtype} topics: {candidates}; choose one with {flag}')
+        raise AmbiguousTopicError(
+            f'several {msgtype} topics: {candidates}; choose one with {flag}', msgtype, candidates
+        )
     others = ', '.join(c for c in candidates if c != paired)
     print(
         f'NOTE: several {msgtype} topics: using {paired}, {why} '

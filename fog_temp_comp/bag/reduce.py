@@ -49,6 +49,8 @@ class BinnedRecord:
     processes: int = 1
     #: the temperature frame_id kept where the topic carried several (else '')
     temp_frame_id: str = ''
+    #: there, every frame_id the topic carried, sorted (else ())
+    temp_frame_ids: tuple[str, ...] = ()
 
 
 def bin_record(record: ChamberRecord, period_s: float) -> BinnedRecord:
@@ -178,11 +180,13 @@ def reduce_bag(
     keep_temperature: bool = False,
     strict: bool = False,
     on_salvage: Callable[[Salvage], None] | None = None,
+    frame_notes: bool = True,
 ) -> BinnedRecord:
     """Stream a bag and keep only its grid bins (memory grows with hours, not messages).
 
     With ``keep_temperature`` the temperature samples are kept too (sorted by stamp).
     ``strict`` refuses a damaged bag; else ``on_salvage`` is called with what was skipped.
+    ``frame_notes`` False leaves out the ``NOTE:`` on a temperature topic of several sensors.
     A bag that is one intact MCAP file of :data:`PARALLEL_MIN_BYTES` or more is read in two
     processes (its second half in a fork; :mod:`fog_temp_comp.core.forked`).
     """
@@ -199,6 +203,7 @@ def reduce_bag(
         temp_frame_id=temp_frame_id,
         progress=progress,
         strict=strict,
+        frame_notes=frame_notes,
     ) as stream:
         processes = 2 if _read_in_two(stream, reduction, period_s) else 1
         if processes == 1:
@@ -219,6 +224,7 @@ def reduce_bag(
             path, stream.imu_topic, stream.temp_topic, stream.frame_id, period_s,
             t_idx, t_stamp, temp, g_idx, g_stamp, rate.reshape(-1, 3),
             gyro.samples, temperature.samples, kept, processes, stream.temp_frame_id,
+            stream.temp_frame_ids,
         )  # fmt: skip
 
 
@@ -242,6 +248,7 @@ def reduce_record(
     quiet: bool = True,
     strict: bool = False,
     on_salvage: Callable[[Salvage], None] | None = None,
+    frame_notes: bool = True,
 ) -> ChamberRecord:
     """A bag as a :class:`ChamberRecord` whose gyro stream is reduced to grid-bin means.
 
@@ -262,6 +269,7 @@ def reduce_record(
         keep_temperature=True,
         strict=strict,
         on_salvage=on_salvage,
+        frame_notes=frame_notes,
     )
     assert binned.temperature_samples is not None
     temp_t, temps = binned.temperature_samples
@@ -275,4 +283,5 @@ def reduce_record(
         temp_stamps_s=temp_t,
         temperature_degC=temps,
         temp_frame_id=binned.temp_frame_id,
+        temp_frame_ids=binned.temp_frame_ids,
     )

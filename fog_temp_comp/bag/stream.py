@@ -93,6 +93,9 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
     strict : bool
         Refuse a damaged bag (:class:`~fog_temp_comp.bag.salvage.RecoveryError`) instead of
         reading it as far as it is intact; what was skipped is in :attr:`salvage` either way.
+    frame_notes : bool
+        :meth:`warn_unstamped` gives the ``NOTE:`` on a temperature topic of several sensors
+        (False: ``calibrate`` reads each sensor in turn and says which it kept).
 
     """
 
@@ -109,6 +112,7 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         chunk_size: int = 10_000,
         progress: Progress | None = None,
         strict: bool = False,
+        frame_notes: bool = True,
     ) -> None:
         if time_source not in TIME_SOURCES:
             raise ValueError(f'time_source must be one of {TIME_SOURCES}, got {time_source!r}')
@@ -116,6 +120,7 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
             raise BagError('--temp-field needs --temp-topic (the topic that carries the field)')
         self.path = Path(path)
         self.time_source = time_source
+        self.frame_notes = frame_notes
         self.temp_field = temp_field
         self.chunk_size = chunk_size
         self.progress = progress
@@ -302,7 +307,9 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
             self.frames['imu'].note(
                 str(self.path), self.imu_topic, what="gyros' messages", flag='--gyro-frame-id'
             ),
-            self.frames['temperature'].note(str(self.path), self.temp_topic),
+            self.frames['temperature'].note(str(self.path), self.temp_topic)
+            if self.frame_notes
+            else None,
         )
         for note in notes:
             if note is not None:
@@ -313,6 +320,12 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         """The temperature frame_id kept where the topic carried several, else ''."""
         frames = self.frames['temperature']
         return (frames.kept or '') if frames.several else ''
+
+    @property
+    def temp_frame_ids(self) -> tuple[str, ...]:
+        """Every frame_id the temperature topic carried where it carried several, sorted."""
+        frames = self.frames['temperature']
+        return tuple(sorted(frames.readings)) if frames.several else ()
 
 
 def resolve_any_topic(reader: AnyReader, topic: str, flag: str) -> str:
@@ -336,6 +349,7 @@ def read_record(
     quiet: bool = True,
     strict: bool = False,
     on_salvage: Callable[[Salvage], None] | None = None,
+    frame_notes: bool = True,
 ) -> ChamberRecord:
     """Read the gyro and temperature streams of a bag into arrays (sorted by stamp).
 
@@ -355,6 +369,7 @@ def read_record(
         temp_frame_id=temp_frame_id,
         progress=progress,
         strict=strict,
+        frame_notes=frame_notes,
     ) as stream:
         for chunk in stream.chunks():
             parts[chunk.kind].append(chunk)
@@ -381,4 +396,5 @@ def read_record(
             temp_stamps_s=temp_t[temp_order],
             temperature_degC=temps[temp_order],
             temp_frame_id=stream.temp_frame_id,
+            temp_frame_ids=stream.temp_frame_ids,
         )

@@ -51,6 +51,10 @@ class Coefficients:
     #: of a temperature topic that carried several sensors' readings (told by frame_id), the
     #: one the fit used; the node, ``compensate`` and ``evaluate`` keep it too ('' for none)
     temperature_frame_id: str = ''
+    #: where the bags carried several temperature topics that their names did not tell apart,
+    #: the one ``calibrate`` chose; ``compensate`` and ``evaluate`` take it from such bags
+    #: ('' for none)
+    temperature_topic: str = ''
 
 
 def _hinge_text(term: str) -> str:
@@ -89,6 +93,7 @@ def to_dict(coeffs: Coefficients) -> dict[str, Any]:
             if coeffs.temperature_frame_id
             else {}
         ),
+        **({'temperature_topic': coeffs.temperature_topic} if coeffs.temperature_topic else {}),
         'axes': {
             axis: {
                 coefficient_key(term): float(model.coefficients[i, j])
@@ -223,7 +228,12 @@ def from_dict(data: Any) -> Coefficients:
         raise CoefficientsError(f'denoise: {err}') from None
     frame_id = data.get('frame_id', '') or ''
     temperature_frame_id = data.get('temperature_frame_id', '') or ''
-    for key, value in (('frame_id', frame_id), ('temperature_frame_id', temperature_frame_id)):
+    temperature_topic = data.get('temperature_topic', '') or ''
+    for key, value in (
+        ('frame_id', frame_id),
+        ('temperature_frame_id', temperature_frame_id),
+        ('temperature_topic', temperature_topic),
+    ):
         if not isinstance(value, str):
             raise CoefficientsError(f'{key}: expected a string')
     model = DriftModel(terms, matrix, t_range, r_range)
@@ -234,6 +244,7 @@ def from_dict(data: Any) -> Coefficients:
         fit=dict(data.get('fit') or {}),
         provenance=dict(data.get('provenance') or {}),
         temperature_frame_id=temperature_frame_id,
+        temperature_topic=temperature_topic,
     )
 
 

@@ -17,7 +17,8 @@ class ChamberRecord:
 
     ``rates_rad_s`` has shape (N, 3); stamps are sorted (stable) so they are non-decreasing.
     ``temp_frame_id``: where the temperature topic carried several sensors' readings (told by
-    frame_id), the one kept (:mod:`fog_temp_comp.core.frame_lock`); else ''.
+    frame_id), the one kept (:mod:`fog_temp_comp.core.frame_lock`); else ''. ``temp_frame_ids``:
+    there, every frame_id the topic carried (sorted); else ().
     """
 
     path: Path
@@ -29,3 +30,4 @@ class ChamberRecord:
     temp_stamps_s: FloatArray
     temperature_degC: FloatArray
     temp_frame_id: str = ''
+    temp_frame_ids: tuple[str, ...] = ()

@@ -8,6 +8,7 @@ Earth-rate removal, validation replay and the HTML report (matplotlib, imported 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -25,12 +26,15 @@ from fog_temp_comp.core.earth import earth_rate_body_deg_h, parse_orientation, r
 from fog_temp_comp.core.evaluate import format_scores, replay_record, score_record
 from fog_temp_comp.core.fitstats import format_fits
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, coefficient_key
+from fog_temp_comp.core.model_candidates import StructureScore
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
+from fog_temp_comp.core.sensor_choice import TemperatureSource
 from fog_temp_comp.tools.atomic import AtomicOutputs
 from fog_temp_comp.tools.evaluate_command import clamp_notes
 from fog_temp_comp.tools.excitation import identifiable_terms
 from fog_temp_comp.tools.salvaged import Salvaged
+from fog_temp_comp.tools.temperature_sources import Attempt, fit_on_best_source, source_read_args
 
 
 @dataclass(frozen=True)
@@ -118,38 +122,20 @@ def _calibrate(
         temp_topic=temp_topic or opt.temp_topic,
     )
     earth, provenance = _earth_correction(opt)
-    salvaged = Salvaged()
-    read: dict[str, Any] = dict(
-        gyro_topic=opt.gyro_topic,
-        temp_topic=opt.temp_topic,
-        temp_field=opt.temp_field,
-        temp_frame_id=opt.temp_frame_id,
-        gyro_frame_id=opt.gyro_frame_id,
-        time_source=opt.time_source,
-        quiet=opt.quiet,
-        strict=opt.strict,
-        on_salvage=salvaged.add,
-    )
-
-    def load_record(bag: Path) -> ChamberRecord:
-        """A held-out or validation bag's record with the Earth rate removed."""
-        return earth(on_one_clock(read_record, bag, **read))
-
-    period = opt.settings.tdot_period_s
-    # a chunk skipped inside a run splits it: the grid never bridges what was lost
-    records = [
-        earth(piece)
-        for b in bags
-        for piece in salvaged.split(on_one_clock(reduce_record, b, period, **read))
-    ]
     if opt.prior is not None and (opt.terms or opt.fit_coil_lag or opt.heldout):
         raise ValueError('--prior sets the terms and Tdot settings; drop --terms/--fit-coil-lag')
-    if opt.prior is None:  # with a fleet prior, the prior carries what a short run lacks
-        terms = identifiable_terms(records, opt.terms, drop=opt.drop_unidentifiable, stdout=stdout)
-        opt = dataclasses.replace(opt, terms=terms)
-    heldout = [load_record(b) for b in opt.heldout]
-    provenance = {**provenance, **salvaged.provenance()}
-    result = _fit(opt, records, heldout, provenance, stdout)
+    read = _read_args(opt)
+    # of several temperature sensors in the bags, calibrate on each and keep the best
+    choose = _automatic(opt) and opt.temp_field is None and not opt.temp_frame_id
+    attempt = functools.partial(_attempt, opt, bags, read, earth, provenance, choose)
+    attempted, _ = fit_on_best_source(attempt, choose=choose, stdout=stdout)
+    records, result = attempted.records, attempted.result
+    opt, read = attempted.extra
+
+    def load_record(bag: Path) -> ChamberRecord:
+        """A validation bag's record (the sensor fitted) with the Earth rate removed."""
+        return earth(on_one_clock(read_record, bag, **read))
+
     coeffs = result.coefficients
     if opt.no_constant:
         coeffs = _without_constant(coeffs)
@@ -168,21 +154,76 @@ def _calibrate(
     return 0
 
 
+def _read_args(opt: CalibrateOptions) -> dict[str, Any]:
+    """The bag readers' keyword arguments that ``opt`` sets."""
+    return dict(
+        gyro_topic=opt.gyro_topic,
+        temp_topic=opt.temp_topic,
+        temp_field=opt.temp_field,
+        temp_frame_id=opt.temp_frame_id,
+        gyro_frame_id=opt.gyro_frame_id,
+        time_source=opt.time_source,
+        quiet=opt.quiet,
+        strict=opt.strict,
+    )
+
+
+def _attempt(
+    opt: CalibrateOptions,
+    bags: Sequence[Path],
+    read: dict[str, Any],
+    earth: Callable[[ChamberRecord], ChamberRecord],
+    provenance: dict[str, Any],
+    choose: bool,
+    source: TemperatureSource | None,
+    out: TextIO,
+) -> Attempt:
+    """Read the training (and held-out) bags with ``source``'s readings and fit.
+
+    Prints to ``out``; the attempt's ``extra`` holds the options and reader arguments used.
+    """
+    salvaged = Salvaged()
+    args = {**read, **source_read_args(source), 'on_salvage': salvaged.add}
+    if choose:  # several sensors on a topic: the table after the fits says which is kept
+        args['frame_notes'] = False
+    period = opt.settings.tdot_period_s
+    # a chunk skipped inside a run splits it: the grid never bridges what was lost
+    records = [
+        earth(piece)
+        for b in bags
+        for piece in salvaged.split(on_one_clock(reduce_record, b, period, **args))
+    ]
+    if opt.prior is None:  # with a fleet prior, the prior carries what a short run lacks
+        terms = identifiable_terms(records, opt.terms, drop=opt.drop_unidentifiable, stdout=out)
+        opt = dataclasses.replace(opt, terms=terms)
+    heldout = [earth(on_one_clock(read_record, b, **args)) for b in opt.heldout]
+    result, chosen = _fit(opt, records, heldout, {**provenance, **salvaged.provenance()}, out)
+    return Attempt(records, result, chosen, '', extra=(opt, args))
+
+
+def _automatic(opt: CalibrateOptions) -> bool:
+    """Whether calibrate chooses the model by cross-validation (no flag that sets it)."""
+    return (
+        opt.terms is None
+        and not opt.fit_coil_lag
+        and not opt.online_tdot
+        and not opt.leave_one_run_out
+        and opt.settings.method == 'kalman'
+        and opt.prior is None
+    )
+
+
 def _fit(
     opt: CalibrateOptions,
     records: list[ChamberRecord],
     heldout: list[ChamberRecord],
     provenance: dict[str, Any],
     stdout: TextIO,
-) -> CalibrationResult:
-    """The calibration result: chosen by cross-validation, by held-out runs, or as asked."""
-    automatic = (
-        opt.terms is None
-        and not opt.fit_coil_lag
-        and not opt.online_tdot
-        and not opt.leave_one_run_out
-        and opt.settings.method == 'kalman'
-    )
+) -> tuple[CalibrationResult, StructureScore | None]:
+    """The calibration result: chosen by cross-validation, by held-out runs, or as asked.
+
+    With it the structure chosen by cross-validation and the score of what runs (else None).
+    """
     if opt.prior is not None:
         from fog_temp_comp.core import prior
 
@@ -190,8 +231,8 @@ def _fit(
             records, prior.load_prior(opt.prior), provenance=provenance
         )
         print(prior.format_prior_fit(result), file=stdout)
-        return result
-    if automatic:
+        return result, None
+    if _automatic(opt):
         from fog_temp_comp.core import model_choice
 
         result, cv_scores, cv_chosen = model_choice.choose_and_calibrate(
@@ -209,7 +250,7 @@ def _fit(
         )
         if quantized:
             print(model_choice.format_quantized(quantized), file=stdout)
-        return result
+        return result, cv_chosen
     if opt.heldout or opt.leave_one_run_out:
         candidates = default_candidates(opt.settings)
         coeffs, chosen, results = select_and_calibrate(
@@ -228,7 +269,7 @@ def _fit(
             online_tdot=candidate.online_tdot,
             hac_lag=opt.hac_lag,
             provenance={**provenance, 'selection': coeffs.provenance.get('selection')},
-        )
+        ), None
     return calibrate_detailed(
         records,
         opt.settings,
@@ -237,7 +278,7 @@ def _fit(
         online_tdot=opt.online_tdot,
         hac_lag=opt.hac_lag,
         provenance=provenance,
-    )
+    ), None
 
 
 def _print_fit(

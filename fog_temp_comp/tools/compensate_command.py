@@ -42,6 +42,7 @@ from fog_temp_comp.tools.atomic import AtomicOutputs
 from fog_temp_comp.tools.chunkreplay import ChunkReplayer, chunked
 from fog_temp_comp.tools.evaluate_command import effective_settings
 from fog_temp_comp.tools.salvaged import Salvaged
+from fog_temp_comp.tools.temperature_sources import with_yaml_temperature_topic
 
 
 def compensate_command(
@@ -115,7 +116,7 @@ def compensate_command(
         temp_field=temp_field,
         temp_frame_id=temp_frame_id or coeffs.temperature_frame_id,
     )
-    (n_out, counters), compensator = _on_one_clock(run, in_bag, out_bag, strict)
+    (n_out, counters), compensator = run.replay(out_bag, strict, coeffs.temperature_topic)
     _report_written(run, out_bag, n_out, counters, chosen=output_topic is None, stdout=stdout)
     _report_faults(run.in_bag, compensator)
     _report_gaps(run.in_bag, compensator.status.counters)
@@ -340,6 +341,22 @@ class _Compensate:
     temp_field: str | None = None
     #: of a temperature topic with several sensors' readings, this one's ('': choose)
     temp_frame_id: str = ''
+
+    def replay(
+        self, out_bag: Path, strict: bool, fitted_topic: str
+    ) -> tuple[tuple[int, CompensatorCounters], Compensator]:
+        """:func:`_on_one_clock` with the temperature topic the coefficients were fitted on.
+
+        ``fitted_topic`` is used where no topic was asked for and the bag's temperature topics
+        are not told apart by their names (if the bag has it).
+        """
+        gyro_topic, temp_topic, output_topic = self.topics
+
+        def on_topic(topic: str | None) -> tuple[tuple[int, CompensatorCounters], Compensator]:
+            self.topics = (gyro_topic, topic, output_topic)
+            return _on_one_clock(self, self.in_bag, out_bag, strict)
+
+        return with_yaml_temperature_topic(on_topic, fitted_topic, temp_topic, sys.stderr)
 
     def _unset_stamps(self, imu_name: str, temp_name: str) -> UnsetStamps:
         """What times the messages; by header, it stops at clocks hours apart."""

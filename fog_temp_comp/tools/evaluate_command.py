@@ -18,7 +18,9 @@ from fog_temp_comp.core.coefficients import Coefficients, load
 from fog_temp_comp.core.compensator import CompensatorCounters, GuardSettings
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.evaluate import format_scores, replay_record, score_record
+from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.tools.salvaged import Salvaged
+from fog_temp_comp.tools.temperature_sources import with_yaml_temperature_topic
 
 
 def evaluate_command(
@@ -51,17 +53,23 @@ def evaluate_command(
     notes = []
     salvaged = Salvaged()
     for bag in bags:
-        record = on_one_clock(
-            read_record,
-            bag,
-            gyro_topic=gyro_topic,
-            temp_topic=temp_topic,
-            temp_field=temp_field,
-            temp_frame_id=temp_frame_id or coeffs.temperature_frame_id,
-            gyro_frame_id=gyro_frame_id or coeffs.frame_id,
-            strict=strict,
-            on_salvage=salvaged.add,
-            time_source=time_source,
+
+        def read(topic: str | None, bag: Path = bag) -> ChamberRecord:
+            return on_one_clock(
+                read_record,
+                bag,
+                gyro_topic=gyro_topic,
+                temp_topic=topic,
+                temp_field=temp_field,
+                temp_frame_id=temp_frame_id or coeffs.temperature_frame_id,
+                gyro_frame_id=gyro_frame_id or coeffs.frame_id,
+                strict=strict,
+                on_salvage=salvaged.add,
+                time_source=time_source,
+            )
+
+        record = with_yaml_temperature_topic(
+            read, coeffs.temperature_topic, temp_topic, sys.stderr
         )
         corrected, status = replay_record(
             record, coeffs, effective_settings(coeffs, denoise_method), guard
