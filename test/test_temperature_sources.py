@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 import yaml
 from numpy.testing import assert_allclose
+from rclpy.parameter import Parameter
 
 from fog_temp_comp.bag import bagio
 from fog_temp_comp.bag.bagio import FORMATS, IMU_TYPE, TEMPERATURE_TYPE
@@ -31,6 +32,7 @@ from fog_temp_comp.core.sensor_choice import (
     choose_source,
     sources_record,
 )
+from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.simulate import SimulatedRun
 
@@ -194,3 +196,30 @@ def test_the_first_sensor_within_the_tolerance_of_the_best_is_kept() -> None:
     }
     with pytest.raises(ValueError, match=r'no temperature sensor .*\[d\]: no Tdot spread'):
         choose_source([failed])
+
+
+def test_the_node_warns_where_it_reads_another_topic_than_the_one_fitted(
+    ros_context: object,
+    tmp_path: Path,
+    capfd: pytest.CaptureFixture[str],
+    short_cycle: SimulatedRun,
+) -> None:
+    """The node cannot choose its topic: it says which one the coefficients were fitted on."""
+    cal = write_sensors(tmp_path / 'cal', 'mcap', short_cycle)
+    coeffs = tmp_path / 'c.yaml'
+    assert commands.calibrate_command([cal], coeffs, stdout=io.StringIO()) == 0
+    capfd.readouterr()
+    for remap, warned in (([], True), (['-r', 'imu/temperature:=/imu/temp_coil'], False)):
+        node = CompensatorNode(
+            context=ros_context,
+            cli_args=['--ros-args', *remap],
+            parameter_overrides=[Parameter('coefficients_file', value=str(coeffs))],
+        )
+        try:
+            lines = [line for line in capfd.readouterr().err.splitlines() if 'fitted on' in line]
+        finally:
+            node.destroy_node()
+        assert len(lines) == int(warned), lines
+        if warned:
+            assert lines[0].startswith('[WARN]') and 'this node reads /imu/temperature' in lines[0]
+            assert 'imu/temperature:=/imu/temp_coil' in lines[0]

@@ -123,6 +123,13 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
                 'would correct its own output again and again; remap one of them elsewhere'
             )
         self.config = self._build_config({})
+        fitted = self.config.coefficients.temperature_topic
+        if fitted and resolve is not None and resolve('imu/temperature') != fitted:
+            self.get_logger().warning(
+                f'the coefficients were fitted on the temperature topic {fitted} (calibrate chose '
+                f'it of several), this node reads {resolve("imu/temperature")}: remap '
+                f'imu/temperature:={fitted}'
+            )
         self.compensator = Compensator(
             self.config.coefficients.model,
             self.config.settings,
