@@ -184,8 +184,8 @@ def _attempt(
     """
     salvaged = Salvaged()
     args = {**read, **source_read_args(source), 'on_salvage': salvaged.add}
-    if choose:  # several sensors on a topic: the table after the fits says which is kept
-        args['frame_notes'] = False
+    if choose and (source is None or source.frame_id):  # the table after the fits says which
+        args['frame_notes'] = False  # sensor of a topic is kept (of topics: their notes)
     period = opt.settings.tdot_period_s
     # a chunk skipped inside a run splits it: the grid never bridges what was lost
     records = [
