@@ -9,6 +9,7 @@ import pytest
 import yaml
 
 from fog_temp_comp.bag.bagio import write_chamber_bag
+from fog_temp_comp.core import model_choice
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.model import PAPER_TERMS
@@ -330,3 +331,42 @@ def test_a_rival_scored_better_with_the_quantized_filter_becomes_the_choice(
         result.coefficients.denoise, kalman_quantized_noise_degC=0.0, temperature_period_s=0.0
     ) == chosen.structure.settings(sensor_noise_settings(result))
     assert 'another model scores better' in format_quantized(step)
+
+
+def test_a_sensor_lag_rival_scored_in_a_forked_child_gives_the_same_step(
+    quiet_record, monkeypatch: pytest.MonkeyPatch
+):
+    """The slowest rival runs in a child while the rest are scored here: the same record."""
+    base = sensor_noise([quiet_record]).apply(RECOMMENDED_SETTINGS)
+    plain = Structure(PAPER_TERMS, 0.003, 0.5)
+    sensor_lag = Structure(PAPER_TERMS, 0.003, 0.5, sensor_lag_s=120.0)
+    lead_lag = Structure((*PAPER_TERMS, 'Tdot_lag'), 0.003, 0.5, tdot_lag_s=120.0)
+    chosen, *rivals = cross_validate([quiet_record], base, [plain, sensor_lag, lead_lag])
+    steps = {}
+    for forked in (True, False):
+        children: list[str] = []
+        real = model_choice.ForkedCall
+
+        def counted(function, rival, *args, real=real, children=children):
+            children.append(rival.structure.name)
+            return real(function, rival, *args)
+
+        here: list[str] = []  # the rivals scored in this process (a child's calls are its own)
+        score_here = model_choice._rival_score
+
+        def scored_here(rival, *args, here=here, score_here=score_here):
+            here.append(rival.structure.name)
+            return score_here(rival, *args)
+
+        monkeypatch.setattr(model_choice, 'ForkedCall', counted)
+        monkeypatch.setattr(model_choice, '_rival_score', scored_here)
+        monkeypatch.setattr(model_choice, 'two_processes', lambda records, on=forked: on)
+        steps[forked] = quantized_choice(chosen, [quiet_record], base, [], rivals=rivals)
+        assert children == ([sensor_lag.name] if forked else [])
+        # forked, the child's score was used: the sensor lag was not scored here as well
+        assert here == ([lead_lag.name] if forked else [sensor_lag.name, lead_lag.name])
+    assert steps[True][0] == steps[False][0]  # the settings
+    assert steps[True][1] == steps[False][1]  # the YAML's record, every score to the bit
+    assert steps[True][2] == steps[False][2]
+    assert len(steps[True][1]['rivals']) == 2  # both scored, in their order
+    assert 'sensor_lag_s' in steps[True][1]['rivals'][0]['structure']

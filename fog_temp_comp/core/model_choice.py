@@ -38,6 +38,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from contextlib import ExitStack
 from typing import Any
 
 from fog_temp_comp.core.bounded_search import minimize_bounded
@@ -65,11 +66,13 @@ from fog_temp_comp.core.cv_folds import _Fold as _Fold
 from fog_temp_comp.core.cv_folds import _parts as _parts
 from fog_temp_comp.core.cv_folds import _score as _score
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
+from fog_temp_comp.core.forked import ForkedCall
 from fog_temp_comp.core.kalman_series import (
     estimator_series,
     prefetch_series,
     series_cache,
     shaped_series,
+    two_processes,
 )
 from fog_temp_comp.core.model import CANDIDATE_TERMS, PAPER_TERMS
 from fog_temp_comp.core.model_candidates import (
@@ -295,24 +298,34 @@ def quantized_choice(
     with it too, their time constants refined on that score (a sensor lag's in
     :data:`SENSOR_LAG_RIVAL_EVALUATIONS` scores: every value tried reruns the filter, which at
     10 Hz made ``calibrate`` 4x slower with the usual 5); one replaces the chosen structure
-    only if it beats its quantized score by more than ``tolerance``.
+    only if it beats its quantized score by more than ``tolerance``. A sensor-lag rival, the
+    slowest (its filter reruns at every value tried), is scored in a forked child while the
+    rest are scored here, where there is a second core (the same scores to the bit).
     """
     fit = noise_before_quantization(
         records, base.temperature_quantum_degC, base.temperature_noise_degC
     )
     with_noise = dataclasses.replace(base, kalman_quantized_noise_degC=fit.noise_degC)
-    score = _quantized_score(chosen, records, with_noise, heldout)
+    # a sensor-lag rival (its filter rerun at every value tried: the slowest) in a forked child
+    slow = [i for i, r in enumerate(rivals) if dynamics_kind(r.structure) == 'sensor lag'][:1]
+    args = (records, with_noise, heldout)
+    with ExitStack() as stack:
+        child = (
+            stack.enter_context(ForkedCall(_rival_score, rivals[slow[0]], *args))
+            if slow and two_processes(records)
+            else None
+        )
+        score = _quantized_score(chosen, records, with_noise, heldout)
+        again_all = [
+            None if child is not None and i == slow[0] else _rival_score(r, *args)
+            for i, r in enumerate(rivals)
+        ]
+        if child is not None:  # the same score as here, bit for bit (or computed here)
+            again_all[slow[0]] = child.result() or _rival_score(rivals[slow[0]], *args)
     tried = []
     best = score
-    for rival in rivals:
-        (again,) = cross_validate(records, with_noise, [rival.structure], heldout)
-        # a sensor lag's every value tried reruns the filter: fewer of them
-        evaluations = (
-            SENSOR_LAG_RIVAL_EVALUATIONS
-            if dynamics_kind(rival.structure) == 'sensor lag'
-            else REFINE_EVALUATIONS
-        )
-        again = refine_time_constant(again, records, with_noise, heldout, evaluations=evaluations)
+    for rival, again in zip(rivals, again_all, strict=True):
+        assert again is not None
         tried.append(
             {
                 'structure': again.structure.name,
@@ -338,6 +351,20 @@ def quantized_choice(
     if used:
         return best.structure.settings(with_noise), record, best
     return chosen.structure.settings(base), record, chosen
+
+
+def _rival_score(
+    rival: StructureScore,
+    records: Sequence[ChamberRecord],
+    with_noise: DenoiseSettings,
+    heldout: Sequence[ChamberRecord],
+) -> StructureScore:
+    """A rival scored with the quantized filter, its time constant refined on that score."""
+    (again,) = cross_validate(records, with_noise, [rival.structure], heldout)
+    # a sensor lag's every value tried reruns the filter: fewer of them
+    sensor_lag = dynamics_kind(rival.structure) == 'sensor lag'
+    evaluations = SENSOR_LAG_RIVAL_EVALUATIONS if sensor_lag else REFINE_EVALUATIONS
+    return refine_time_constant(again, records, with_noise, heldout, evaluations=evaluations)
 
 
 def _quantized_score(
