@@ -306,26 +306,10 @@ def quantized_choice(
         records, base.temperature_quantum_degC, base.temperature_noise_degC
     )
     with_noise = dataclasses.replace(base, kalman_quantized_noise_degC=fit.noise_degC)
-    # a sensor-lag rival (its filter rerun at every value tried: the slowest) in a forked child
-    slow = [i for i, r in enumerate(rivals) if dynamics_kind(r.structure) == 'sensor lag'][:1]
-    args = (records, with_noise, heldout)
-    with ExitStack() as stack:
-        child = (
-            stack.enter_context(ForkedCall(_rival_score, rivals[slow[0]], *args))
-            if slow and two_processes(records)
-            else None
-        )
-        score = _quantized_score(chosen, records, with_noise, heldout)
-        again_all = [
-            None if child is not None and i == slow[0] else _rival_score(r, *args)
-            for i, r in enumerate(rivals)
-        ]
-        if child is not None:  # the same score as here, bit for bit (or computed here)
-            again_all[slow[0]] = child.result() or _rival_score(rivals[slow[0]], *args)
+    score, again_all = _quantized_scores(chosen, rivals, records, with_noise, heldout)
     tried = []
     best = score
     for rival, again in zip(rivals, again_all, strict=True):
-        assert again is not None
         tried.append(
             {
                 'structure': again.structure.name,
@@ -351,6 +335,36 @@ def quantized_choice(
     if used:
         return best.structure.settings(with_noise), record, best
     return chosen.structure.settings(base), record, chosen
+
+
+def _quantized_scores(
+    chosen: StructureScore,
+    rivals: Sequence[StructureScore],
+    records: Sequence[ChamberRecord],
+    with_noise: DenoiseSettings,
+    heldout: Sequence[ChamberRecord],
+) -> tuple[StructureScore, list[StructureScore]]:
+    """The chosen structure's and each rival's quantized scores (:func:`quantized_choice`).
+
+    A sensor-lag rival (its filter rerun at every value tried: the slowest) is scored in a
+    forked child while the rest are scored here, where there is a second core.
+    """
+    slow = [i for i, r in enumerate(rivals) if dynamics_kind(r.structure) == 'sensor lag'][:1]
+    args = (records, with_noise, heldout)
+    with ExitStack() as stack:
+        child = (
+            stack.enter_context(ForkedCall(_rival_score, rivals[slow[0]], *args))
+            if slow and two_processes(records)
+            else None
+        )
+        score = _quantized_score(chosen, records, with_noise, heldout)
+        scored = [
+            None if child is not None and i == slow[0] else _rival_score(r, *args)
+            for i, r in enumerate(rivals)
+        ]
+        if child is not None:  # the same score as here, bit for bit (or computed here)
+            scored[slow[0]] = child.result() or _rival_score(rivals[slow[0]], *args)
+    return score, [s for s in scored if s is not None]
 
 
 def _rival_score(
