@@ -223,3 +223,32 @@ def test_the_node_warns_where_it_reads_another_topic_than_the_one_fitted(
         if warned:
             assert lines[0].startswith('[WARN]') and 'this node reads /imu/temperature' in lines[0]
             assert 'imu/temperature:=/imu/temp_coil' in lines[0]
+
+
+def test_a_stuck_sensor_that_sorts_first_on_a_shared_topic_does_not_stop_the_others(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], short_cycle: SimulatedRun
+) -> None:
+    """frame_ids ``adc`` (stuck at 25 degC) and ``coil`` on one topic: ``coil`` is fitted.
+
+    Before, the frame_id that sorts first was fitted, and a stuck one stopped calibrate.
+    """
+    events = [
+        (round(t * 1e9), 2, '/imu/data_raw', bagio.make_imu(round(t * 1e9), 'imu_link', w))
+        for t, w in zip(short_cycle.imu_stamps_s, short_cycle.rates_rad_s, strict=True)
+    ]
+    for t, value in zip(short_cycle.temp_stamps_s, short_cycle.temperature_degC, strict=True):
+        ns = round(t * 1e9)
+        events.append((ns, 0, '/imu/temperature', bagio.make_temperature(ns, 'adc', 25.0)))
+        events.append((ns, 1, '/imu/temperature', bagio.make_temperature(ns, 'coil', value)))
+    cal = write_events(tmp_path / 'cal', 'mcap', events)
+    coeffs, reference = tmp_path / 'c.yaml', tmp_path / 'ref.yaml'
+    assert cli.main(['calibrate', str(cal), '-o', str(coeffs)]) == 0
+    out, err = capsys.readouterr()
+    assert 'NOTE' not in err  # the table says which sensor is kept
+    rows = [line for line in out.splitlines() if line.startswith('/imu/temperature [')]
+    assert 'ERROR' in rows[0] and '[adc]' in rows[0] and rows[1].endswith('<- used')
+    got = load(coeffs)
+    assert got.temperature_frame_id == 'coil' and got.temperature_topic == ''
+    ref = write_run(tmp_path / 'ref', 'mcap', short_cycle)
+    assert commands.calibrate_command([ref], reference, stdout=io.StringIO()) == 0
+    assert_allclose(got.model.coefficients, load(reference).model.coefficients, rtol=1e-9)

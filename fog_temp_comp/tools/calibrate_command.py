@@ -34,7 +34,13 @@ from fog_temp_comp.tools.atomic import AtomicOutputs
 from fog_temp_comp.tools.evaluate_command import clamp_notes
 from fog_temp_comp.tools.excitation import identifiable_terms
 from fog_temp_comp.tools.salvaged import Salvaged
-from fog_temp_comp.tools.temperature_sources import Attempt, fit_on_best_source, source_read_args
+from fog_temp_comp.tools.temperature_sources import (
+    Attempt,
+    SeveralSensorsError,
+    fit_on_best_source,
+    several_sensors,
+    source_read_args,
+)
 
 
 @dataclass(frozen=True)
@@ -193,12 +199,14 @@ def _attempt(
         for b in bags
         for piece in salvaged.split(on_one_clock(reduce_record, b, period, **args))
     ]
+    if choose and source is None and several_sensors(records):
+        raise SeveralSensorsError(records)  # each sensor's readings get an attempt of their own
     if opt.prior is None:  # with a fleet prior, the prior carries what a short run lacks
         terms = identifiable_terms(records, opt.terms, drop=opt.drop_unidentifiable, stdout=out)
         opt = dataclasses.replace(opt, terms=terms)
     heldout = [earth(on_one_clock(read_record, b, **args)) for b in opt.heldout]
     result, chosen = _fit(opt, records, heldout, {**provenance, **salvaged.provenance()}, out)
-    return Attempt(records, result, chosen, '', extra=(opt, args))
+    return Attempt(records, result, chosen, extra=(opt, args))
 
 
 def _automatic(opt: CalibrateOptions) -> bool:

@@ -34,23 +34,47 @@ if TYPE_CHECKING:  # (compensate and evaluate import this module for the topic a
     from fog_temp_comp.core.calibration import CalibrationResult
     from fog_temp_comp.core.model_candidates import StructureScore
 
-__all__ = ['Attempt', 'fit_on_best_source', 'source_read_args', 'with_yaml_temperature_topic']
+__all__ = [
+    'Attempt',
+    'SeveralSensorsError',
+    'fit_on_best_source',
+    'several_sensors',
+    'source_read_args',
+    'with_yaml_temperature_topic',
+]
 
 T = TypeVar('T')
 
 
 @dataclass
 class Attempt:
-    """One sensor's fit: its training records, what it printed, the result and its score."""
+    """One sensor's fit: its training records, the result and its score."""
 
     records: list[ChamberRecord]
     result: CalibrationResult
     #: the chosen structure with the score of what runs (None where not chosen by score)
     chosen: StructureScore | None
-    #: what the fit printed (the model choice's table)
-    text: str
-    #: anything else the caller keeps with the fit (its salvage record, ...)
+    #: anything else the caller keeps with the fit (its options, reader arguments, ...)
     extra: Any = None
+
+
+class SeveralSensorsError(Exception):
+    """An attempt read a temperature topic that carries several sensors' readings (frame_ids).
+
+    Raised before it fits, so that each sensor gets an attempt of its own.
+    """
+
+    def __init__(self, records: Sequence[ChamberRecord]) -> None:
+        frame_ids = sorted({f for r in records for f in r.temp_frame_ids})
+        super().__init__(f'several temperature sensors: {frame_ids}')
+        topic = records[0].temp_topic if records else ''
+        #: one per frame_id, sorted
+        self.sources = tuple(TemperatureSource(topic, f) for f in frame_ids)
+
+
+def several_sensors(records: Sequence[ChamberRecord]) -> bool:
+    """Whether ``records`` read a temperature topic that carries several sensors' readings."""
+    return any(r.temp_frame_ids for r in records)
 
 
 def source_read_args(source: TemperatureSource | None) -> dict[str, str]:
@@ -69,59 +93,44 @@ def fit_on_best_source(
     """The fit, on the best of the bags' temperature sensors where they carry several.
 
     ``attempt(source, out)`` reads the training bags with ``source`` (None: the readers'
-    default) and fits, printing to ``out``. With ``choose`` False, or one sensor in the bags,
-    it runs once as before. Else each sensor gets an attempt, their tables are printed under
-    its name, then the comparison; an attempt that fails (a sensor that does not excite the
-    model, a topic missing from a bag) is listed with its error. Returns the kept attempt
-    (its YAML with the comparison and, for topics, ``temperature_topic``) and its sensor.
+    default) and fits, printing to ``out``; with ``choose``, where it reads a topic of several
+    sensors' readings, it raises :class:`SeveralSensorsError` before fitting. With ``choose``
+    False, or one sensor in the bags, it runs once as before. Else each sensor gets an
+    attempt, their tables are printed under its name, then the comparison; an attempt that
+    fails (a sensor that does not excite the model, a topic missing from a bag) is listed
+    with its error. Returns the kept attempt (its YAML with the comparison and, for topics,
+    ``temperature_topic``) and its sensor.
     """
     from fog_temp_comp.core.calibration import CalibrationError
 
     if not choose:
         return attempt(None, stdout), None
-    first_out = io.StringIO()
     try:
-        first = attempt(None, first_out)
+        return attempt(None, stdout), None
     except AmbiguousTopicError as err:
         if err.msgtype != TEMPERATURE_TYPE:
             raise
         sources = [TemperatureSource(topic) for topic in err.candidates]
-        reused: Attempt | None = None
-    else:
-        frame_ids = sorted({f for r in first.records for f in r.temp_frame_ids})
-        if not frame_ids:
-            stdout.write(first_out.getvalue())
-            return first, None
-        topic = first.records[0].temp_topic
-        sources = [TemperatureSource(topic, f) for f in frame_ids]
-        reused = first
+    except SeveralSensorsError as several:
+        sources = list(several.sources)
     outcomes: list[SourceOutcome] = []
     attempts: dict[TemperatureSource, Attempt] = {}
     for source in sources:
         out = io.StringIO()
         try:
-            done = _reuse(reused, source, first_out) or attempt(source, out)
+            done = attempt(source, out)
         except (BagError, CalibrationError, CoefficientsError, ValueError) as err:
             outcomes.append(SourceOutcome(source, error=str(err)))
             continue
         attempts[source] = done
-        text = done.text if done is reused else out.getvalue()
         print(f'\ntemperature sensor {source.label}:', file=stdout)
-        stdout.write(text)
+        stdout.write(out.getvalue())
         outcomes.append(SourceOutcome(source, done.result, chosen=done.chosen))
     best = choose_source(outcomes)
     print('\n' + format_sources(outcomes, best) + '\n', file=stdout)
     kept = attempts[best.source]
     kept.result = _with_choice(kept.result, outcomes, best, topics=not best.source.frame_id)
     return kept, best.source
-
-
-def _reuse(reused: Attempt | None, source: TemperatureSource, out: io.StringIO) -> Attempt | None:
-    """The first attempt where it read ``source``'s readings (the frame_id it kept)."""
-    if reused is None or {r.temp_frame_id for r in reused.records} != {source.frame_id}:
-        return None
-    reused.text = out.getvalue()
-    return reused
 
 
 def _with_choice(
