@@ -81,7 +81,9 @@ def compensate_command(
     ``temp_field`` reads the temperature (degC) from a field of ``temp_topic``'s messages of
     any type, as ``calibrate --temp-field`` (through ``AnyReader``; the node itself subscribes
     to ``sensor_msgs/Temperature``). ``temp_frame_id`` (default: the coefficients'
-    ``temperature_frame_id``) picks one sensor's readings of a topic that carries several.
+    ``temperature_frame_id``) picks one sensor's readings of a topic that carries several; of
+    temperature topics that the names do not tell apart, the coefficients' ``temperature_topic``
+    is taken where no ``temp_topic`` is given.
     ``output_topic`` defaults to :data:`DEFAULT_OUTPUT_TOPIC`,
     or, where the input has that topic already (a driver that publishes its raw rate there), to
     the gyro topic with ``_compensated`` appended (:func:`output_topic_for`); a given topic that

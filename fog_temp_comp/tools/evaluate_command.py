@@ -45,7 +45,8 @@ def evaluate_command(
     temperature from a field of ``temp_topic``, as ``calibrate --temp-field``;
     ``temp_frame_id`` (default: the coefficients' ``temperature_frame_id``) picks one sensor's
     readings of a topic that carries several, ``gyro_frame_id`` (default: the coefficients'
-    ``frame_id``) one gyro's messages.
+    ``frame_id``) one gyro's messages; of temperature topics that the names do not tell apart,
+    the coefficients' ``temperature_topic`` is taken where no ``temp_topic`` is given.
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
