@@ -153,12 +153,12 @@ def study_one(job: tuple[int, int, float, bool]) -> dict[str, object]:
         t_cal = time.perf_counter()
         try:
             # as foreign_plants.py's default row: calibrate with no flags
-            result, scores, chosen = choose_and_calibrate(
+            result, _, chosen = choose_and_calibrate(
                 [runs[s][TRAINING_RUN].as_record()],
                 pipeline_settings(hysteresis_quanta),
                 quantized_likelihood=not gaussian_readings,
             )
-            outcomes.append(SourceOutcome(source, result, scores, chosen))
+            outcomes.append(SourceOutcome(source, result, chosen=chosen))
             corrected = {
                 n: compensate_record(runs[s][n].as_record(), result.coefficients)
                 for n in heldout_names

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # (the offline commands import this module; only calibrate fits)
@@ -54,7 +54,6 @@ class SourceOutcome:
 
     source: TemperatureSource
     result: CalibrationResult | None = None
-    scores: list[StructureScore] = field(default_factory=list)
     #: the structure chosen (its score with Gaussian readings, unless a rival won with the
     #: quantized filter)
     chosen: StructureScore | None = None

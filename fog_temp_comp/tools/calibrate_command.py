@@ -134,7 +134,7 @@ def _calibrate(
     # of several temperature sensors in the bags, calibrate on each and keep the best
     choose = _automatic(opt) and opt.temp_field is None and not opt.temp_frame_id
     attempt = functools.partial(_attempt, opt, bags, read, earth, provenance, choose)
-    attempted, _ = fit_on_best_source(attempt, choose=choose, stdout=stdout)
+    attempted = fit_on_best_source(attempt, choose=choose, stdout=stdout)
     records, result = attempted.records, attempted.result
     opt, read = attempted.extra
 

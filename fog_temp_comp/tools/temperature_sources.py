@@ -89,7 +89,7 @@ def fit_on_best_source(
     *,
     choose: bool,
     stdout: TextIO,
-) -> tuple[Attempt, TemperatureSource | None]:
+) -> Attempt:
     """The fit, on the best of the bags' temperature sensors where they carry several.
 
     ``attempt(source, out)`` reads the training bags with ``source`` (None: the readers'
@@ -99,14 +99,14 @@ def fit_on_best_source(
     attempt, their tables are printed under its name, then the comparison; an attempt that
     fails (a sensor that does not excite the model, a topic missing from a bag) is listed
     with its error. Returns the kept attempt (its YAML with the comparison and, for topics,
-    ``temperature_topic``) and its sensor.
+    ``temperature_topic``).
     """
     from fog_temp_comp.core.calibration import CalibrationError
 
     if not choose:
-        return attempt(None, stdout), None
+        return attempt(None, stdout)
     try:
-        return attempt(None, stdout), None
+        return attempt(None, stdout)
     except AmbiguousTopicError as err:
         if err.msgtype != TEMPERATURE_TYPE:
             raise
@@ -130,7 +130,7 @@ def fit_on_best_source(
     print('\n' + format_sources(outcomes, best) + '\n', file=stdout)
     kept = attempts[best.source]
     kept.result = _with_choice(kept.result, outcomes, best, topics=not best.source.frame_id)
-    return kept, best.source
+    return kept
 
 
 def _with_choice(
