@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
@@ -102,6 +103,7 @@ def del_key(path: str) -> Callable[[dict], None]:
         (set_key('denoise.method', 'median'), 'denoise'),
         (set_key('denoise.bogus', 1), 'denoise'),
         (set_key('frame_id', 5), 'frame_id'),
+        (set_key('temperature_topic', ['/a', '/b']), 'temperature_topic'),
     ],
 )
 def test_malformed_file_names_the_key(
@@ -129,6 +131,19 @@ def test_empty_or_invalid_yaml(tmp_path: Path, text: str, match: str) -> None:
     path.write_text(text)
     with pytest.raises(CoefficientsError, match=match):
         load(path)
+
+
+def test_the_temperature_topic_calibrate_chose_round_trips(
+    tmp_path: Path, coeffs: Coefficients
+) -> None:
+    """Written only where calibrate chose one of several topics; read back as written."""
+    path = tmp_path / 'c.yaml'
+    save(coeffs, path)
+    assert 'temperature_topic' not in yaml.safe_load(path.read_text())
+    assert load(path).temperature_topic == ''
+    save(dataclasses.replace(coeffs, temperature_topic='/imu/temp_coil'), path)
+    assert yaml.safe_load(path.read_text())['temperature_topic'] == '/imu/temp_coil'
+    assert load(path).temperature_topic == '/imu/temp_coil'
 
 
 def test_missing_file(tmp_path: Path) -> None:

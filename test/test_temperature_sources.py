@@ -160,6 +160,13 @@ def test_flags_that_set_the_model_keep_the_error_and_so_do_coefficients_without_
     assert cli.main(['compensate', str(cal), '--coeffs', str(coeffs), '-o', str(out)]) == 1
     assert 'several sensor_msgs/msg/Temperature topics' in capsys.readouterr().err
     assert not out.exists()
+    # nor do coefficients that name a topic the bag does not have
+    named = tmp_path / 'named.yaml'
+    data = yaml.safe_load(coeffs.read_text())
+    named.write_text(yaml.safe_dump({**data, 'temperature_topic': '/imu/temp_gone'}))
+    assert cli.main(['compensate', str(cal), '--coeffs', str(named), '-o', str(out)]) == 1
+    assert 'several sensor_msgs/msg/Temperature topics' in capsys.readouterr().err
+    assert not out.exists()
     # a topic asked for is used, with or without a choice in the coefficients
     assert cli.main(
         ['compensate', str(cal), '--coeffs', str(coeffs), '-o', str(out),
