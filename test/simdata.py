@@ -103,6 +103,24 @@ def temperature_events(
     return events
 
 
+def gyro_events(
+    run: SimulatedRun, rank: int = 0, log: Callable[[float], int] | None = None
+) -> list[Event]:
+    """``run``'s gyro samples on ``/imu/data_raw`` (frame ``imu_link``).
+
+    Ranked ``rank`` among messages of one log time, logged at their stamps (or ``log(stamp_s)``).
+    """
+    return [
+        (
+            round(t * 1e9) if log is None else log(t),
+            rank,
+            '/imu/data_raw',
+            make_imu(round(t * 1e9), 'imu_link', w),
+        )
+        for t, w in zip(run.imu_stamps_s, run.rates_rad_s, strict=True)
+    ]
+
+
 def write_events(
     path: Path, fmt: str, events: Sequence[Event], topics: dict[str, str] = CHAMBER_TOPICS
 ) -> Path:

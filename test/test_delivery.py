@@ -30,7 +30,7 @@ from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.simulate import SimulatedRun
 
-from simdata import temperature_events, write_events, write_run
+from simdata import gyro_events, temperature_events, write_events, write_run
 
 COEFFS = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
 BURST_S = 20.0
@@ -109,10 +109,7 @@ def write_bursts(path: Path, run: SimulatedRun) -> Path:
     t0 = run.imu_stamps_s[0]
     log = lambda t: round((t0 + BURST_S * (np.floor((t - t0) / BURST_S) + 1)) * 1e9)  # noqa: E731
     events = temperature_events(run, log=log)
-    events += [
-        (log(t), 1, '/imu/data_raw', bagio.make_imu(round(t * 1e9), 'imu_link', w))
-        for t, w in zip(run.imu_stamps_s, run.rates_rad_s, strict=True)
-    ]
+    events += gyro_events(run, 1, log)
     return write_events(path, 'mcap', events)
 
 

@@ -30,7 +30,14 @@ from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.simulate import SimulatedRun
 
-from simdata import CHAMBER_TOPICS, bag_path, temperature_events, write_events, write_run
+from simdata import (
+    CHAMBER_TOPICS,
+    bag_path,
+    gyro_events,
+    temperature_events,
+    write_events,
+    write_run,
+)
 
 #: the sensors on the topic, in the order the driver publishes them each second, and their
 #: offsets from the coil sensor fog_x (degC): the other coils and the board
@@ -135,10 +142,7 @@ def write_sensors(path: Path, fmt: str, run: SimulatedRun) -> Path:
     The driver stamps the three readings of a second alike and publishes them in
     :data:`SENSORS`'s order, after the gyro sample of that stamp.
     """
-    events = [
-        (round(t * 1e9), 0, '/imu/data_raw', bagio.make_imu(round(t * 1e9), 'imu_link', w))
-        for t, w in zip(run.imu_stamps_s, run.rates_rad_s, strict=True)
-    ]
+    events = gyro_events(run)
     for t, value in zip(run.temp_stamps_s, run.temperature_degC, strict=True):
         ns = round(t * 1e9)
         for k, (frame, offset) in enumerate(SENSORS.items()):

@@ -36,7 +36,7 @@ from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.simulate import SimulatedRun
 
-from simdata import bag_path, write_events, write_run
+from simdata import bag_path, gyro_events, write_events, write_run
 
 #: the board's sensor: the coil's temperature through this lag (s), offset and steps (degC)
 BOARD_LAG_S, BOARD_OFFSET_DEGC, BOARD_STEP_DEGC = 600.0, 2.0, 0.25
@@ -61,10 +61,7 @@ def board_of(run: SimulatedRun) -> np.ndarray:
 
 def write_sensors(path: Path, fmt: str, run: SimulatedRun) -> Path:
     """``run`` with three temperature topics: the coil's (the run's readings), board, adc."""
-    events = [
-        (round(t * 1e9), 3, '/imu/data_raw', bagio.make_imu(round(t * 1e9), 'imu_link', w))
-        for t, w in zip(run.imu_stamps_s, run.rates_rad_s, strict=True)
-    ]
+    events = gyro_events(run, 3)
     board = board_of(run)
     for k, t in enumerate(run.temp_stamps_s):
         ns = round(t * 1e9)
@@ -239,10 +236,7 @@ def test_a_stuck_sensor_that_sorts_first_on_a_shared_topic_does_not_stop_the_oth
 
     Before, the frame_id that sorts first was fitted, and a stuck one stopped calibrate.
     """
-    events = [
-        (round(t * 1e9), 2, '/imu/data_raw', bagio.make_imu(round(t * 1e9), 'imu_link', w))
-        for t, w in zip(short_cycle.imu_stamps_s, short_cycle.rates_rad_s, strict=True)
-    ]
+    events = gyro_events(short_cycle, 2)
     for t, value in zip(short_cycle.temp_stamps_s, short_cycle.temperature_degC, strict=True):
         ns = round(t * 1e9)
         events.append((ns, 0, '/imu/temperature', bagio.make_temperature(ns, 'adc', 25.0)))
