@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import math
 import sys
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from functools import cache
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +32,10 @@ IMU_TYPE = 'sensor_msgs/msg/Imu'
 #: what ``compensate`` appends to the gyro topic for its output where ``/imu/data`` is taken
 OUTPUT_SUFFIX = '_compensated'
 TEMPERATURE_TYPE = 'sensor_msgs/msg/Temperature'
+#: bare numbers a driver may publish its temperature as (degC in their ``data``)
+NUMBER_TYPES = ('std_msgs/msg/Float64', 'std_msgs/msg/Float32')
+#: the field of a :data:`NUMBER_TYPES` message that holds the number
+NUMBER_FIELD = 'data'
 
 
 class BagError(Exception):
@@ -47,6 +51,57 @@ class AmbiguousTopicError(BagError):
         self.msgtype = msgtype
         #: the topics of that type, sorted
         self.candidates = tuple(candidates)
+
+
+class MissingTopicError(BagError):
+    """A topic asked for by name is not in the bag."""
+
+
+class NoTemperatureTopicError(BagError):
+    """A bag has no ``sensor_msgs/Temperature`` topic (and none was named)."""
+
+    def __init__(self, message: str, topics: Mapping[str, str], beside: str | None) -> None:
+        super().__init__(message)
+        #: the bag's topics, ``{name: message type}``
+        self.topics = dict(topics)
+        #: the gyro's topic, where known
+        self.beside = beside
+
+
+def number_temperature_topic(topics: Mapping[str, str], beside: str | None = None) -> str | None:
+    """The one bare-number topic named as a temperature, or None.
+
+    Of the topics of :data:`NUMBER_TYPES` (``std_msgs/Float64``, ``Float32``) whose last name
+    segment says ``temp`` (``/imu/temperature``, ``/fog/temp_c``), the only one, or the one
+    that shares the most of ``beside``'s namespace (:func:`beside_topic`); None where there is
+    none or the names do not tell.
+    """
+    candidates = sorted(
+        name
+        for name, msgtype in topics.items()
+        if msgtype in NUMBER_TYPES and 'temp' in name.rsplit('/', 1)[-1].lower()
+    )
+    if len(candidates) == 1:
+        return candidates[0]
+    return beside_topic(candidates, beside) if beside else None
+
+
+def number_fallback(err: NoTemperatureTopicError, stderr: TextIO | None = None) -> str:
+    """The topic of :func:`number_temperature_topic` for a bag without a Temperature topic.
+
+    A ``NOTE:`` on ``stderr`` (default: ``sys.stderr``) says which topic and field are read.
+    Raises ``err`` again where there is no such topic.
+    """
+    topic = number_temperature_topic(err.topics, err.beside)
+    if topic is None:
+        raise err
+    print(
+        f'NOTE: no {TEMPERATURE_TYPE} topic: reading the temperature (degC) from {topic} '
+        f'({err.topics[topic]}, field {NUMBER_FIELD}; name another with --temp-topic and '
+        '--temp-field)',
+        file=stderr or sys.stderr,
+    )
+    return topic
 
 
 @cache
@@ -219,16 +274,19 @@ def resolve_topic_in(
                     raise BagError(f'{flag} {topic}: has type {topics[name]}, expected {msgtype}')
                 return name
         listing = ', '.join(f'{n} ({t})' for n, t in sorted(topics.items())) or 'none'
-        raise BagError(f'{flag} {topic}: not in bag; topics: {listing}')
+        raise MissingTopicError(f'{flag} {topic}: not in bag; topics: {listing}')
     candidates = sorted(name for name, t in topics.items() if t == msgtype)
     if len(candidates) == 1:
         return candidates[0]
     if not candidates:
         listing = ', '.join(f'{n} ({t})' for n, t in sorted(topics.items())) or 'none'
         hint = f'; name one with {flag}' if topics else ''
-        if topics and msgtype == TEMPERATURE_TYPE:
-            hint += ' (calibrate reads a number in another message with --temp-field FIELD)'
-        raise BagError(f'no {msgtype} topic in bag; topics: {listing}{hint}')
+        message = f'no {msgtype} topic in bag; topics: {listing}{hint}'
+        if msgtype == TEMPERATURE_TYPE:
+            if topics:
+                message += ' (calibrate reads a number in another message with --temp-field FIELD)'
+            raise NoTemperatureTopicError(message, topics, beside)
+        raise BagError(message)
     if beside:
         paired, why = beside_topic(candidates, beside), f'beside {beside}'
     else:

@@ -51,6 +51,9 @@ class BinnedRecord:
     temp_frame_id: str = ''
     #: there, every frame_id the topic carried, sorted (else ())
     temp_frame_ids: tuple[str, ...] = ()
+    #: the field and message type the temperature was read from ('': sensor_msgs/Temperature)
+    temp_field: str = ''
+    temp_msgtype: str = ''
 
 
 def bin_record(record: ChamberRecord, period_s: float) -> BinnedRecord:
@@ -224,7 +227,7 @@ def reduce_bag(
             path, stream.imu_topic, stream.temp_topic, stream.frame_id, period_s,
             t_idx, t_stamp, temp, g_idx, g_stamp, rate.reshape(-1, 3),
             gyro.samples, temperature.samples, kept, processes, stream.temp_frame_id,
-            stream.temp_frame_ids,
+            stream.temp_frame_ids, **stream.temp_source(),
         )  # fmt: skip
 
 
@@ -284,4 +287,6 @@ def reduce_record(
         temperature_degC=temps,
         temp_frame_id=binned.temp_frame_id,
         temp_frame_ids=binned.temp_frame_ids,
+        temp_field=binned.temp_field,
+        temp_msgtype=binned.temp_msgtype,
     )

@@ -32,8 +32,12 @@ import numpy as np
 from fog_temp_comp.bag import cdr
 from fog_temp_comp.bag.bagio import (
     IMU_TYPE,
+    NUMBER_FIELD,
     TEMPERATURE_TYPE,
     BagError,
+    MissingTopicError,
+    NoTemperatureTopicError,
+    number_fallback,
     open_bag,
     resolve_topic,
     resolve_topic_in,
@@ -133,6 +137,8 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         self.reader: AnyReader | None = None
         self.imu_topic = ''
         self.temp_topic = ''
+        #: the temperature topic's message type (another than Temperature with ``temp_field``)
+        self.temp_msgtype = TEMPERATURE_TYPE
         self.frame_id = ''
         #: which frame_id's gyro and temperature messages are kept, how many of each were read
         #: (a preferred gyro frame_id not seen is not waited for: the node does not drop gyro
@@ -153,6 +159,22 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         self.span_stats: list[ScanStats] = []
 
     def __enter__(self) -> BagStream:
+        """Open the bag and resolve its topics.
+
+        A bag without a ``sensor_msgs/Temperature`` topic, where none was named, is read from
+        its bare-number temperature topic (:func:`~fog_temp_comp.bag.bagio.number_fallback`,
+        a ``NOTE:`` says so) if it has one.
+        """
+        try:
+            return self._enter()
+        except NoTemperatureTopicError as err:
+            if self._temp_topic is not None or self.temp_field is not None:
+                raise
+            self._temp_topic = number_fallback(err)
+            self.temp_field = NUMBER_FIELD
+            return self._enter()
+
+    def _enter(self) -> BagStream:
         if not self.path.exists():
             raise BagError(f'{self.path}: no such bag')
         self._sqlite_files = None
@@ -194,12 +216,22 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
             else:
                 assert self._temp_topic is not None
                 self.temp_topic = resolve_any_topic(reader, self._temp_topic, '--temp-topic')
+                self.temp_msgtype = reader.topics[self.temp_topic].msgtype or ''
         except BaseException:
             self._context.__exit__(*sys.exc_info())
             raise
         self.reader = reader
         self._open = True
         return self
+
+    def temp_source(self) -> dict[str, str]:
+        """``temp_field`` and ``temp_msgtype`` of a record read from this stream.
+
+        Both '' where the temperature was a ``sensor_msgs/Temperature``.
+        """
+        if self.temp_field is None:
+            return {'temp_field': '', 'temp_msgtype': ''}
+        return {'temp_field': self.temp_field, 'temp_msgtype': self.temp_msgtype}
 
     def __exit__(
         self,
@@ -334,7 +366,7 @@ def resolve_any_topic(reader: AnyReader, topic: str, flag: str) -> str:
         if name in reader.topics:
             return name
     listing = ', '.join(f'{n} ({i.msgtype})' for n, i in sorted(reader.topics.items()))
-    raise BagError(f'{flag} {topic}: not in bag; topics: {listing or "none"}')
+    raise MissingTopicError(f'{flag} {topic}: not in bag; topics: {listing or "none"}')
 
 
 def read_record(
@@ -397,4 +429,5 @@ def read_record(
             temperature_degC=temps[temp_order],
             temp_frame_id=stream.temp_frame_id,
             temp_frame_ids=stream.temp_frame_ids,
+            **stream.temp_source(),
         )

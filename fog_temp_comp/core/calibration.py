@@ -455,7 +455,24 @@ def _coefficients(
         fit={**fit_summary(fits), **({'warnings': warnings} if warnings else {})},
         provenance={**records_provenance(records), **provenance},
         temperature_frame_id=common_frame_id(records, temperature=True),
+        **temperature_message(records),
     )
+
+
+def temperature_message(records: Sequence[ChamberRecord]) -> dict[str, str]:
+    """The coefficients' keys of a temperature read from another message type than Temperature.
+
+    ``temperature_type``, ``temperature_field`` and ``temperature_topic`` where every record
+    read the same field of the same type on the same topic (a bare ``std_msgs/Float64``);
+    else {} (``sensor_msgs/Temperature``, or records that differ).
+    """
+    sources = {(r.temp_msgtype, r.temp_field, r.temp_topic) for r in records}
+    if len(sources) != 1:
+        return {}
+    ((msgtype, field, topic),) = sources
+    if not field:
+        return {}
+    return {'temperature_type': msgtype, 'temperature_field': field, 'temperature_topic': topic}
 
 
 def common_frame_id(records: Sequence[ChamberRecord], *, temperature: bool = False) -> str:

@@ -53,8 +53,14 @@ class Coefficients:
     temperature_frame_id: str = ''
     #: where the bags carried several temperature topics that their names did not tell apart,
     #: the one ``calibrate`` chose; ``compensate`` and ``evaluate`` take it from such bags
-    #: ('' for none)
+    #: ('' for none); also the topic of a temperature read from another message type
     temperature_topic: str = ''
+    #: where the temperature was a field of another message type than
+    #: ``sensor_msgs/Temperature`` (a bare ``std_msgs/Float64``), that type (``pkg/msg/Type``)
+    #: and field (``data``); the node subscribes to it, ``compensate`` and ``evaluate`` read it
+    #: ('' for ``sensor_msgs/Temperature``)
+    temperature_type: str = ''
+    temperature_field: str = ''
 
 
 def _hinge_text(term: str) -> str:
@@ -94,6 +100,14 @@ def to_dict(coeffs: Coefficients) -> dict[str, Any]:
             else {}
         ),
         **({'temperature_topic': coeffs.temperature_topic} if coeffs.temperature_topic else {}),
+        **(
+            {
+                'temperature_type': coeffs.temperature_type,
+                'temperature_field': coeffs.temperature_field,
+            }
+            if coeffs.temperature_type
+            else {}
+        ),
         'axes': {
             axis: {
                 coefficient_key(term): float(model.coefficients[i, j])
@@ -229,13 +243,18 @@ def from_dict(data: Any) -> Coefficients:
     frame_id = data.get('frame_id', '') or ''
     temperature_frame_id = data.get('temperature_frame_id', '') or ''
     temperature_topic = data.get('temperature_topic', '') or ''
+    temperature_type = data.get('temperature_type', '') or ''
+    temperature_field = data.get('temperature_field', '') or ''
     for key, value in (
         ('frame_id', frame_id),
         ('temperature_frame_id', temperature_frame_id),
         ('temperature_topic', temperature_topic),
+        ('temperature_type', temperature_type),
+        ('temperature_field', temperature_field),
     ):
         if not isinstance(value, str):
             raise CoefficientsError(f'{key}: expected a string')
+    _check_temperature_message(temperature_type, temperature_field, temperature_topic)
     model = DriftModel(terms, matrix, t_range, r_range)
     return Coefficients(
         model=model,
@@ -245,7 +264,25 @@ def from_dict(data: Any) -> Coefficients:
         provenance=dict(data.get('provenance') or {}),
         temperature_frame_id=temperature_frame_id,
         temperature_topic=temperature_topic,
+        temperature_type=temperature_type,
+        temperature_field=temperature_field,
     )
+
+
+def _check_temperature_message(msgtype: str, field: str, topic: str) -> None:
+    """``temperature_type`` and ``temperature_field`` come together, with the topic."""
+    if bool(msgtype) != bool(field):
+        raise CoefficientsError(
+            'temperature_type and temperature_field: give both (a field of another message '
+            'type than sensor_msgs/Temperature) or neither'
+        )
+    if not msgtype:
+        return
+    parts = msgtype.split('/')
+    if len(parts) != 3 or parts[1] != 'msg' or not all(parts):
+        raise CoefficientsError(f"temperature_type: expected 'pkg/msg/Type', got {msgtype!r}")
+    if not topic:
+        raise CoefficientsError('temperature_type: needs temperature_topic (the topic it is on)')
 
 
 def _get(data: dict[str, Any], key: str, kind: type, *, where: str = '') -> Any:

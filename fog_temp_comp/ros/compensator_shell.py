@@ -28,7 +28,7 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
-from fog_temp_comp.core.coefficients import CoefficientsError
+from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError
 from fog_temp_comp.core.compensator import Compensator
 from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.stamp_offset import (
@@ -44,7 +44,12 @@ from fog_temp_comp.ros.diagnostics import build_report, reading_model
 from fog_temp_comp.ros.node_parameters import FILTER_PARAMETERS, GUARD_PARAMETERS
 from fog_temp_comp.ros.params import ParameterError, params_files, unknown_warnings
 from fog_temp_comp.ros.spin import EXECUTORS
-from fog_temp_comp.ros.temperature_input import temperature_input
+from fog_temp_comp.ros.temperature_input import (
+    DEFAULT_FIELD,
+    DEFAULT_TYPE,
+    TemperatureInput,
+    temperature_input,
+)
 
 __all__ = ['IMU_INPUT_DEPTH', 'IMU_INPUT_QOS', 'CompensatorShell']
 
@@ -123,12 +128,12 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
                 'would correct its own output again and again; remap one of them elsewhere'
             )
         self.config = self._build_config({})
+        self._temperature = self._fitted_temperature_input(self.config.coefficients)
         fitted = self.config.coefficients.temperature_topic
         if fitted and resolve is not None and resolve('imu/temperature') != fitted:
             self.get_logger().warning(
-                f'the coefficients were fitted on the temperature topic {fitted} (calibrate chose '
-                f'it of several), this node reads {resolve("imu/temperature")}: remap '
-                f'imu/temperature:={fitted}'
+                f'the coefficients were fitted on the temperature topic {fitted}, this node reads '
+                f'{resolve("imu/temperature")}: remap imu/temperature:={fitted}'
             )
         self.compensator = Compensator(
             self.config.coefficients.model,
@@ -147,6 +152,31 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self._arrival = ArrivalOffsets()
         self._imu_total_at_temperature = 0
         self._load_learned_bias()
+
+    def _fitted_temperature_input(
+        self, coeffs: Coefficients, *, log: bool = True
+    ) -> TemperatureInput:
+        """The temperature input: the parameters', or else the one the coefficients were fitted on.
+
+        Where ``temperature_type`` and ``temperature_field`` are left at their defaults and
+        the coefficients were fitted on a field of another message type (a bare
+        ``std_msgs/Float64``: their ``temperature_type``), the node subscribes to that (an
+        info line says so). Raises :class:`ParameterError` where that type is not here.
+        """
+        asked = (
+            self.get_parameter('temperature_type').value,
+            self.get_parameter('temperature_field').value,
+        )
+        if not coeffs.temperature_type or asked != (DEFAULT_TYPE, DEFAULT_FIELD):
+            return temperature_input(*asked)
+        chosen = temperature_input(coeffs.temperature_type, coeffs.temperature_field)
+        if log:
+            self.get_logger().info(
+                f'reading the temperature (degC) from field {coeffs.temperature_field} of '
+                f'{coeffs.temperature_type}, as the coefficients were fitted (parameters '
+                'temperature_type and temperature_field choose another)'
+            )
+        return chosen
 
     def _create_output(self, *args: Any, **kwargs: Any) -> Publisher:
         """The publisher of ``imu/data`` (the lifecycle node makes it a lifecycle publisher)."""
@@ -219,11 +249,13 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             return SetParametersResult(successful=True)
         try:
             config = self._build_config(changes)
+            temperature = self._reloaded_temperature_input(config.coefficients)
         except (CoefficientsError, ValueError, TypeError) as err:
             return SetParametersResult(successful=False, reason=str(err))
         if rebuild:  # the learned bias belongs to the old coefficients: keep it in the file
             self.save_learned_bias('reconfigure')
         self.config = config
+        self._temperature = temperature
         if rebuild:
             counters = self.compensator.status.counters
             last_reading = self.compensator.last_reading
@@ -239,6 +271,21 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         else:
             self.compensator.guard = config.guard
         return SetParametersResult(successful=True)
+
+    def _reloaded_temperature_input(self, coeffs: Coefficients) -> TemperatureInput:
+        """The temperature input of new coefficients; ValueError where its type changes.
+
+        The subscription's type is fixed while the node runs: such coefficients need a restart.
+        """
+        reloaded = self._fitted_temperature_input(coeffs, log=False)
+        wanted, have = reloaded.msg_type, self._temperature.msg_type
+        if wanted is not have:
+            raise ValueError(
+                f'these coefficients read the temperature from a {wanted.__module__}.'
+                f'{wanted.__name__}, the node subscribes to {have.__module__}.{have.__name__}: '
+                'restart the node with them'
+            )
+        return reloaded
 
     # ------------------------------------------------------------------ data
     def _unset_stamp_s(self) -> float:

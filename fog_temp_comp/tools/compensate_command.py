@@ -17,7 +17,7 @@ from collections.abc import Callable, Collection
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from fog_temp_comp.bag import bagio, mcapwrite
 from fog_temp_comp.bag.bagio import BagError, BagWriter
@@ -26,7 +26,7 @@ from fog_temp_comp.bag.repair import repaired_bag
 from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.stream import resolve_any_topic
 from fog_temp_comp.bag.unstamped import ClocksApartError, UnsetStamps
-from fog_temp_comp.core.coefficients import load
+from fog_temp_comp.core.coefficients import Coefficients, load
 from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
 from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.rest import RestLearner, RestSettings
@@ -43,6 +43,9 @@ from fog_temp_comp.tools.chunkreplay import ChunkReplayer, chunked
 from fog_temp_comp.tools.evaluate_command import effective_settings
 from fog_temp_comp.tools.salvaged import Salvaged
 from fog_temp_comp.tools.temperature_sources import with_yaml_temperature_topic
+
+if TYPE_CHECKING:
+    from rosbags.highlevel import AnyReader
 
 
 def compensate_command(
@@ -79,8 +82,10 @@ def compensate_command(
     ``'receive'`` times gyro and temperature by their receive times, not their header stamps
     (drivers on two clocks, which the default warns about); the output keeps the headers.
     ``temp_field`` reads the temperature (degC) from a field of ``temp_topic``'s messages of
-    any type, as ``calibrate --temp-field`` (through ``AnyReader``; the node itself subscribes
-    to ``sensor_msgs/Temperature``). ``temp_frame_id`` (default: the coefficients'
+    any type, as ``calibrate --temp-field`` (through ``AnyReader``); without either, the field
+    and topic the coefficients were fitted on (``temperature_field``), else a bag without a
+    ``sensor_msgs/Temperature`` topic is read from its bare-number temperature topic
+    (``std_msgs/Float64``, ``data``). ``temp_frame_id`` (default: the coefficients'
     ``temperature_frame_id``) picks one sensor's readings of a topic that carries several; of
     temperature topics that the names do not tell apart, the coefficients' ``temperature_topic``
     is taken where no ``temp_topic`` is given.
@@ -118,7 +123,7 @@ def compensate_command(
         temp_field=temp_field,
         temp_frame_id=temp_frame_id or coeffs.temperature_frame_id,
     )
-    (n_out, counters), compensator = run.replay(out_bag, strict, coeffs.temperature_topic)
+    (n_out, counters), compensator = run.replay(out_bag, strict, coeffs)
     _report_written(run, out_bag, n_out, counters, chosen=output_topic is None, stdout=stdout)
     _report_faults(run.in_bag, compensator)
     _report_gaps(run.in_bag, compensator.status.counters)
@@ -345,20 +350,43 @@ class _Compensate:
     temp_frame_id: str = ''
 
     def replay(
-        self, out_bag: Path, strict: bool, fitted_topic: str
+        self, out_bag: Path, strict: bool, coeffs: Coefficients
     ) -> tuple[tuple[int, CompensatorCounters], Compensator]:
-        """:func:`_on_one_clock` with the temperature topic the coefficients were fitted on.
+        """:func:`_on_one_clock` with the temperature the coefficients were fitted on.
 
-        ``fitted_topic`` is used where no topic was asked for and the bag's temperature topics
-        are not told apart by their names (if the bag has it).
+        Where no topic or field was asked for, ``coeffs``' temperature topic and field
+        (:func:`~fog_temp_comp.tools.temperature_sources.with_yaml_temperature_topic`).
         """
         gyro_topic, temp_topic, output_topic = self.topics
 
-        def on_topic(topic: str | None) -> tuple[tuple[int, CompensatorCounters], Compensator]:
+        def on_topic(
+            topic: str | None, field: str | None
+        ) -> tuple[tuple[int, CompensatorCounters], Compensator]:
             self.topics = (gyro_topic, topic, output_topic)
+            self.temp_field = field
             return _on_one_clock(self, self.in_bag, out_bag, strict)
 
-        return with_yaml_temperature_topic(on_topic, fitted_topic, temp_topic, sys.stderr)
+        return with_yaml_temperature_topic(
+            on_topic, coeffs, temp_topic, self.temp_field, sys.stderr
+        )
+
+    def _temperature_topic(self, reader: AnyReader, temp_topic: str | None, imu_name: str) -> str:
+        """The temperature topic: ``--temp-field``'s, a Temperature, or a bare number's.
+
+        A bag without a ``sensor_msgs/Temperature`` topic is read from its bare-number
+        temperature topic (:func:`~fog_temp_comp.bag.bagio.number_fallback`), which sets
+        :attr:`temp_field`.
+        """
+        if self.temp_field is not None and temp_topic is not None:
+            return resolve_any_topic(reader, temp_topic, '--temp-topic')
+        try:
+            return bagio.resolve_topic(
+                reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic', imu_name
+            )
+        except bagio.NoTemperatureTopicError as err:
+            name = bagio.number_fallback(err)
+            self.temp_field = bagio.NUMBER_FIELD
+            return name
 
     def _unset_stamps(self, imu_name: str, temp_name: str) -> UnsetStamps:
         """What times the messages; by header, it stops at clocks hours apart."""
@@ -391,13 +419,7 @@ class _Compensate:
         with opened:
             imu_name = bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic')
             self.output_used = output_topic_for(output_topic, imu_name, reader.topics, self.in_bag)
-            temp_name = (
-                resolve_any_topic(reader, temp_topic, '--temp-topic')
-                if self.temp_field is not None and temp_topic is not None
-                else bagio.resolve_topic(
-                    reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic', imu_name
-                )
-            )
+            temp_name = self._temperature_topic(reader, temp_topic, imu_name)
             job = _CompensateJob(
                 reader=reader,
                 in_bag=self.in_bag,

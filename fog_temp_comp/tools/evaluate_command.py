@@ -55,13 +55,13 @@ def evaluate_command(
     salvaged = Salvaged()
     for bag in bags:
 
-        def read(topic: str | None, bag: Path = bag) -> ChamberRecord:
+        def read(topic: str | None, field: str | None, bag: Path = bag) -> ChamberRecord:
             return on_one_clock(
                 read_record,
                 bag,
                 gyro_topic=gyro_topic,
                 temp_topic=topic,
-                temp_field=temp_field,
+                temp_field=field,
                 temp_frame_id=temp_frame_id or coeffs.temperature_frame_id,
                 gyro_frame_id=gyro_frame_id or coeffs.frame_id,
                 strict=strict,
@@ -69,9 +69,7 @@ def evaluate_command(
                 time_source=time_source,
             )
 
-        record = with_yaml_temperature_topic(
-            read, coeffs.temperature_topic, temp_topic, sys.stderr
-        )
+        record = with_yaml_temperature_topic(read, coeffs, temp_topic, temp_field, sys.stderr)
         corrected, status = replay_record(
             record, coeffs, effective_settings(coeffs, denoise_method), guard
         )

@@ -19,8 +19,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 
-from fog_temp_comp.bag.bagio import TEMPERATURE_TYPE, AmbiguousTopicError, BagError
-from fog_temp_comp.core.coefficients import CoefficientsError
+from fog_temp_comp.bag.bagio import (
+    TEMPERATURE_TYPE,
+    AmbiguousTopicError,
+    BagError,
+    MissingTopicError,
+)
+from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.sensor_choice import (
     SourceOutcome,
@@ -155,18 +160,36 @@ def _with_choice(
 
 
 def with_yaml_temperature_topic(
-    read: Callable[[str | None], T],
-    wanted: str,
+    read: Callable[[str | None, str | None], T],
+    coeffs: Coefficients,
     temp_topic: str | None,
+    temp_field: str | None,
     stderr: TextIO,
 ) -> T:
-    """``read(temp_topic)``, or ``read(wanted)``: the coefficients' ``temperature_topic``.
+    """``read(topic, field)`` of the temperature the coefficients were fitted on, or as asked.
 
-    That one where no ``--temp-topic`` was given and the bag's temperature topics are not told
-    apart by their names, but the coefficients were fitted on one of them (a ``NOTE:`` says so).
+    With ``--temp-topic``/``--temp-field`` given, those. Else, where the coefficients were
+    fitted on a field of another message type (``temperature_field``), that field of their
+    ``temperature_topic`` if the bag has it; where the bag's temperature topics are not told
+    apart by their names, the coefficients' ``temperature_topic``; else the readers' default.
+    A ``NOTE:`` says where the coefficients decided.
     """
+    wanted = coeffs.temperature_topic
+    if temp_topic is None and temp_field is None and coeffs.temperature_field:
+        try:
+            result = read(wanted, coeffs.temperature_field)
+        except MissingTopicError:
+            pass  # a bag that logs it otherwise: the readers' default
+        else:
+            print(
+                f'NOTE: reading the temperature (degC) from {wanted} '
+                f'({coeffs.temperature_type}, field {coeffs.temperature_field}), as the '
+                'coefficients were fitted (name another with --temp-topic and --temp-field)',
+                file=stderr,
+            )
+            return result
     try:
-        return read(temp_topic)
+        return read(temp_topic, temp_field)
     except AmbiguousTopicError as err:
         if temp_topic is not None or err.msgtype != TEMPERATURE_TYPE:
             raise
@@ -178,4 +201,4 @@ def with_yaml_temperature_topic(
             f'coefficients were fitted on (not {others}; choose another with --temp-topic)',
             file=stderr,
         )
-        return read(wanted)
+        return read(wanted, temp_field)
