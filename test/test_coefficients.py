@@ -104,6 +104,9 @@ def del_key(path: str) -> Callable[[dict], None]:
         (set_key('denoise.bogus', 1), 'denoise'),
         (set_key('frame_id', 5), 'frame_id'),
         (set_key('temperature_topic', ['/a', '/b']), 'temperature_topic'),
+        (set_key('temperature_type', 'std_msgs/msg/Float64'), 'give both'),
+        (set_key('temperature_field', 'data'), 'give both'),
+        (set_key('temperature_type', 7), 'temperature_type: expected a string'),
     ],
 )
 def test_malformed_file_names_the_key(
@@ -144,6 +147,39 @@ def test_the_temperature_topic_calibrate_chose_round_trips(
     save(dataclasses.replace(coeffs, temperature_topic='/imu/temp_coil'), path)
     assert yaml.safe_load(path.read_text())['temperature_topic'] == '/imu/temp_coil'
     assert load(path).temperature_topic == '/imu/temp_coil'
+
+
+def test_the_temperature_message_type_round_trips_and_is_checked(
+    tmp_path: Path, coeffs: Coefficients
+) -> None:
+    """A temperature read from a field of another type: type, field and topic, together."""
+    path = tmp_path / 'c.yaml'
+    bare = dataclasses.replace(
+        coeffs,
+        temperature_topic='/imu/temperature',
+        temperature_type='std_msgs/msg/Float64',
+        temperature_field='data',
+    )
+    save(bare, path)
+    data = yaml.safe_load(path.read_text())
+    assert (data['temperature_type'], data['temperature_field']) == (
+        'std_msgs/msg/Float64',
+        'data',
+    )
+    loaded = load(path)
+    assert (loaded.temperature_topic, loaded.temperature_type, loaded.temperature_field) == (
+        '/imu/temperature',
+        'std_msgs/msg/Float64',
+        'data',
+    )
+    for edit, match in (
+        ({'temperature_type': 'std_msgs/Float64/x'}, "expected 'pkg/msg/Type'"),
+        ({'temperature_type': 'std_msgs/Float64'}, "expected 'pkg/msg/Type'"),
+        ({'temperature_topic': ''}, 'needs temperature_topic'),
+    ):
+        path.write_text(yaml.safe_dump({**data, **edit}))
+        with pytest.raises(CoefficientsError, match=match):
+            load(path)
 
 
 def test_missing_file(tmp_path: Path) -> None:

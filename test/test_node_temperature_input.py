@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +15,7 @@ from rosharness import Harness, core_output, rate_of, split_stamp
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 
+from fog_temp_comp.core.coefficients import load, save
 from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.ros.params import ParameterError
 from fog_temp_comp.tools.simulate import SimulatedRun
@@ -123,3 +125,62 @@ def test_a_temperature_input_that_cannot_be_read_is_refused_with_the_reason(
 ) -> None:
     with pytest.raises(ParameterError, match=message):
         node_reading(ros_context, coeffs_file, msg_type, field)
+
+
+def float64_coefficients(coeffs_file: Path, tmp_path: Path) -> Path:
+    """The example coefficients as fitted on a bare std_msgs/Float64 on the status topic."""
+    coeffs = dataclasses.replace(
+        load(coeffs_file),
+        temperature_topic='/' + STATUS_TOPIC,
+        temperature_type='std_msgs/msg/Float64',
+        temperature_field='data',
+    )
+    path = tmp_path / 'float64.yaml'
+    save(coeffs, path)
+    return path
+
+
+def test_the_node_reads_the_temperature_type_the_coefficients_were_fitted_on(
+    ros_context: object, coeffs_file: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Parameters left at their defaults: the coefficients' Float64 is subscribed and read."""
+    fitted = float64_coefficients(coeffs_file, tmp_path)
+    node = CompensatorNode(
+        context=ros_context,
+        cli_args=['--ros-args', '-r', f'imu/temperature:={STATUS_TOPIC}'],
+        parameter_overrides=[Parameter('coefficients_file', value=str(fitted))],
+    )
+    harness, publisher = harness_with(ros_context, node, Float64)
+    try:
+        for k in range(3):
+            before = node.compensator.status.counters.temperature_total
+            publisher.publish(Float64(data=21.0 + 0.01 * k))
+            harness.spin_until(
+                lambda b=before: node.compensator.status.counters.temperature_total > b
+            )
+        assert node.unstamped == 3
+        assert node.compensator.status.temperature_degC == pytest.approx(21.02, abs=0.05)
+        # coefficients fitted on a Temperature need another subscription: refused, kept
+        result = node.set_parameters([Parameter('coefficients_file', value=str(coeffs_file))])[0]
+        assert not result.successful and 'restart the node' in result.reason
+        assert node.config.coefficients.temperature_type == 'std_msgs/msg/Float64'
+        assert node.set_parameters([Parameter('coefficients_file', value=str(fitted))])[
+            0
+        ].successful
+    finally:
+        harness.close()
+    assert 'field data of std_msgs/msg/Float64, as the coefficients were fitted' in (
+        capfd.readouterr().err
+    )
+
+
+def test_the_temperature_parameters_override_the_coefficients_type(
+    ros_context: object, coeffs_file: Path, tmp_path: Path
+) -> None:
+    """A type named by the parameters is what the node subscribes to, whatever was fitted."""
+    fitted = float64_coefficients(coeffs_file, tmp_path)
+    node = node_reading(ros_context, fitted, 'sensor_msgs/msg/FluidPressure', 'fluid_pressure')
+    try:
+        assert node._temperature.msg_type is FluidPressure
+    finally:
+        node.destroy_node()

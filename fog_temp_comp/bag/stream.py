@@ -51,7 +51,7 @@ from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.sqlitescan import loose_sqlite_files, plain_sqlite_files, topic_types
 from fog_temp_comp.bag.sqlitestream import _SqliteReading
 from fog_temp_comp.bag.streamchunk import Chunk, FloatArray, StampOrder
-from fog_temp_comp.bag.streamdecode import _decoder, get_field
+from fog_temp_comp.bag.streamdecode import _decoder, check_field, get_field
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.record import ChamberRecord
@@ -217,6 +217,7 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
                 assert self._temp_topic is not None
                 self.temp_topic = resolve_any_topic(reader, self._temp_topic, '--temp-topic')
                 self.temp_msgtype = reader.topics[self.temp_topic].msgtype or ''
+                check_field(reader.typestore, self.temp_msgtype, self.temp_field)
         except BaseException:
             self._context.__exit__(*sys.exc_info())
             raise

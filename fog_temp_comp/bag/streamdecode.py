@@ -24,7 +24,39 @@ from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.units import NS_PER_S
 
-__all__ = ['get_field']
+__all__ = ['FieldError', 'check_field', 'get_field']
+
+#: ROS base types that hold a number (``bool``, ``string`` and ``char`` do not)
+NUMBER_BASE_TYPES = frozenset(
+    ['float32', 'float64', 'int8', 'uint8', 'int16', 'uint16', 'int32', 'uint32', 'int64',
+     'uint64', 'byte', 'octet']
+)  # fmt: skip
+
+
+class FieldError(BagError):
+    """A ``--temp-field`` that the temperature topic's messages do not have as a number."""
+
+
+def check_field(store: Any, msgtype: str, path: str) -> None:
+    """Raise :class:`FieldError` where ``path`` (``a.b.c``) is not a number of ``msgtype``.
+
+    ``store``: a rosbags ``Typestore`` that has ``msgtype`` (a reader's, with the bag's own
+    definitions); checked when the bag is opened, before a message is read.
+    """
+    names = path.split('.')
+    for k, name in enumerate(names):
+        fields = dict(store.fielddefs[msgtype][1])
+        if name not in fields:
+            raise FieldError(f'--temp-field {path}: no field {name!r} (fields: {sorted(fields)})')
+        kind, detail = fields[name]
+        last = k == len(names) - 1
+        if kind.name == 'NAME' and not last:
+            msgtype = detail
+            continue
+        if not (last and kind.name == 'BASE' and detail[0] in NUMBER_BASE_TYPES):
+            what = detail if kind.name == 'NAME' else kind.name.lower()
+            raise FieldError(f'--temp-field {path}: not a number ({what})')
+        return
 
 
 def get_field(msg: Any, path: str) -> float:
@@ -33,10 +65,10 @@ def get_field(msg: Any, path: str) -> float:
     for name in path.split('.'):
         if not hasattr(value, name):
             fields = sorted(getattr(value, '__dataclass_fields__', {}))
-            raise BagError(f'--temp-field {path}: no field {name!r} (fields: {fields})')
+            raise FieldError(f'--temp-field {path}: no field {name!r} (fields: {fields})')
         value = getattr(value, name)
     if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
-        raise BagError(f'--temp-field {path}: not a number ({type(value).__name__})')
+        raise FieldError(f'--temp-field {path}: not a number ({type(value).__name__})')
     return float(value)
 
 

@@ -25,6 +25,7 @@ from fog_temp_comp.bag.one_clock import on_one_clock
 from fog_temp_comp.bag.repair import repaired_bag
 from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.stream import resolve_any_topic
+from fog_temp_comp.bag.streamdecode import check_field
 from fog_temp_comp.bag.unstamped import ClocksApartError, UnsetStamps
 from fog_temp_comp.core.coefficients import Coefficients, load
 from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
@@ -378,7 +379,9 @@ class _Compensate:
         :attr:`temp_field`.
         """
         if self.temp_field is not None and temp_topic is not None:
-            return resolve_any_topic(reader, temp_topic, '--temp-topic')
+            name = resolve_any_topic(reader, temp_topic, '--temp-topic')
+            check_field(reader.typestore, reader.topics[name].msgtype or '', self.temp_field)
+            return name
         try:
             return bagio.resolve_topic(
                 reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic', imu_name

@@ -25,6 +25,7 @@ from fog_temp_comp.bag.bagio import (
     BagError,
     MissingTopicError,
 )
+from fog_temp_comp.bag.streamdecode import FieldError
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.sensor_choice import (
@@ -178,7 +179,7 @@ def with_yaml_temperature_topic(
     if temp_topic is None and temp_field is None and coeffs.temperature_field:
         try:
             result = read(wanted, coeffs.temperature_field)
-        except MissingTopicError:
+        except (MissingTopicError, FieldError):
             pass  # a bag that logs it otherwise: the readers' default
         else:
             print(
