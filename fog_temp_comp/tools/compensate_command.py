@@ -83,13 +83,10 @@ def compensate_command(
     ``'receive'`` times gyro and temperature by their receive times, not their header stamps
     (drivers on two clocks, which the default warns about); the output keeps the headers.
     ``temp_field`` reads the temperature (degC) from a field of ``temp_topic``'s messages of
-    any type, as ``calibrate --temp-field`` (through ``AnyReader``); without either, the field
-    and topic the coefficients were fitted on (``temperature_field``), else a bag without a
-    ``sensor_msgs/Temperature`` topic is read from its bare-number temperature topic
-    (``std_msgs/Float64``, ``data``). ``temp_frame_id`` (default: the coefficients'
-    ``temperature_frame_id``) picks one sensor's readings of a topic that carries several; of
-    temperature topics that the names do not tell apart, the coefficients' ``temperature_topic``
-    is taken where no ``temp_topic`` is given.
+    any type (through ``AnyReader``); without them, what the coefficients were fitted on
+    (:func:`~fog_temp_comp.tools.temperature_sources.with_yaml_temperature_topic`).
+    ``temp_frame_id`` (default: the coefficients' ``temperature_frame_id``) picks one sensor's
+    readings of a topic that carries several.
     ``output_topic`` defaults to :data:`DEFAULT_OUTPUT_TOPIC`,
     or, where the input has that topic already (a driver that publishes its raw rate there), to
     the gyro topic with ``_compensated`` appended (:func:`output_topic_for`); a given topic that
