@@ -8,11 +8,12 @@ from typing import Any
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticStatus
 from numpy.testing import assert_array_equal
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
-from rosharness import Harness, core_output, rate_of, split_stamp
-from sensor_msgs.msg import FluidPressure
+from rosharness import Harness, core_output, make_temperature, rate_of, split_stamp
+from sensor_msgs.msg import FluidPressure, Temperature
 from std_msgs.msg import Float64
 
 from fog_temp_comp.core.coefficients import load, save
@@ -184,3 +185,50 @@ def test_the_temperature_parameters_override_the_coefficients_type(
         assert node._temperature.msg_type is FluidPressure
     finally:
         node.destroy_node()
+
+
+def test_a_temperature_published_as_another_type_is_an_error_in_diagnostics(
+    ros_context: object, coeffs_file: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """A Float64 on the topic the node reads as a Temperature: nothing arrives; said, with the fix.
+
+    The driver is another process's participant (one participant cannot hold both types on a
+    topic); said while nothing has arrived, not once a reading of the subscribed type comes.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.node import Node
+
+    node = CompensatorNode(
+        context=ros_context,
+        cli_args=['--ros-args', '-r', f'imu/temperature:={STATUS_TOPIC}'],
+        parameter_overrides=[Parameter('coefficients_file', value=str(coeffs_file))],
+    )
+    harness = Harness(ros_context, node, connect=False)
+    driver_context = Context()
+    rclpy.init(context=driver_context)
+    driver = Node('float64_driver', context=driver_context)
+    try:
+        driver.create_publisher(Float64, STATUS_TOPIC, qos_profile_sensor_data)
+        harness.spin_until(lambda: node.get_publishers_info_by_topic('/' + STATUS_TOPIC) != [])
+        status = harness.diagnose()
+        assert status.level == DiagnosticStatus.ERROR
+        assert (
+            '/fog/status is published as std_msgs/msg/Float64, this node subscribes to it as '
+            'sensor_msgs/msg/Temperature: nothing is received; set parameters temperature_type'
+        ) in status.message
+        values = {kv.key: kv.value for kv in status.values}
+        assert values['published_as /fog/status'] == 'std_msgs/msg/Float64'
+        assert 'published_as /imu/data_raw' not in values  # the harness publishes an Imu there
+        temperature = harness.peer.create_publisher(
+            Temperature, STATUS_TOPIC, qos_profile_sensor_data
+        )
+        harness.spin_until(lambda: temperature.get_subscription_count() > 0)
+        temperature.publish(make_temperature(1.0, 20.0))
+        harness.spin_until(lambda: node.compensator.status.counters.temperature_total > 0)
+        assert 'published as' not in harness.diagnose().message
+    finally:
+        driver.destroy_node()
+        rclpy.shutdown(context=driver_context)
+        harness.close()
+    assert 'nothing is received; set parameters temperature_type' in capfd.readouterr().err

@@ -41,6 +41,7 @@ from fog_temp_comp.core.units import AXES, RAD_S_PER_DEG_H
 from fog_temp_comp.ros.bias_learning import BiasLearningMixin
 from fog_temp_comp.ros.console_log import ConsoleLogMixin
 from fog_temp_comp.ros.diagnostics import build_report, reading_model
+from fog_temp_comp.ros.input_types import TypeMismatch, type_mismatches
 from fog_temp_comp.ros.node_parameters import FILTER_PARAMETERS, GUARD_PARAMETERS
 from fog_temp_comp.ros.params import ParameterError, params_files, unknown_warnings
 from fog_temp_comp.ros.spin import EXECUTORS
@@ -429,6 +430,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             require_frame_match=self._require_frame_match,
             frames=self.temperature_frames,
             plausible_degC=self.compensator.plausible_temperature_degC,
+            type_mismatches=self._type_mismatches(counters),
             rest=None if self.compensator.rest is None else self.compensator.rest.finish(),
             rest_bias_file=(
                 (self.config.rest_bias_file, self._rest_bias_state)
@@ -449,6 +451,21 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._send(self._diag_pub, array)
+
+    def _type_mismatches(self, counters: Any) -> list[TypeMismatch]:
+        """The inputs that received nothing yet and are published only as other types.
+
+        Asked of the graph while an input is silent; each found is logged (throttled).
+        """
+        silent = []
+        if not counters.imu_total and not self.imu_while_inactive:
+            silent.append((self._imu_sub.topic_name, 'sensor_msgs/msg/Imu'))
+        if not counters.temperature_total:
+            silent.append((self._temp_sub.topic_name, self._temperature.type_name))
+        found = type_mismatches(self, silent) if silent else []
+        for mismatch in found:
+            self.get_logger().error(mismatch.text(), throttle_duration_sec=self._throttle_s)
+        return found
 
     def _send(self, publisher: Publisher, msg: Any) -> None:
         """Publish ``msg``; dropped without a word once rclpy is shutting down.

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from fog_temp_comp.core.coefficients import Coefficients
@@ -12,6 +13,7 @@ from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.rest import RestStatus
 from fog_temp_comp.core.units import AXES
+from fog_temp_comp.ros.input_types import TypeMismatch
 
 OK, WARN, ERROR = 0, 1, 2
 
@@ -75,18 +77,17 @@ def build_report(
     rest_bias_file: tuple[str, str] | None = None,
     frames: FrameLock | None = None,
     plausible_degC: tuple[float, float] = (-math.inf, math.inf),
+    type_mismatches: Sequence[TypeMismatch] = (),
 ) -> Report:
     """Summarise ``status``; ``previous`` are the counters at the last report (for deltas).
 
-    ``rest_bias_file`` is (path, what happened to it: loaded, refused and why, written, ...);
-    ``stale_after_s`` (s) and ``plausible_degC`` (low, high degC) the compensator's
-    :attr:`~fog_temp_comp.core.compensator.Compensator.stale_after_s` and ``plausible_...``;
-    ``temperature_stamp_offset_s`` the recent temperature stamp minus the gyro's latest on
-    arrival nearest zero (s) and ``two_clocks`` whether it says two clocks
-    (:class:`~fog_temp_comp.core.stamp_offset.ArrivalOffsets`); ``clocks_apart_s`` the offset
-    of header clocks hours apart that made the node time both on arrival (nan: it did not);
-    ``frames`` which frame_id's temperatures the node keeps; ``frame_mismatches`` the gyro
-    messages of another frame_id in all and since the last report (which set the level).
+    ``rest_bias_file``: (path, what happened to it: loaded, refused and why, written, ...).
+    ``stale_after_s`` (s), ``plausible_degC`` (low, high degC): the compensator's. The
+    temperature stamp minus the gyro's latest on arrival nearest zero (s), ``two_clocks``:
+    :class:`~fog_temp_comp.core.stamp_offset.ArrivalOffsets`; ``clocks_apart_s``: header
+    clocks hours apart that made the node time both on arrival (nan: it did not). ``frames``:
+    the temperature frame_id kept; ``frame_mismatches``: gyro messages of another frame_id,
+    in all and since the last report; ``type_mismatches``: inputs published as other types.
     """
     counters = status.counters
     reasons = _temperature_reasons(status, previous, plausible_degC)
@@ -100,7 +101,7 @@ def build_report(
         reasons.append((level, f'gyro frame_id differs from calibrated one ({action})'))
     reasons += _clock_reasons(temperature_stamp_offset_s, two_clocks, clocks_apart_s, unstamped)
     frame_reasons, frame_values = _temperature_frames(frames)
-    reasons += frame_reasons
+    reasons += frame_reasons + [(ERROR, m.text()) for m in type_mismatches]
     if rest is not None and rest.residual_over_limit:
         reasons.append(
             (WARN, 'rest residual above rest_residual_limit_deg_h: not applied (moving?)')
@@ -124,6 +125,7 @@ def build_report(
         ('frame_id_mismatches', str(frame_mismatches[0])),
         ('temperature_unstamped', str(unstamped)),
         *frame_values,
+        *[(f'published_as {m.topic}', ', '.join(m.published)) for m in type_mismatches],
     ]
     values += [(name, str(value)) for name, value in dataclasses.asdict(counters).items()]
     if rest is not None:

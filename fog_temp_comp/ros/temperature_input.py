@@ -31,6 +31,8 @@ class TemperatureInput:
     degC: Callable[[Any], float]
     #: whether the messages carry a ``header`` (else they are timed on arrival)
     stamped: bool
+    #: the type's name, ``pkg/msg/Type``
+    type_name: str = DEFAULT_TYPE
 
 
 def _message_class(type_name: str) -> type:
@@ -82,4 +84,8 @@ def temperature_input(type_name: str, field: str) -> TemperatureInput:
 
     """
     msg_type = _message_class(type_name)
-    return TemperatureInput(msg_type, _reader(msg_type, field), hasattr(msg_type(), 'header'))
+    parts = type_name.split('/')
+    name = f'{parts[0]}/msg/{parts[-1]}'
+    return TemperatureInput(
+        msg_type, _reader(msg_type, field), hasattr(msg_type(), 'header'), name
+    )
