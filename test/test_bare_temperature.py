@@ -115,6 +115,11 @@ def test_calibrate_compensate_and_evaluate_a_bare_float64_with_default_flags(
     )
     assert len(out_bare) == short_run.imu_stamps_s.size
     assert out_bare == out_plain
+    # coefficients that name no temperature type: compensate finds the bare number itself
+    plain_coeffs = ['--coeffs', str(fitted['plain'])]
+    assert cli.main(['compensate', str(bare), *plain_coeffs, '-o', str(tmp_path / 'o_own')]) == 0
+    assert 'NOTE: no sensor_msgs/msg/Temperature topic' in capsys.readouterr().err
+    assert imu_of(tmp_path / 'o_own', '/imu/data') == out_plain
     tables = []
     for bag in (bare, plain):
         out = io.StringIO()

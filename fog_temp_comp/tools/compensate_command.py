@@ -373,7 +373,7 @@ class _Compensate:
 
         A bag without a ``sensor_msgs/Temperature`` topic is read from its bare-number
         temperature topic (:func:`~fog_temp_comp.bag.bagio.number_fallback`), which sets
-        :attr:`temp_field`.
+        :attr:`temp_field` and the temperature topic of :attr:`topics`.
         """
         if self.temp_field is not None and temp_topic is not None:
             name = resolve_any_topic(reader, temp_topic, '--temp-topic')
@@ -385,7 +385,8 @@ class _Compensate:
             )
         except bagio.NoTemperatureTopicError as err:
             name = bagio.number_fallback(err)
-            self.temp_field = bagio.NUMBER_FIELD
+            self.temp_field = bagio.NUMBER_FIELD  # and the topic: a repaired copy reads it too
+            self.topics = (self.topics[0], name, self.topics[2])
             return name
 
     def _unset_stamps(self, imu_name: str, temp_name: str) -> UnsetStamps:
