@@ -11,6 +11,7 @@ import io
 from contextlib import redirect_stdout
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from numpy.testing import assert_allclose, assert_array_equal
@@ -22,9 +23,12 @@ from fog_temp_comp.bag.bagio import (
     number_temperature_topic,
     typestore,
 )
-from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.bag.cdr import Spans
+from fog_temp_comp.bag.stream import BagStream, read_record
+from fog_temp_comp.bag.streamdecode import decode_numbers
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.tools import cli
+from fog_temp_comp.tools.compensate_command import compensate_command
 from fog_temp_comp.tools.simulate import SimulatedRun
 
 from simdata import gyro_events, write_events, write_run
@@ -120,6 +124,10 @@ def test_calibrate_compensate_and_evaluate_a_bare_float64_with_default_flags(
     assert cli.main(['compensate', str(bare), *plain_coeffs, '-o', str(tmp_path / 'o_own')]) == 0
     assert 'NOTE: no sensor_msgs/msg/Temperature topic' in capsys.readouterr().err
     assert imu_of(tmp_path / 'o_own', '/imu/data') == out_plain
+    # the block path (MCAP, bare numbers decoded in a batch) against rosbags one at a time
+    slow = tmp_path / 'o_slow'
+    assert compensate_command(bare, fitted['bare'], slow, fast=False, stdout=io.StringIO()) == 0
+    assert imu_of(slow, '/imu/data') == out_plain
     tables = []
     for bag in (bare, plain):
         out = io.StringIO()
@@ -186,3 +194,45 @@ def test_compensate_follows_the_custom_field_the_coefficients_were_fitted_on(
     )
     assert imu_of(without, '/imu/data') == imu_of(with_flags, '/imu/data')
     assert len(imu_of(without, '/imu/data')) == short_run.imu_stamps_s.size
+
+
+@pytest.mark.parametrize('msgtype', [FLOAT64, 'std_msgs/msg/Float32'])
+def test_bare_numbers_decode_in_a_batch_as_rosbags_deserializes_them(msgtype: str) -> None:
+    """CDR of either byte order and ROS 1, from spans or byte buffers: rosbags' values."""
+    store = typestore()
+    values = [20.0, -40.125, 1e-3, 85.5, 0.0]
+    msgs = [store.types[msgtype](data=v) for v in values]
+    cdr_le = [store.serialize_cdr(m, msgtype) for m in msgs]
+    cdr_be = [store.serialize_cdr(m, msgtype, little_endian=False) for m in msgs]
+    ros1 = [store.serialize_ros1(m, msgtype) for m in msgs]
+    expected = [store.deserialize_cdr(r, msgtype).data for r in cdr_le]
+    mixed = [cdr_le[0], cdr_be[1], cdr_le[2], cdr_be[3], cdr_le[4]]
+    for raws in (cdr_le, cdr_be, mixed, Spans.join(mixed)):
+        assert_array_equal(decode_numbers(raws, msgtype), expected)
+    assert_array_equal(decode_numbers(Spans.join(ros1), msgtype, ros1=True), expected)
+    assert_array_equal(
+        [store.deserialize_ros1(r, msgtype).data for r in ros1], expected
+    )  # the reference reads ROS 1 alike
+    with pytest.raises(ValueError, match='shorter'):
+        decode_numbers([cdr_le[0][:-1]], msgtype)
+    with pytest.raises(ValueError, match='encapsulation'):
+        decode_numbers([b'\x00\x07' + cdr_le[0][2:]], msgtype)
+
+
+@pytest.mark.parametrize('fmt', ['mcap', 'sqlite3', 'ros1'])
+def test_a_bare_number_is_read_by_the_batch_readers(
+    tmp_path: Path, short_run: SimulatedRun, fmt: str
+) -> None:
+    """Not through rosbags one message at a time: the format's own batch reader."""
+    name = 'run.bag' if fmt == 'ros1' else 'run'
+    bag = write_bare_bag(tmp_path / name, fmt, short_run, {'/imu/temperature': FLOAT64})
+    with BagStream(bag) as stream:
+        batch = {
+            'mcap': stream._batch_readable() and bool(stream._mcap_files()),
+            'sqlite3': bool(stream._sqlite_files),
+            'ros1': stream._ros1 is not None,
+        }[fmt]
+        assert batch
+        chunks = list(stream.chunks())
+    temps = np.concatenate([c.values for c in chunks if c.kind == 'temperature'])
+    assert_array_equal(np.sort(temps), np.sort(short_run.temperature_degC))

@@ -305,6 +305,18 @@ def resolve_topic_in(
     return paired
 
 
+def resolve_any_topic_in(topics: Mapping[str, str], topic: str, flag: str) -> str:
+    """An existing topic of any type in ``{topic name: message type}``.
+
+    A missing leading slash is accepted.
+    """
+    for name in (topic, '/' + topic.lstrip('/')):
+        if name in topics:
+            return name
+    listing = ', '.join(f'{n} ({t})' for n, t in sorted(topics.items()))
+    raise MissingTopicError(f'{flag} {topic}: not in bag; topics: {listing or "none"}')
+
+
 def temperature_first(
     messages: Iterable[tuple[Connection, int, bytes]], temp_topic: str
 ) -> Iterator[tuple[Connection, int, bytes]]:

@@ -14,7 +14,6 @@ from typing import TYPE_CHECKING, Any
 
 from fog_temp_comp.bag.bagio import (
     IMU_TYPE,
-    TEMPERATURE_TYPE,
     BagError,
     data_files,
     resolve_topic_in,
@@ -43,7 +42,7 @@ class _McapReading(_StreamDecoding):
     def _open_damaged_mcap(self, err: BagError) -> bool:
         """After rosbags failed: read MCAP files on our own (cut, no summary, no metadata)."""
         files = self._mcap_files()
-        if not files or self.temp_field is not None:
+        if not files:
             return False
         if self.path.is_dir() and not (self.path / 'metadata.yaml').is_file():
             self.salvage.damage('no metadata.yaml (recorder killed?): read the .mcap files')
@@ -59,9 +58,9 @@ class _McapReading(_StreamDecoding):
         if (self.path / 'metadata.yaml').is_file() or not self.path.is_dir():
             self.salvage.damage(f'cannot open as a whole bag ({err})')
         self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
-        self.temp_topic = resolve_topic_in(
-            topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic', self.imu_topic
-        )
+        self._resolve_temperature(topics)
+        if not self._batch_readable():
+            return False  # a field of another type needs rosbags' definitions
         self._salvage_mcap = files
         self._open = True
         return True
@@ -70,10 +69,11 @@ class _McapReading(_StreamDecoding):
         """Two spans of about half the bytes each of a bag that is one intact MCAP file.
 
         None for any other bag (several files, damaged, without a summary listing its
-        chunks, read through ``--temp-field``, or smaller than ``min_bytes``).
+        chunks, a ``--temp-field`` of another type than a bare number, or smaller than
+        ``min_bytes``).
         """
         files = self._mcap_files() if self.reader is not None else []
-        if len(files) != 1 or self.temp_field is not None:
+        if len(files) != 1 or not self._batch_readable():
             return None
         if files[0].stat().st_size < min_bytes:
             return None

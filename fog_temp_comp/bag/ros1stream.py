@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from fog_temp_comp.bag import cdr
-from fog_temp_comp.bag.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagError, resolve_topic_in
+from fog_temp_comp.bag.bagio import IMU_TYPE, BagError, resolve_topic_in
 from fog_temp_comp.bag.ros1scan import Ros1Bag, Ros1FormatError
 from fog_temp_comp.bag.salvage import RecoveryError
 from fog_temp_comp.bag.streamchunk import Chunk
@@ -35,9 +35,9 @@ class _Ros1Reading(_StreamDecoding):
                 '(the file ends inside its first, compressed chunk)'
             )
         self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
-        self.temp_topic = resolve_topic_in(
-            topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic', self.imu_topic
-        )
+        self._resolve_temperature(topics)
+        if not self._batch_readable():
+            return None  # a field of another type: through rosbags
         wanted = [c for c in bag.connections if c.topic in (self.imu_topic, self.temp_topic)]
         if len(wanted) != 2 or any(c.msgtype != topics[c.topic] for c in wanted):
             return None

@@ -14,7 +14,7 @@ from typing import Any
 import apsw
 
 from fog_temp_comp.bag import cdr
-from fog_temp_comp.bag.bagio import IMU_TYPE, TEMPERATURE_TYPE, BagError
+from fog_temp_comp.bag.bagio import IMU_TYPE, BagError
 from fog_temp_comp.bag.sqlitesalvage import (
     SqliteDamage,
     expected_pages,
@@ -48,7 +48,7 @@ class _SqliteReading(_StreamDecoding):
         already read; the damage goes to :attr:`salvage`.
         """
         kind_of = self._kinds()
-        topics = {self.imu_topic: IMU_TYPE, self.temp_topic: TEMPERATURE_TYPE}
+        topics = {self.imu_topic: IMU_TYPE, self.temp_topic: self.temp_msgtype}
         decoders = {
             self.imu_topic: cdr.decode_imu_rates_cdr,
             self.temp_topic: cdr.decode_temperature_cdr,

@@ -32,13 +32,10 @@ import numpy as np
 from fog_temp_comp.bag import cdr
 from fog_temp_comp.bag.bagio import (
     IMU_TYPE,
-    NUMBER_FIELD,
     TEMPERATURE_TYPE,
     BagError,
-    MissingTopicError,
-    NoTemperatureTopicError,
-    number_fallback,
     open_bag,
+    resolve_any_topic_in,
     resolve_topic,
     resolve_topic_in,
 )
@@ -51,7 +48,7 @@ from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.sqlitescan import loose_sqlite_files, plain_sqlite_files, topic_types
 from fog_temp_comp.bag.sqlitestream import _SqliteReading
 from fog_temp_comp.bag.streamchunk import Chunk, FloatArray, StampOrder
-from fog_temp_comp.bag.streamdecode import _decoder, check_field, get_field
+from fog_temp_comp.bag.streamdecode import _decoder, get_field
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.record import ChamberRecord
@@ -159,30 +156,13 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         self.span_stats: list[ScanStats] = []
 
     def __enter__(self) -> BagStream:
-        """Open the bag and resolve its topics.
-
-        A bag without a ``sensor_msgs/Temperature`` topic, where none was named, is read from
-        its bare-number temperature topic (:func:`~fog_temp_comp.bag.bagio.number_fallback`,
-        a ``NOTE:`` says so) if it has one.
-        """
-        try:
-            return self._enter()
-        except NoTemperatureTopicError as err:
-            if self._temp_topic is not None or self.temp_field is not None:
-                raise
-            self._temp_topic = number_fallback(err)
-            self.temp_field = NUMBER_FIELD
-            return self._enter()
-
-    def _enter(self) -> BagStream:
         if not self.path.exists():
             raise BagError(f'{self.path}: no such bag')
         self._sqlite_files = None
-        if self.temp_field is None:
-            loose = loose_sqlite_files(self.path)
-            if loose is not None:
-                self.salvage.damage(loose[1])
-            self._sqlite_files = loose[0] if loose else plain_sqlite_files(self.path)
+        loose = loose_sqlite_files(self.path)
+        if loose is not None:
+            self.salvage.damage(loose[1])
+        self._sqlite_files = loose[0] if loose else plain_sqlite_files(self.path)
         if self._sqlite_files:  # read without rosbags: its open counts every row first
             try:
                 topics = topic_types(self._sqlite_files)
@@ -191,12 +171,12 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
                 if not topics:
                     raise BagError(f'{self.path}: cannot open bag: {err}') from err
             self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
-            self.temp_topic = resolve_topic_in(
-                topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic', self.imu_topic
-            )
-            self._open = True
-            return self
-        self._ros1 = self._open_ros1() if self.temp_field is None else None
+            self._resolve_temperature(topics)
+            if self._batch_readable():
+                self._open = True
+                return self
+            self._sqlite_files = None  # a field of another type: through rosbags
+        self._ros1 = self._open_ros1()
         if self._ros1 is not None:
             self._open = True
             return self
@@ -209,15 +189,10 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
             return self
         try:
             self.imu_topic = resolve_topic(reader, self._gyro_topic, IMU_TYPE, '--gyro-topic')
-            if self.temp_field is None:
-                self.temp_topic = resolve_topic(
-                    reader, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic', self.imu_topic
-                )
-            else:
-                assert self._temp_topic is not None
-                self.temp_topic = resolve_any_topic(reader, self._temp_topic, '--temp-topic')
-                self.temp_msgtype = reader.topics[self.temp_topic].msgtype or ''
-                check_field(reader.typestore, self.temp_msgtype, self.temp_field)
+            self._resolve_temperature(
+                {name: info.msgtype or '' for name, info in reader.topics.items()},
+                reader.typestore,
+            )
         except BaseException:
             self._context.__exit__(*sys.exc_info())
             raise
@@ -289,7 +264,7 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         conns = [c for c in reader.connections if c.topic in (self.imu_topic, self.temp_topic)]
         decoders = {c.id: _decoder(c, reader.is2) for c in conns}
         mcap_files = self._mcap_files()
-        if mcap_files and self.temp_field is None and len(conns) == 2:
+        if mcap_files and self._batch_readable() and len(conns) == 2:
             yield from self._scan_mcap(mcap_files, decoders, conns)
             return
         yield from self._read_messages(reader, conns, decoders)
@@ -363,11 +338,9 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
 
 def resolve_any_topic(reader: AnyReader, topic: str, flag: str) -> str:
     """An existing topic of any type (a missing leading slash is accepted)."""
-    for name in (topic, '/' + topic.lstrip('/')):
-        if name in reader.topics:
-            return name
-    listing = ', '.join(f'{n} ({i.msgtype})' for n, i in sorted(reader.topics.items()))
-    raise MissingTopicError(f'{flag} {topic}: not in bag; topics: {listing or "none"}')
+    return resolve_any_topic_in(
+        {name: info.msgtype or '' for name, info in reader.topics.items()}, topic, flag
+    )
 
 
 def read_record(

@@ -16,7 +16,19 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fog_temp_comp.bag import cdr
-from fog_temp_comp.bag.bagio import IMU_TYPE, BagError, stamp_to_s
+from fog_temp_comp.bag.bagio import (
+    IMU_TYPE,
+    NUMBER_FIELD,
+    NUMBER_TYPES,
+    TEMPERATURE_TYPE,
+    BagError,
+    NoTemperatureTopicError,
+    number_fallback,
+    resolve_any_topic_in,
+    resolve_topic_in,
+    stamp_to_s,
+    typestore,
+)
 from fog_temp_comp.bag.progress import Progress
 from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.streamchunk import Chunk
@@ -24,7 +36,7 @@ from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.units import NS_PER_S
 
-__all__ = ['FieldError', 'check_field', 'get_field']
+__all__ = ['FieldError', 'check_field', 'decode_numbers', 'get_field']
 
 #: ROS base types that hold a number (``bool``, ``string`` and ``char`` do not)
 NUMBER_BASE_TYPES = frozenset(
@@ -72,6 +84,41 @@ def get_field(msg: Any, path: str) -> float:
     return float(value)
 
 
+def _serialized(raws: Any) -> bool:
+    """Whether a batch holds serialized messages (a batch reader's), not deserialized ones."""
+    return isinstance(raws, cdr.Spans) or (
+        len(raws) > 0 and isinstance(raws[0], (bytes, bytearray, memoryview))
+    )
+
+
+def decode_numbers(raws: Any, msgtype: str, *, ros1: bool = False) -> NDArray[np.float64]:
+    """The ``data`` of serialized ``std_msgs/Float64`` or ``Float32`` messages, shape (N,).
+
+    ``raws``: :class:`~fog_temp_comp.bag.cdr.Spans` or a list of byte buffers, CDR (a
+    4-byte encapsulation header, either byte order) or ROS 1 (``ros1``: the bare number).
+    Raises ValueError on a message of another size or an unknown encapsulation.
+    """
+    spans = raws if isinstance(raws, cdr.Spans) else cdr.Spans.join(list(raws))
+    size = 8 if msgtype == 'std_msgs/msg/Float64' else 4
+    offset = 0 if ros1 else 4
+    if np.any(spans.lengths < offset + size):
+        raise ValueError(f'{msgtype}: a message shorter than {offset + size} bytes')
+    buffer = np.frombuffer(spans.buffer, dtype=np.uint8)
+    starts = np.asarray(spans.starts, dtype=np.int64)
+    data = buffer[(starts + offset)[:, None] + np.arange(size)]
+    little = np.ones(starts.size, dtype=bool)
+    if not ros1:  # CDR_BE 0x0000, CDR_LE 0x0001
+        kind = buffer[starts + 1]
+        if np.any(buffer[starts] != 0) or np.any(kind > 1):
+            raise ValueError(f'{msgtype}: not a plain CDR encapsulation')
+        little = kind == 1
+    dtype = np.dtype(f'f{size}')
+    values = np.empty(starts.size, dtype=np.float64)
+    values[little] = data[little].copy().view(dtype.newbyteorder('<')).ravel()
+    values[~little] = data[~little].copy().view(dtype.newbyteorder('>')).ravel()
+    return values
+
+
 def _decoder(conn: Any, is_ros2: bool) -> Any:
     """Batch decoder of a connection's messages."""
     imu = conn.msgtype == IMU_TYPE
@@ -93,6 +140,8 @@ class _StreamDecoding:
     path: Path
     time_source: str
     temp_field: str | None
+    #: the temperature topic's message type
+    temp_msgtype: str
     chunk_size: int
     progress: Progress | None
     imu_topic: str
@@ -105,6 +154,40 @@ class _StreamDecoding:
     _gyro_topic: str | None
     _temp_topic: str | None
     _open: bool
+
+    def _resolve_temperature(self, topics: dict[str, str], store: Any = None) -> None:
+        """Set :attr:`temp_topic` from the bag's ``{topic: message type}``.
+
+        A Temperature topic; or with ``--temp-field``, the topic named (its type in
+        :attr:`temp_msgtype`, the field checked against ``store``'s definition of it where
+        given); or, in a bag without a Temperature topic where none was named, its bare-number
+        temperature topic (:func:`~fog_temp_comp.bag.bagio.number_fallback`: a ``NOTE:``;
+        :attr:`temp_field` becomes ``data``).
+        """
+        if self.temp_field is None:
+            try:
+                self.temp_topic = resolve_topic_in(
+                    topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic', self.imu_topic
+                )
+                return
+            except NoTemperatureTopicError as err:
+                # only raised where no topic was named: read the bare number from here on
+                self._temp_topic = self.temp_topic = number_fallback(err)
+                self.temp_field = NUMBER_FIELD
+        else:
+            assert self._temp_topic is not None
+            self.temp_topic = resolve_any_topic_in(topics, self._temp_topic, '--temp-topic')
+        self.temp_msgtype = topics[self.temp_topic]
+        if store is not None:
+            check_field(store, self.temp_msgtype, self.temp_field)
+        elif self._batch_readable():
+            check_field(typestore(), self.temp_msgtype, self.temp_field)
+
+    def _batch_readable(self) -> bool:
+        """Whether the batch readers decode the temperature: a Temperature or a bare number."""
+        return self.temp_field is None or (
+            self.temp_field == NUMBER_FIELD and self.temp_msgtype in NUMBER_TYPES
+        )
 
     def _kinds(self) -> dict[str, str]:
         """Topic -> chunk kind."""
@@ -163,7 +246,12 @@ class _StreamDecoding:
         raws, logs, owners = batch
         log_ns = np.asarray([] if logs is None else logs, dtype=np.int64)
         receive = log_ns / NS_PER_S
-        if kind == 'temperature' and self.temp_field is not None:
+        if kind == 'temperature' and self.temp_field is not None and _serialized(raws):
+            # a bare number from a batch reader: no header, timed by its receive time
+            ros1 = getattr(self, '_ros1', None) is not None
+            values = decode_numbers(raws, self.temp_msgtype, ros1=ros1)
+            stamps = receive
+        elif kind == 'temperature' and self.temp_field is not None:
             field = self.temp_field
             values = np.array([get_field(msg, field) for msg in raws])
             stamps = np.array(

@@ -24,12 +24,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fog_temp_comp.bag import cdr
-from fog_temp_comp.bag.bagio import BagWriter
+from fog_temp_comp.bag.bagio import NUMBER_FIELD, NUMBER_TYPES, BagWriter
 from fog_temp_comp.bag.cdr import Spans
 from fog_temp_comp.bag.mcapscan import scan_mcap
+from fog_temp_comp.bag.streamdecode import decode_numbers
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.compensator import Compensator
 from fog_temp_comp.core.frame_lock import FrameLock
+from fog_temp_comp.core.units import NS_PER_S
 
 __all__ = ['UnsupportedError', 'per_message_compressed', 'replay_mcap', 'single_mcap_file']
 
@@ -94,6 +96,16 @@ class _Boundary:
         self.tail_has_other = bool((~is_temp[times == last]).any())
 
 
+def number_type(reader: Any, temp_topic: str, temp_field: str | None) -> str | None:
+    """The bare-number type (``std_msgs/msg/Float64``) of a temperature read as its ``data``.
+
+    None for any other temperature: a ``sensor_msgs/Temperature``, or a field of another type
+    (which the block path does not decode).
+    """
+    msgtype = reader.topics[temp_topic].msgtype
+    return msgtype if temp_field == NUMBER_FIELD and msgtype in NUMBER_TYPES else None
+
+
 def replay_mcap(
     mcap: Path,
     writer: BagWriter,
@@ -105,12 +117,15 @@ def replay_mcap(
     output_topic: str,
     unstamped: UnsetStamps | None = None,
     frames: FrameLock | None = None,
+    number_type: str | None = None,
 ) -> int:
     """Compensate ``mcap`` into ``writer`` (topics registered already); corrected Imu written.
 
     Unset header stamps (0) take the receive time, counted in ``unstamped`` (which also notes
     the stamps' offsets from the receive times, or times every message by its receive time).
     Of a temperature topic with several sensors' readings, ``frames`` keeps one's.
+    ``number_type``: the temperature is a bare ``std_msgs/Float64`` or ``Float32`` (its
+    ``data``, timed by its receive time), not a ``sensor_msgs/Temperature``.
 
     Raises
     ------
@@ -138,8 +153,7 @@ def replay_mcap(
             output_id=output_id,
             imu_topic=imu_topic,
             temp_topic=temp_topic,
-            unstamped=unstamped,
-            frames=frames,
+            timing=(unstamped, frames, number_type),
         )
     return n_out
 
@@ -155,8 +169,7 @@ def _replay_chunk(
     output_id: int,
     imu_topic: str,
     temp_topic: str,
-    unstamped: UnsetStamps,
-    frames: FrameLock,
+    timing: tuple[UnsetStamps, FrameLock, str | None],
 ) -> int:
     """One chunk: order, compensate, patch, write; return the corrected Imu written."""
     kind_of = {imu_topic: _IMU, temp_topic: _TEMP}
@@ -171,7 +184,7 @@ def _replay_chunk(
     spans = {n: s for n, _, s in batches}
     logs = {n: t for n, t, _ in batches}
     rates, keep = _compensate(
-        compensator, kind[order], spans, logs, (imu_topic, temp_topic), (unstamped, frames)
+        compensator, kind[order], spans, logs, (imu_topic, temp_topic), timing
     )
     patched: bytes | bytearray = b''
     if imu_topic in spans and keep.any():
@@ -201,17 +214,18 @@ def _compensate(
     spans: dict[str, Spans],
     logs: dict[str, IntArray],
     topics: tuple[str, str],
-    timing: tuple[UnsetStamps, FrameLock],
+    timing: tuple[UnsetStamps, FrameLock, str | None],
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Feed the messages in order; corrected rates (N_imu, 3) and which Imu were not dropped.
 
     ``kind`` is the chunk's merged order; Imu and temperatures each come in their batch's
     order in it, so the chunk goes in as one :meth:`Compensator.correct_interleaved`.
     ``topics``: (gyro, temperature); ``logs``: each topic's log times, ns; ``timing``: what
-    times the messages, and which temperature frame_id is kept.
+    times the messages, which temperature frame_id is kept, and the bare-number type the
+    temperature is published as (None: a Temperature).
     """
     imu_topic, temp_topic = topics
-    unstamped, frames = timing
+    unstamped, frames, number_type = timing
     n_imu = len(spans[imu_topic]) if imu_topic in spans else 0
     if n_imu:
         imu = cdr.decode_imu_rates_cdr(spans[imu_topic])
@@ -225,7 +239,11 @@ def _compensate(
     fed = kind[kind != _OTHER]
     before = np.cumsum(fed == _IMU)[fed == _TEMP]
     temp_stamps, temps = np.empty(0), np.empty(0)
-    if before.size:
+    if before.size and number_type is not None:  # no header: timed by its receive time
+        temps = decode_numbers(spans[temp_topic], number_type)
+        receive = logs[temp_topic]
+        temp_stamps = unstamped.timed(temp_topic, receive / NS_PER_S, receive)
+    elif before.size:
         temp = cdr.decode_temperature_cdr(spans[temp_topic])
         keep = frames.keep_batch(temp.frame_id_table, temp.frame_id_index)
         temp_stamps = unstamped.timed(temp_topic, temp.stamps_s[keep], logs[temp_topic][keep])

@@ -433,10 +433,14 @@ class _Compensate:
                 compress=self.fmt == 'mcap' and _compressed_mcap(source),
                 unstamped=self._unset_stamps(imu_name, temp_name),
                 frames=FrameLock(self.temp_frame_id),
+                number_type=blockreplay.number_type(reader, temp_name, self.temp_field),
             )
             mcap = None
             block = (
-                self.fast and reader.is2 and compensator.rest is None and self.temp_field is None
+                self.fast
+                and reader.is2
+                and compensator.rest is None
+                and (self.temp_field is None or job.number_type is not None)
             )
             if block and not blockreplay.per_message_compressed(reader):
                 mcap = blockreplay.single_mcap_file(source)
@@ -500,6 +504,8 @@ class _CompensateJob:
     temp_field: str | None = None
     #: of a temperature topic with several sensors' readings (frame_ids), the one kept
     frames: FrameLock = dataclasses.field(default_factory=FrameLock)
+    #: the temperature is a bare ``std_msgs/Float64``/``Float32`` of this type (its ``data``)
+    number_type: str | None = None
 
     def warn(self, in_bag: Path) -> None:
         """The warnings on the input's stamps, a note on its temperature frame_ids (stderr)."""
@@ -531,6 +537,7 @@ class _CompensateJob:
                         output_topic=self.output_topic,
                         unstamped=self.unstamped,
                         frames=self.frames,
+                        number_type=self.number_type,
                     )
                 else:
                     n_out = self._replay_messages(writer, compensator, batched)
