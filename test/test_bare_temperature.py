@@ -19,8 +19,10 @@ from test_stream import imu_of, short_run, write_custom_bag
 
 from fog_temp_comp.bag.bagio import (
     IMU_TYPE,
+    AmbiguousTopicError,
     NoTemperatureTopicError,
-    number_temperature_topic,
+    number_temperature_topics,
+    resolve_temperature,
     typestore,
 )
 from fog_temp_comp.bag.cdr import Spans
@@ -138,32 +140,57 @@ def test_calibrate_compensate_and_evaluate_a_bare_float64_with_default_flags(
 
 
 def test_which_bare_number_is_the_temperature() -> None:
-    """Named as a temperature, of a number type, the only one or the one beside the gyro."""
+    """Named as a temperature, of a number type: all of them, or the one beside the gyro."""
     imu = {'/fog/imu/data_raw': IMU_TYPE}
-    assert number_temperature_topic({**imu, '/fog/imu/temp_c': FLOAT64}) == '/fog/imu/temp_c'
-    assert number_temperature_topic({**imu, '/fog/imu/Temperature': FLOAT64}) == (
+    assert number_temperature_topics({**imu, '/fog/imu/temp_c': FLOAT64}) == ['/fog/imu/temp_c']
+    assert number_temperature_topics({**imu, '/fog/imu/Temperature': FLOAT64}) == [
         '/fog/imu/Temperature'
-    )
-    assert number_temperature_topic({**imu, '/fog/imu/t': FLOAT64}) is None  # name says nothing
-    assert number_temperature_topic({**imu, '/fog/temp': 'std_msgs/msg/String'}) is None
-    assert number_temperature_topic({**imu, '/fog/temp': 'std_msgs/msg/Int32'}) is None
+    ]
+    assert number_temperature_topics({**imu, '/fog/imu/t': FLOAT64}) == []  # name says nothing
+    assert number_temperature_topics({**imu, '/fog/temp': 'std_msgs/msg/String'}) == []
+    assert number_temperature_topics({**imu, '/fog/temp': 'std_msgs/msg/Int32'}) == []
     two = {**imu, '/fog/imu/temperature': FLOAT64, '/chamber/temperature': FLOAT64}
-    assert number_temperature_topic(two) is None
-    assert number_temperature_topic(two, '/fog/imu/data_raw') == '/fog/imu/temperature'
+    assert number_temperature_topics(two) == ['/chamber/temperature', '/fog/imu/temperature']
+    assert number_temperature_topics(two, '/fog/imu/data_raw') == ['/fog/imu/temperature']
     untold = {**imu, '/fog/imu/temp_a': FLOAT64, '/fog/imu/temp_b': FLOAT64}
-    assert number_temperature_topic(untold, '/fog/imu/data_raw') is None
+    assert number_temperature_topics(untold, '/fog/imu/data_raw') == [
+        '/fog/imu/temp_a',
+        '/fog/imu/temp_b',
+    ]
+    # a bare number named with --temp-topic is read as its data, without --temp-field
+    assert resolve_temperature(untold, 'fog/imu/temp_b', None, None) == ('/fog/imu/temp_b', 'data')
+    assert resolve_temperature(
+        {**untold, '/t': 'sensor_msgs/msg/Temperature'}, None, None, '/fog/imu/data_raw'
+    ) == ('/t', None)
+    with pytest.raises(AmbiguousTopicError, match='several bare-number temperature topics'):
+        resolve_temperature(untold, None, None, '/fog/imu/data_raw')
+    with pytest.raises(NoTemperatureTopicError, match='--temp-field FIELD'):
+        resolve_temperature({**imu, '/fog/imu/t': FLOAT64}, None, None, '/fog/imu/data_raw')
 
 
-def test_two_bare_temperatures_the_names_do_not_tell_apart_keep_the_error(
-    tmp_path: Path, short_run: SimulatedRun
+def test_two_bare_temperatures_the_names_do_not_tell_apart_are_each_fitted(
+    tmp_path: Path, short_run: SimulatedRun, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """No guess: the error lists the topics and says how to name one."""
+    """As two Temperature topics: calibrate fits each and keeps one; compensate follows it."""
     topics = {'/imu/temp_a': FLOAT64, '/imu/temp_b': FLOAT64}
     bag = write_bare_bag(tmp_path / 'two', 'mcap', short_run, topics)
-    with pytest.raises(NoTemperatureTopicError, match=r'/imu/temp_a .*--temp-field FIELD'):
+    with pytest.raises(AmbiguousTopicError, match=r"\['/imu/temp_a', '/imu/temp_b'\]"):
         read_record(bag)
-    record = read_record(bag, temp_topic='/imu/temp_b', temp_field='data')
-    assert record.temp_topic == '/imu/temp_b'
+    assert read_record(bag, temp_topic='/imu/temp_b').temp_topic == '/imu/temp_b'
+    fitted = tmp_path / 'c.yaml'
+    assert cli.main(['calibrate', str(bag), '-o', str(fitted)]) == 0
+    out = capsys.readouterr().out
+    assert 'temperature sensor /imu/temp_a:' in out and 'temperature sensor /imu/temp_b:' in out
+    coeffs = load(fitted)  # the same readings on both: the first within the tolerance
+    assert (coeffs.temperature_topic, coeffs.temperature_type, coeffs.temperature_field) == (
+        '/imu/temp_a',
+        FLOAT64,
+        'data',
+    )
+    assert (
+        cli.main(['compensate', str(bag), '--coeffs', str(fitted), '-o', str(tmp_path / 'o')]) == 0
+    )
+    assert 'from /imu/temp_a (std_msgs/msg/Float64, field data)' in capsys.readouterr().err
 
 
 def test_compensate_follows_the_custom_field_the_coefficients_were_fitted_on(

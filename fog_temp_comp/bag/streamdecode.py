@@ -20,12 +20,8 @@ from fog_temp_comp.bag.bagio import (
     IMU_TYPE,
     NUMBER_FIELD,
     NUMBER_TYPES,
-    TEMPERATURE_TYPE,
     BagError,
-    NoTemperatureTopicError,
-    number_fallback,
-    resolve_any_topic_in,
-    resolve_topic_in,
+    resolve_temperature,
     stamp_to_s,
     typestore,
 )
@@ -158,30 +154,24 @@ class _StreamDecoding:
     def _resolve_temperature(self, topics: dict[str, str], store: Any = None) -> None:
         """Set :attr:`temp_topic` from the bag's ``{topic: message type}``.
 
-        A Temperature topic; or with ``--temp-field``, the topic named (its type in
-        :attr:`temp_msgtype`, the field checked against ``store``'s definition of it where
-        given); or, in a bag without a Temperature topic where none was named, its bare-number
-        temperature topic (:func:`~fog_temp_comp.bag.bagio.number_fallback`: a ``NOTE:``;
-        :attr:`temp_field` becomes ``data``).
+        By :func:`~fog_temp_comp.bag.bagio.resolve_temperature`: a Temperature topic; a field
+        of the topic named (its type in :attr:`temp_msgtype`, the field checked against
+        ``store``'s definition of it, or the package's for a bare number); or a bare number's
+        ``data`` (:attr:`temp_field` becomes ``data``).
         """
-        if self.temp_field is None:
-            try:
-                self.temp_topic = resolve_topic_in(
-                    topics, self._temp_topic, TEMPERATURE_TYPE, '--temp-topic', self.imu_topic
-                )
-                return
-            except NoTemperatureTopicError as err:
-                # only raised where no topic was named: read the bare number from here on
-                self._temp_topic = self.temp_topic = number_fallback(err)
-                self.temp_field = NUMBER_FIELD
-        else:
-            assert self._temp_topic is not None
-            self.temp_topic = resolve_any_topic_in(topics, self._temp_topic, '--temp-topic')
-        self.temp_msgtype = topics[self.temp_topic]
+        topic, field = resolve_temperature(
+            topics, self._temp_topic, self.temp_field, self.imu_topic
+        )
+        # kept: a later read path of the same bag resolves it again without a NOTE
+        self._temp_topic = self.temp_topic = topic
+        self.temp_field = field
+        if field is None:
+            return
+        self.temp_msgtype = topics[topic]
         if store is not None:
-            check_field(store, self.temp_msgtype, self.temp_field)
+            check_field(store, self.temp_msgtype, field)
         elif self._batch_readable():
-            check_field(typestore(), self.temp_msgtype, self.temp_field)
+            check_field(typestore(), self.temp_msgtype, field)
 
     def _batch_readable(self) -> bool:
         """Whether the batch readers decode the temperature: a Temperature or a bare number."""

@@ -24,7 +24,6 @@ from fog_temp_comp.bag.bagio import BagError, BagWriter
 from fog_temp_comp.bag.one_clock import on_one_clock
 from fog_temp_comp.bag.repair import repaired_bag
 from fog_temp_comp.bag.salvage import Salvage
-from fog_temp_comp.bag.stream import resolve_any_topic
 from fog_temp_comp.bag.streamdecode import check_field
 from fog_temp_comp.bag.unstamped import ClocksApartError, UnsetStamps
 from fog_temp_comp.core.coefficients import Coefficients, load
@@ -369,25 +368,19 @@ class _Compensate:
         )
 
     def _temperature_topic(self, reader: AnyReader, temp_topic: str | None, imu_name: str) -> str:
-        """The temperature topic: ``--temp-field``'s, a Temperature, or a bare number's.
+        """The temperature topic, by :func:`~fog_temp_comp.bag.bagio.resolve_temperature`.
 
-        A bag without a ``sensor_msgs/Temperature`` topic is read from its bare-number
-        temperature topic (:func:`~fog_temp_comp.bag.bagio.number_fallback`), which sets
-        :attr:`temp_field` and the temperature topic of :attr:`topics`.
+        Where it is read as a field (``--temp-field``, a bare number's ``data``), that field
+        is checked and set as :attr:`temp_field`, the topic in :attr:`topics` (a repaired copy
+        reads the same without a second ``NOTE:``).
         """
-        if self.temp_field is not None and temp_topic is not None:
-            name = resolve_any_topic(reader, temp_topic, '--temp-topic')
-            check_field(reader.typestore, reader.topics[name].msgtype or '', self.temp_field)
-            return name
-        try:
-            return bagio.resolve_topic(
-                reader, temp_topic, bagio.TEMPERATURE_TYPE, '--temp-topic', imu_name
-            )
-        except bagio.NoTemperatureTopicError as err:
-            name = bagio.number_fallback(err)
-            self.temp_field = bagio.NUMBER_FIELD  # and the topic: a repaired copy reads it too
-            self.topics = (self.topics[0], name, self.topics[2])
-            return name
+        topics = {name: info.msgtype or '' for name, info in reader.topics.items()}
+        name, field = bagio.resolve_temperature(topics, temp_topic, self.temp_field, imu_name)
+        if field is not None:
+            check_field(reader.typestore, topics[name], field)
+        self.temp_field = field
+        self.topics = (self.topics[0], name, self.topics[2])
+        return name
 
     def _unset_stamps(self, imu_name: str, temp_name: str) -> UnsetStamps:
         """What times the messages; by header, it stops at clocks hours apart."""
