@@ -21,13 +21,13 @@ from fog_temp_comp.bag.bagio import (
     NUMBER_FIELD,
     NUMBER_TYPES,
     BagError,
-    resolve_temperature,
     stamp_to_s,
     typestore,
 )
 from fog_temp_comp.bag.progress import Progress
 from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.streamchunk import Chunk
+from fog_temp_comp.bag.temperature_topic import resolve_temperature
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.units import NS_PER_S

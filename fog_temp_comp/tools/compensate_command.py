@@ -25,6 +25,7 @@ from fog_temp_comp.bag.one_clock import on_one_clock
 from fog_temp_comp.bag.repair import repaired_bag
 from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.streamdecode import check_field
+from fog_temp_comp.bag.temperature_topic import resolve_temperature
 from fog_temp_comp.bag.unstamped import ClocksApartError, UnsetStamps
 from fog_temp_comp.core.coefficients import Coefficients, load
 from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
@@ -375,7 +376,7 @@ class _Compensate:
         reads the same without a second ``NOTE:``).
         """
         topics = {name: info.msgtype or '' for name, info in reader.topics.items()}
-        name, field = bagio.resolve_temperature(topics, temp_topic, self.temp_field, imu_name)
+        name, field = resolve_temperature(topics, temp_topic, self.temp_field, imu_name)
         if field is not None:
             check_field(reader.typestore, topics[name], field)
         self.temp_field = field
