@@ -60,6 +60,14 @@ def harness_with(context: object, node: Any, msg_type: type) -> tuple[Harness, A
     return harness, publisher
 
 
+def send_reading(harness: Harness, publisher: Any, msg: Any) -> None:
+    """Publish one temperature reading and spin until the node's compensator has counted it."""
+    counters = harness.node.compensator.status.counters
+    before = counters.temperature_total
+    publisher.publish(msg)
+    harness.spin_until(lambda: harness.node.compensator.status.counters.temperature_total > before)
+
+
 def test_a_stamped_message_of_another_type_gives_the_cores_output(
     ros_context: object, coeffs_file: Path, short_cycle: SimulatedRun
 ) -> None:
@@ -79,11 +87,7 @@ def test_a_stamped_message_of_another_type_gives_the_cores_output(
                 msg = FluidPressure()
                 msg.header.stamp.sec, msg.header.stamp.nanosec = split_stamp(pending[0])
                 msg.fluid_pressure = float(pending[1])
-                before = node.compensator.status.counters.temperature_total
-                publisher.publish(msg)
-                harness.spin_until(
-                    lambda b=before: node.compensator.status.counters.temperature_total > b
-                )
+                send_reading(harness, publisher, msg)
                 pending = next(temps, None)
             out.append(harness.send_imu(run.imu_stamps_s[k], run.rates_rad_s[k]))
     finally:
@@ -98,11 +102,7 @@ def test_a_bare_float64_is_timed_on_arrival(ros_context: object, coeffs_file: Pa
     harness, publisher = harness_with(ros_context, node, Float64)
     try:
         for k in range(5):
-            before = node.compensator.status.counters.temperature_total
-            publisher.publish(Float64(data=20.0 + 0.01 * k))
-            harness.spin_until(
-                lambda b=before: node.compensator.status.counters.temperature_total > b
-            )
+            send_reading(harness, publisher, Float64(data=20.0 + 0.01 * k))
             now_s = node.get_clock().now().nanoseconds * 1e-9
             assert harness.send_imu(now_s, [0.0, 0.0, 0.0]) is not None
         assert node.unstamped == 5
@@ -154,11 +154,7 @@ def test_the_node_reads_the_temperature_type_the_coefficients_were_fitted_on(
     harness, publisher = harness_with(ros_context, node, Float64)
     try:
         for k in range(3):
-            before = node.compensator.status.counters.temperature_total
-            publisher.publish(Float64(data=21.0 + 0.01 * k))
-            harness.spin_until(
-                lambda b=before: node.compensator.status.counters.temperature_total > b
-            )
+            send_reading(harness, publisher, Float64(data=21.0 + 0.01 * k))
         assert node.unstamped == 3
         assert node.compensator.status.temperature_degC == pytest.approx(21.02, abs=0.05)
         # coefficients fitted on a Temperature need another subscription: refused, kept
@@ -232,3 +228,22 @@ def test_a_temperature_published_as_another_type_is_an_error_in_diagnostics(
         rclpy.shutdown(context=driver_context)
         harness.close()
     assert 'nothing is received; set parameters temperature_type' in capfd.readouterr().err
+
+
+def test_coefficients_fitted_on_a_type_not_here_stop_the_node_with_the_reason(
+    ros_context: object, coeffs_file: Path, tmp_path: Path
+) -> None:
+    """A driver's status message whose workspace is not sourced: said, with the way out."""
+    coeffs = dataclasses.replace(
+        load(coeffs_file),
+        temperature_topic='/gyro/status',
+        temperature_type='fog_msgs/msg/GyroStatus',
+        temperature_field='coil_temp_c',
+    )
+    path = tmp_path / 'status.yaml'
+    save(coeffs, path)
+    with pytest.raises(ParameterError, match=r"the coefficients' temperature_type: no message"):
+        CompensatorNode(
+            context=ros_context,
+            parameter_overrides=[Parameter('coefficients_file', value=str(path))],
+        )

@@ -170,7 +170,14 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         )
         if not coeffs.temperature_type or asked != (DEFAULT_TYPE, DEFAULT_FIELD):
             return temperature_input(*asked)
-        chosen = temperature_input(coeffs.temperature_type, coeffs.temperature_field)
+        try:
+            chosen = temperature_input(coeffs.temperature_type, coeffs.temperature_field)
+        except ParameterError as err:  # a driver's type whose workspace is not sourced
+            reason = str(err).removeprefix('parameter ')
+            raise ParameterError(
+                f"the coefficients' {reason} (or set parameters temperature_type and "
+                'temperature_field)'
+            ) from err
         if log:
             self.get_logger().info(
                 f'reading the temperature (degC) from field {coeffs.temperature_field} of '
