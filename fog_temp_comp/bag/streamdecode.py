@@ -154,7 +154,7 @@ class _StreamDecoding:
     def _resolve_temperature(self, topics: dict[str, str], store: Any = None) -> None:
         """Set :attr:`temp_topic` from the bag's ``{topic: message type}``.
 
-        By :func:`~fog_temp_comp.bag.bagio.resolve_temperature`: a Temperature topic; a field
+        By :func:`~fog_temp_comp.bag.temperature_topic.resolve_temperature`: a Temperature; a field
         of the topic named (its type in :attr:`temp_msgtype`, the field checked against
         ``store``'s definition of it, or the package's for a bare number); or a bare number's
         ``data`` (:attr:`temp_field` becomes ``data``).

@@ -369,7 +369,7 @@ class _Compensate:
         )
 
     def _temperature_topic(self, reader: AnyReader, temp_topic: str | None, imu_name: str) -> str:
-        """The temperature topic, by :func:`~fog_temp_comp.bag.bagio.resolve_temperature`.
+        """The temperature topic, by ``temperature_topic.resolve_temperature``.
 
         Where it is read as a field (``--temp-field``, a bare number's ``data``), that field
         is checked and set as :attr:`temp_field`, the topic in :attr:`topics` (a repaired copy
