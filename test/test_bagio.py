@@ -489,3 +489,30 @@ def test_writer_refuses_an_unknown_format(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match='ros2'):
         BagWriter(tmp_path / 'x', 'ros2')
     assert not (tmp_path / 'x').exists()
+
+
+def test_temperature_first_is_a_stable_sort_by_log_time_then_temperature() -> None:
+    """Within one log time the temperature first, else the order read: as a stable sort."""
+    import random
+    from types import SimpleNamespace
+
+    from fog_temp_comp.bag.bagio import temperature_first
+
+    imu, temp = SimpleNamespace(topic='/imu/data_raw'), SimpleNamespace(topic='/imu/temperature')
+    rng = random.Random(3)
+    for _ in range(300):
+        n = rng.randint(0, 14)
+        messages = sorted(
+            ((rng.choice([imu, temp]), rng.randint(0, 4), bytes([k])) for k in range(n)),
+            key=lambda m: m[1],
+        )
+        expected = sorted(messages, key=lambda m: (m[1], m[0].topic != temp.topic))
+        assert list(temperature_first(iter(messages), temp.topic)) == expected
+
+
+def test_chunked_gives_every_item_once_in_order_in_lists_of_at_most_size() -> None:
+    from fog_temp_comp.tools.chunkreplay import chunked
+
+    assert list(chunked(range(7), 3)) == [[0, 1, 2], [3, 4, 5], [6]]
+    assert list(chunked(iter(range(6)), 3)) == [[0, 1, 2], [3, 4, 5]]
+    assert list(chunked([], 3)) == []

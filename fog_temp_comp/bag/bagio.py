@@ -291,15 +291,28 @@ def temperature_first(
     """Reorder messages sharing a log time so that temperature comes first (as in a replay).
 
     Readers break ties by connection order, which depends on the writer; a gyro sample and the
-    temperature stamped with it must reach the compensator in a fixed order.
+    temperature stamped with it must reach the compensator in a fixed order. Otherwise the
+    order is kept (a stable sort within each log time). A message alone at its log time, the
+    common case, passes without a sort.
     """
-    group: list[tuple[Connection, int, bytes]] = []
+    first: tuple[Connection, int, bytes] | None = None
+    tied: list[tuple[Connection, int, bytes]] = []  # after ``first``, at its log time
     for item in messages:
-        if group and item[1] != group[0][1]:
-            yield from sorted(group, key=lambda m: m[0].topic != temp_topic)
-            group = []
-        group.append(item)
-    yield from sorted(group, key=lambda m: m[0].topic != temp_topic)
+        if first is not None and item[1] == first[1]:
+            tied.append(item)
+            continue
+        if tied:
+            assert first is not None
+            yield from sorted([first, *tied], key=lambda m: m[0].topic != temp_topic)
+            tied = []
+        elif first is not None:
+            yield first
+        first = item
+    if tied:
+        assert first is not None
+        yield from sorted([first, *tied], key=lambda m: m[0].topic != temp_topic)
+    elif first is not None:
+        yield first
 
 
 class BagWriter:
