@@ -23,9 +23,8 @@ from fog_temp_comp.bag.bagio import (
     NoTemperatureTopicError,
     typestore,
 )
-from fog_temp_comp.bag.cdr import Spans
+from fog_temp_comp.bag.cdr import Spans, decode_numbers
 from fog_temp_comp.bag.stream import BagStream, read_record
-from fog_temp_comp.bag.streamdecode import decode_numbers
 from fog_temp_comp.bag.temperature_topic import number_temperature_topics, resolve_temperature
 from fog_temp_comp.core.coefficients import load
 from fog_temp_comp.tools import cli

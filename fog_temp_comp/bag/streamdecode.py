@@ -32,7 +32,7 @@ from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.frame_lock import FrameLock
 from fog_temp_comp.core.units import NS_PER_S
 
-__all__ = ['FieldError', 'check_field', 'decode_numbers', 'get_field']
+__all__ = ['FieldError', 'check_field', 'get_field']
 
 #: ROS base types that hold a number (``bool``, ``string`` and ``char`` do not)
 NUMBER_BASE_TYPES = frozenset(
@@ -85,34 +85,6 @@ def _serialized(raws: Any) -> bool:
     return isinstance(raws, cdr.Spans) or (
         len(raws) > 0 and isinstance(raws[0], (bytes, bytearray, memoryview))
     )
-
-
-def decode_numbers(raws: Any, msgtype: str, *, ros1: bool = False) -> NDArray[np.float64]:
-    """The ``data`` of serialized ``std_msgs/Float64`` or ``Float32`` messages, shape (N,).
-
-    ``raws``: :class:`~fog_temp_comp.bag.cdr.Spans` or a list of byte buffers, CDR (a
-    4-byte encapsulation header, either byte order) or ROS 1 (``ros1``: the bare number).
-    Raises ValueError on a message of another size or an unknown encapsulation.
-    """
-    spans = raws if isinstance(raws, cdr.Spans) else cdr.Spans.join(list(raws))
-    size = 8 if msgtype == 'std_msgs/msg/Float64' else 4
-    offset = 0 if ros1 else 4
-    if np.any(spans.lengths < offset + size):
-        raise ValueError(f'{msgtype}: a message shorter than {offset + size} bytes')
-    buffer = np.frombuffer(spans.buffer, dtype=np.uint8)
-    starts = np.asarray(spans.starts, dtype=np.int64)
-    data = buffer[(starts + offset)[:, None] + np.arange(size)]
-    little = np.ones(starts.size, dtype=bool)
-    if not ros1:  # CDR_BE 0x0000, CDR_LE 0x0001
-        kind = buffer[starts + 1]
-        if np.any(buffer[starts] != 0) or np.any(kind > 1):
-            raise ValueError(f'{msgtype}: not a plain CDR encapsulation')
-        little = kind == 1
-    dtype = np.dtype(f'f{size}')
-    values = np.empty(starts.size, dtype=np.float64)
-    values[little] = data[little].copy().view(dtype.newbyteorder('<')).ravel()
-    values[~little] = data[~little].copy().view(dtype.newbyteorder('>')).ravel()
-    return values
 
 
 def _decoder(conn: Any, is_ros2: bool) -> Any:
@@ -239,7 +211,7 @@ class _StreamDecoding:
         if kind == 'temperature' and self.temp_field is not None and _serialized(raws):
             # a bare number from a batch reader: no header, timed by its receive time
             ros1 = getattr(self, '_ros1', None) is not None
-            values = decode_numbers(raws, self.temp_msgtype, ros1=ros1)
+            values = cdr.decode_numbers(raws, self.temp_msgtype, ros1=ros1)
             stamps = receive
         elif kind == 'temperature' and self.temp_field is not None:
             field = self.temp_field

@@ -27,7 +27,6 @@ from fog_temp_comp.bag import cdr
 from fog_temp_comp.bag.bagio import NUMBER_FIELD, NUMBER_TYPES, BagWriter
 from fog_temp_comp.bag.cdr import Spans
 from fog_temp_comp.bag.mcapscan import scan_mcap
-from fog_temp_comp.bag.streamdecode import decode_numbers
 from fog_temp_comp.bag.unstamped import UnsetStamps
 from fog_temp_comp.core.compensator import Compensator
 from fog_temp_comp.core.frame_lock import FrameLock
@@ -240,7 +239,7 @@ def _compensate(
     before = np.cumsum(fed == _IMU)[fed == _TEMP]
     temp_stamps, temps = np.empty(0), np.empty(0)
     if before.size and number_type is not None:  # no header: timed by its receive time
-        temps = decode_numbers(spans[temp_topic], number_type)
+        temps = cdr.decode_numbers(spans[temp_topic], number_type)
         receive = logs[temp_topic]
         temp_stamps = unstamped.timed(temp_topic, receive / NS_PER_S, receive)
     elif before.size:

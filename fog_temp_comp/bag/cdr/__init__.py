@@ -36,7 +36,8 @@ Modules
 :mod:`~fog_temp_comp.bag.cdr.parse`
     :class:`Spans`, the layout checks and the block-wise reading into arrays.
 :mod:`~fog_temp_comp.bag.cdr.decode`
-    The ``decode_*`` functions.
+    The ``decode_*`` functions (also :func:`decode_numbers`: a bare ``std_msgs/Float64`` or
+    ``Float32``'s ``data``).
 :mod:`~fog_temp_comp.bag.cdr.patch`
     The ``patch_imu_angular_velocity_*`` functions.
 :mod:`~fog_temp_comp.bag.cdr.encode`
@@ -72,6 +73,7 @@ from fog_temp_comp.bag.cdr.decode import (
     decode_imu_rates_cdr,
     decode_imu_rates_ros1,
     decode_imu_ros1,
+    decode_numbers,
     decode_temperature_cdr,
     decode_temperature_ros1,
     ros1_header_has_seq,
@@ -115,6 +117,7 @@ __all__ = [
     'decode_imu_rates_cdr',
     'decode_imu_rates_ros1',
     'decode_imu_ros1',
+    'decode_numbers',
     'decode_temperature_cdr',
     'decode_temperature_ros1',
     'encode_imu_cdr',

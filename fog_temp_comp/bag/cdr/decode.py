@@ -1,15 +1,18 @@
-"""The public decoders: batches of serialized Imu and Temperature messages to arrays."""
+"""The public decoders: batches of serialized Imu, Temperature and bare numbers to arrays."""
 
 from __future__ import annotations
 
 import re
 from collections.abc import Sequence
 
+import numpy as np
+
 from fog_temp_comp.bag.cdr.batches import (
     IMU_FLOATS,
     IMU_NAME,
     TEMPERATURE_FLOATS,
     TEMPERATURE_NAME,
+    FloatArray,
     ImuBatch,
     ImuRateBatch,
     RawMessage,
@@ -192,3 +195,33 @@ def ros1_header_has_seq(msgdef: str) -> bool:
         return True
     section = re.split(r'^={10,}\s*$', msgdef[match.end() :], maxsplit=1, flags=re.MULTILINE)[0]
     return _SEQ_LINE.search(section) is not None
+
+
+def decode_numbers(
+    raws: Sequence[RawMessage] | Spans, msgtype: str, *, ros1: bool = False
+) -> FloatArray:
+    """The ``data`` of serialized ``std_msgs/Float64`` or ``Float32`` messages, shape (N,).
+
+    ``raws``: :class:`Spans` or a list of byte buffers, CDR (a
+    4-byte encapsulation header, either byte order) or ROS 1 (``ros1``: the bare number).
+    Raises ValueError on a message of another size or an unknown encapsulation.
+    """
+    spans = raws if isinstance(raws, Spans) else Spans.join(list(raws))
+    size = 8 if msgtype == 'std_msgs/msg/Float64' else 4
+    offset = 0 if ros1 else 4
+    if np.any(spans.lengths < offset + size):
+        raise ValueError(f'{msgtype}: a message shorter than {offset + size} bytes')
+    buffer = np.frombuffer(spans.buffer, dtype=np.uint8)
+    starts = np.asarray(spans.starts, dtype=np.int64)
+    data = buffer[(starts + offset)[:, None] + np.arange(size)]
+    little = np.ones(starts.size, dtype=bool)
+    if not ros1:  # CDR_BE 0x0000, CDR_LE 0x0001
+        kind = buffer[starts + 1]
+        if np.any(buffer[starts] != 0) or np.any(kind > 1):
+            raise ValueError(f'{msgtype}: not a plain CDR encapsulation')
+        little = kind == 1
+    dtype = np.dtype(f'f{size}')
+    values = np.empty(starts.size, dtype=np.float64)
+    values[little] = data[little].copy().view(dtype.newbyteorder('<')).ravel()
+    values[~little] = data[~little].copy().view(dtype.newbyteorder('>')).ravel()
+    return values
