@@ -12,8 +12,12 @@ from fog_temp_comp.tools.simulate import SimulatedRun, simulate_run
 
 from simdata import SHORT_CHAMBER
 
-# keep this test run's DDS traffic to itself: its own domain, discovery on this host only
+# keep this test run's DDS traffic to itself: its own domain, discovery on this host only; each
+# pytest-xdist worker (gw0, gw1, ...: they inherit the controller's environment) its own
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
+if os.environ.get('PYTEST_XDIST_WORKER', '').startswith('gw'):
+    _worker = int(os.environ['PYTEST_XDIST_WORKER'][2:])
+    os.environ['ROS_DOMAIN_ID'] = str(1 + (int(os.environ['ROS_DOMAIN_ID']) + _worker) % 100)
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 

@@ -53,8 +53,9 @@ WORKSPACE_VARIABLES = (
     'CMAKE_PREFIX_PATH',
     'PYTHONPATH',
 )
-#: one domain per test process, so parallel runs on the machine do not see each other
-DOMAIN_ID = str(os.getpid() % 102)
+#: this test process's own domain (conftest.py's: one per run, and per pytest-xdist worker), so
+#: parallel runs on the machine do not see each other
+DOMAIN_ID = os.environ['ROS_DOMAIN_ID']
 EXEC_DEPENDS = {
     'rclpy',
     'sensor_msgs',

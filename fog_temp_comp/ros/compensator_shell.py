@@ -117,6 +117,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self.output_enabled = True
         #: gyro messages ignored while output_enabled was off
         self.imu_while_inactive = 0
+        #: Imu messages published on the output (corrected, or passed through as they came)
+        self.imu_published = 0
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
     def _configure(self) -> None:
@@ -382,6 +384,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             self.frame_mismatches += 1
             if self._require_frame_match:
                 self._send(self._publisher, msg)
+                self.imu_published += 1
                 return
         compensator = self.compensator
         # a header stamp of 0 gets the core's current correction
@@ -397,6 +400,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         if self._inflate_covariance:
             self._inflate(msg)
         self._send(self._publisher, msg)
+        self.imu_published += 1
 
     def _inflate(self, msg: Imu) -> None:
         cov = msg.angular_velocity_covariance
