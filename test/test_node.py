@@ -59,6 +59,8 @@ def test_node_output_matches_core_and_removes_drift(
     try:
         n = run.imu_stamps_s.size
         out = drive(harness, run, n)
+        # every gyro message corrected and published once, and counted so
+        assert node.imu_published == len(harness.received) == len(out) == n
     finally:
         harness.close()
     corrected = np.array(
