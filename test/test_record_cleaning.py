@@ -19,6 +19,7 @@ from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.record_cleaning import (
     OVERLAP_WARN_S,
     check_gyro_rate_changes,
+    kelvin_warning,
     without_repeats,
 )
 from fog_temp_comp.tools import cli, commands
@@ -102,3 +103,46 @@ def test_calibrate_on_the_same_run_twice_fits_it_once(
     assert got.model.terms == want.model.terms
     np.testing.assert_allclose(got.model.coefficients, want.model.coefficients, rtol=1e-12)
     assert got.provenance['repeated_bags'] == [str(link), str(copy)]
+
+
+def test_kelvin_is_warned_of_and_degrees_celsius_are_not() -> None:
+    rates = np.c_[np.linspace(0.0, 1e-5, 50), np.zeros((50, 2))]
+    celsius = record(rates)
+    hot = dataclasses.replace(celsius, temperature_degC=np.linspace(120.0, 150.0, 50))
+    kelvin = dataclasses.replace(
+        celsius, path=Path('k'), temperature_degC=celsius.temperature_degC + 273.15
+    )
+    assert kelvin_warning(celsius) is None and kelvin_warning(hot) is None
+    warning = kelvin_warning(kelvin)
+    assert warning is not None
+    assert warning.startswith('k: temperatures on /imu/temperature of 293.15 to 303.15: kelvin')
+
+
+def test_a_run_in_kelvin_gets_the_fit_of_the_same_run_in_degrees_celsius(
+    tmp_path: Path, short_cycle: SimulatedRun, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Only the constant moves (by 273.15 K times the T coefficient), and calibrate warns."""
+    kelvin_run = dataclasses.replace(
+        short_cycle, temperature_degC=short_cycle.temperature_degC + 273.15
+    )
+    fits = {}
+    for name, run in (('celsius', short_cycle), ('kelvin', kelvin_run)):
+        bag = write_run(tmp_path / name, 'mcap', run)
+        out = tmp_path / f'{name}.yaml'
+        assert cli.main(['calibrate', str(bag), '-o', str(out), '--quiet']) == 0
+        said = capsys.readouterr()
+        fits[name] = (load(out), [x for x in said.out.splitlines() if 'kelvin, not degC' in x])
+    (celsius, celsius_said), (kelvin, kelvin_said) = fits['celsius'], fits['kelvin']
+    assert celsius_said == [] and len(kelvin_said) == 1
+    assert kelvin_said[0].startswith(f'WARNING: {tmp_path / "kelvin"}: temperatures on ')
+    # the same choice; linear in T (no T2, T3 or bias table), so the constant takes the offset
+    assert kelvin.model.terms == celsius.model.terms
+    assert kelvin.model.terms[:3] == ('const', 'T', 'Tdot')
+    assert not {'T2', 'T3', 'T_Tdot'} & set(kelvin.model.terms)
+    k = kelvin.model.coefficients
+    c = celsius.model.coefficients
+    np.testing.assert_allclose(k[1:], c[1:], rtol=1e-6)
+    np.testing.assert_allclose(k[0] + 273.15 * k[1], c[0], rtol=0, atol=1e-6)
+    low, high = kelvin.model.temperature_range_degC.low, kelvin.model.temperature_range_degC.high
+    assert low - 273.15 == pytest.approx(celsius.model.temperature_range_degC.low)
+    assert high - 273.15 == pytest.approx(celsius.model.temperature_range_degC.high)

@@ -23,6 +23,7 @@ from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.temperature_glitches import without_temperature_glitches
 
 __all__ = [
+    'KELVIN_LIKE_DEGC',
     'PLAUSIBLE_DEGC',
     'check_degrees_celsius',
     'check_gyro_rate_changes',
@@ -58,6 +59,29 @@ def check_degrees_celsius(records: Sequence[ChamberRecord]) -> None:
                 'publishing millidegrees or tenths?); convert them, or read the right field '
                 'with --temp-field'
             )
+
+
+#: a record whose median temperature lies above this (degC) reads kelvin: no gyro runs at
+#: 150 degC, and -40..85 degC is 233-358 K
+KELVIN_LIKE_DEGC = 150.0
+
+
+def kelvin_warning(record: ChamberRecord) -> str | None:
+    """A warning where ``record``'s temperatures read like kelvin, else None.
+
+    The fit takes them as they come (273.15 K more moves only the constant term; the design is
+    scaled, the bias tables' knots follow the readings), and the node reads the same sensor,
+    so the correction holds; only the unit the files and reports state is wrong.
+    """
+    values = record.temperature_degC[np.isfinite(record.temperature_degC)]
+    if not values.size or float(np.median(values)) <= KELVIN_LIKE_DEGC:
+        return None
+    return (
+        f'{record.path}: temperatures on {record.temp_topic} of {values.min():.5g} to '
+        f"{values.max():.5g}: kelvin, not degC? The fit and the node work in the sensor's "
+        'unit (the node must read the same sensor), but every "degC" in the coefficients and '
+        'reports is then a kelvin'
+    )
 
 
 def check_gyro_rate_changes(records: Sequence[ChamberRecord]) -> None:
@@ -147,8 +171,9 @@ def without_outliers(
     """The records without their temperature glitches and gyro outlier bins.
 
     Temperatures that are not degrees Celsius, and a gyro rate that never changes, are refused
-    first (:func:`check_degrees_celsius`, :func:`check_gyro_rate_changes`), and a record that
-    repeats another is left out (:func:`without_repeats`; provenance ``repeated_bags``).
+    first (:func:`check_degrees_celsius`, :func:`check_gyro_rate_changes`), a record that
+    repeats another is left out (:func:`without_repeats`; provenance ``repeated_bags``), and
+    one in kelvin is warned of (:func:`kelvin_warning`).
 
     Gyro bins of ``settings.tdot_period_s``; the glitch rule is the node's default guard's.
     Returns the records, a warning per record and kind, and ``provenance`` with the entries
@@ -159,6 +184,7 @@ def without_outliers(
     check_degrees_celsius(records)
     check_gyro_rate_changes(records)
     records, warnings, repeated = without_repeats(records)
+    warnings += [w for w in map(kelvin_warning, records) if w is not None]
     if repeated:
         provenance = {**(provenance or {}), 'repeated_bags': repeated}
     period_s = settings.tdot_period_s
