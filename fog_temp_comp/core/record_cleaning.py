@@ -27,6 +27,7 @@ __all__ = [
     'PLAUSIBLE_DEGC',
     'check_degrees_celsius',
     'check_gyro_rate_changes',
+    'kelvin_warning',
     'without_outliers',
     'without_repeats',
 ]

@@ -117,7 +117,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self.output_enabled = True
         #: gyro messages ignored while output_enabled was off
         self.imu_while_inactive = 0
-        #: Imu messages published on the output (corrected, or passed through as they came)
+        #: Imu messages handed to the output's publisher (corrected, or passed through as they
+        #: came; tests wait for exactly these)
         self.imu_published = 0
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
