@@ -35,7 +35,6 @@ from fog_temp_comp.bag.bagio import (
     TEMPERATURE_TYPE,
     BagError,
     open_bag,
-    resolve_any_topic_in,
     resolve_topic,
     resolve_topic_in,
 )
@@ -65,7 +64,6 @@ __all__ = [
     'StampOrder',
     'get_field',
     'read_record',
-    'resolve_any_topic',
 ]
 
 
@@ -334,13 +332,6 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         """Every frame_id the temperature topic carried where it carried several, sorted."""
         frames = self.frames['temperature']
         return tuple(sorted(frames.readings)) if frames.several else ()
-
-
-def resolve_any_topic(reader: AnyReader, topic: str, flag: str) -> str:
-    """An existing topic of any type (a missing leading slash is accepted)."""
-    return resolve_any_topic_in(
-        {name: info.msgtype or '' for name, info in reader.topics.items()}, topic, flag
-    )
 
 
 def read_record(
