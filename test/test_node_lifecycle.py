@@ -74,7 +74,10 @@ def feed_temperature(harness: Harness, offline: Compensator, start_s: float, n: 
 
 
 def test_bad_coefficients_file_fails_configure_and_stays_unconfigured(
-    ros_context: object, tmp_path: Path
+    ros_context: object,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capfd: pytest.CaptureFixture[str],
 ) -> None:
     bad = tmp_path / 'bad.yaml'
     bad.write_text('schema_version: 1\naxes: [not, a, mapping]\n', encoding='utf-8')
@@ -94,6 +97,17 @@ def test_bad_coefficients_file_fails_configure_and_stays_unconfigured(
         # a missing file fails too; a good one then configures
         node.set_parameters([Parameter('coefficients_file', value=str(tmp_path / 'none.yaml'))])
         assert not manager.transition(Transition.TRANSITION_CONFIGURE)
+        # a package:// path in a terminal that has not sourced a workspace: failed, and said
+        monkeypatch.delenv('AMENT_PREFIX_PATH', raising=False)
+        url = 'package://fog_temp_comp/config/example_coefficients.yaml'
+        node.set_parameters([Parameter('coefficients_file', value=url)])
+        capfd.readouterr()
+        assert not manager.transition(Transition.TRANSITION_CONFIGURE)
+        assert manager.state() == State.PRIMARY_STATE_UNCONFIGURED
+        err = capfd.readouterr().err
+        assert 'Traceback' not in err
+        assert f'configure failed, staying unconfigured: coefficients_file {url}: ' in err
+        assert 'AMENT_PREFIX_PATH is not set' in err
         node.set_parameters([Parameter('coefficients_file', value=str(EXAMPLE))])
         assert manager.transition(Transition.TRANSITION_CONFIGURE)
         assert manager.state() == State.PRIMARY_STATE_INACTIVE

@@ -7,6 +7,7 @@ process, the params file given through ``cli_args`` as ``--ros-args --params-fil
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -16,10 +17,10 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
-from fog_temp_comp.core.coefficients import Coefficients, save
+from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, save
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
-from fog_temp_comp.ros.node import CompensatorNode
+from fog_temp_comp.ros.node import CompensatorNode, resolve_path
 from fog_temp_comp.ros.params import params_files, section_matches
 
 NODE = 'fog_temp_compensator'
@@ -106,6 +107,15 @@ STOPPING = [
         "params file PARAMS: cannot read it ([Errno 2] No such file or directory: 'PARAMS')",
     ),
     (
+        'package:// path without a sourced workspace',
+        f'{NODE}:\n  ros__parameters:\n    coefficients_file: '
+        'package://fog_temp_comp/config/example_coefficients.yaml\n',
+        'coefficients_file package://fog_temp_comp/config/example_coefficients.yaml: '
+        'AMENT_PREFIX_PATH is not set, '
+        'so package:// paths cannot be resolved: source the workspace (. install/setup.sh) or '
+        'give a file path',
+    ),
+    (
         'coefficients file missing',
         f'{NODE}:\n  ros__parameters:\n    coefficients_file: /nonexistent/coeffs.yaml\n',
         None,  # the coefficients loader's own line, checked by pattern below
@@ -169,7 +179,11 @@ def stopped(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, i
         if text is not None:
             paths[case].write_text(text.replace('COEFFS', str(coeffs)))
     command = [sys.executable, '-c', RUN_MAIN, *map(str, paths.values())]
-    done = subprocess.run(command, stderr=subprocess.PIPE, text=True, timeout=300, check=True)
+    # as a terminal that has not sourced a workspace (rclpy's wheels run without it)
+    env = {k: v for k, v in os.environ.items() if k != 'AMENT_PREFIX_PATH'}
+    done = subprocess.run(
+        command, stderr=subprocess.PIPE, text=True, timeout=300, check=True, env=env
+    )
     blocks = re.findall(r'^=== (\S+)\n(.*?)^=== exit (-?\d+)$', done.stderr, re.M | re.S)
     by_path = {path: (int(code), err) for path, err, code in blocks}
     assert len(by_path) == len(paths), done.stderr
@@ -278,3 +292,21 @@ def test_params_files_are_read_from_the_ros_arguments_only() -> None:
     args = ['x', '--params-file', 'a.yaml', '--ros-args', '--params-file', 'b.yaml', '-p', 'k:=v']
     assert params_files(args) == ['b.yaml']
     assert params_files([*args, '--', '--params-file', 'c.yaml']) == ['b.yaml']
+
+
+def test_package_paths_resolve_through_the_ament_index(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """package:// resolves in a sourced workspace; otherwise a CoefficientsError says why."""
+    url = 'package://fog_temp_comp/config/c.yaml'
+    assert resolve_path('/plain/c.yaml') == '/plain/c.yaml'
+    monkeypatch.delenv('AMENT_PREFIX_PATH', raising=False)
+    with pytest.raises(CoefficientsError, match='AMENT_PREFIX_PATH is not set'):
+        resolve_path(url)
+    monkeypatch.setenv('AMENT_PREFIX_PATH', str(tmp_path))
+    with pytest.raises(CoefficientsError, match="package 'fog_temp_comp' is not installed"):
+        resolve_path(url)
+    marker = tmp_path / 'share' / 'ament_index' / 'resource_index' / 'packages' / 'fog_temp_comp'
+    marker.parent.mkdir(parents=True)
+    marker.touch()
+    assert resolve_path(url) == str(tmp_path / 'share' / 'fog_temp_comp' / 'config' / 'c.yaml')

@@ -292,6 +292,11 @@ def resolve_path(path: str) -> str:
         raise CoefficientsError(
             f'coefficients_file {path}: package {package!r} is not installed (AMENT_PREFIX_PATH)'
         ) from None
+    except OSError:  # ament_index raises it when AMENT_PREFIX_PATH is unset or empty
+        raise CoefficientsError(
+            f'coefficients_file {path}: AMENT_PREFIX_PATH is not set, so package:// paths '
+            'cannot be resolved: source the workspace (. install/setup.sh) or give a file path'
+        ) from None
     return os.path.join(share, relative)
 
 
