@@ -70,18 +70,32 @@ def test_a_repeat_is_left_out_and_an_overlap_warned_about() -> None:
     rates = np.c_[np.linspace(0.0, 1e-5, 500), np.zeros((500, 2))]
     first = record(rates, 'a')
     copy = dataclasses.replace(first, path=Path('b'))
+    # its first 90 samples are the last 90 of a (the same hours in two bags), then its own
+    shift = 500 - int(OVERLAP_WARN_S) - 30
+    later_rates = np.r_[rates[shift:], rates[:shift] + 1e-7]
     later = dataclasses.replace(
-        first,
-        path=Path('c'),
-        imu_stamps_s=first.imu_stamps_s + 500 - OVERLAP_WARN_S - 30,
-        rates_rad_s=rates + 1e-7,
+        first, path=Path('c'), imu_stamps_s=first.imu_stamps_s + shift, rates_rad_s=later_rates
     )
     kept, warnings, repeated = without_repeats([first, copy, later])
     assert [r.path.name for r in kept] == ['a', 'c'] and repeated == ['b']
     assert 'b: the same data as a' in warnings[0]
-    assert len(warnings) == 2 and 'c: 89 s of its gyro stamps are also in a' in warnings[1]
+    assert len(warnings) == 2
+    assert 'c: 89 s of its gyro samples (stamps and rates) are also in a' in warnings[1]
     apart = dataclasses.replace(later, imu_stamps_s=first.imu_stamps_s + 500)
     assert without_repeats([first, apart])[1] == []
+
+
+def test_distinct_runs_on_clocks_that_start_alike_are_not_warned_about() -> None:
+    """Two runs with the same stamps (a simulator's or a device's clock) but their own rates."""
+    rates = np.c_[np.linspace(0.0, 1e-5, 500), np.zeros((500, 2))]
+    first = record(rates, 'a')
+    second = dataclasses.replace(first, path=Path('b'), rates_rad_s=rates[::-1] + 1e-7)
+    kept, warnings, repeated = without_repeats([first, second])
+    assert [r.path.name for r in kept] == ['a', 'b'] and warnings == [] and repeated == []
+    # the same samples for most of it, a few rates changed (noise in a copy): still one run
+    most = dataclasses.replace(second, rates_rad_s=rates.copy())
+    most.rates_rad_s[::10] += 1e-9
+    assert 'b: 498 s of its gyro samples' in without_repeats([first, most])[1][0]
 
 
 def test_calibrate_on_the_same_run_twice_fits_it_once(

@@ -117,9 +117,11 @@ def without_repeats(
 ) -> tuple[list[ChamberRecord], list[str], list[str]]:
     """The records less those that repeat an earlier one; warnings; the repeats' paths.
 
-    A repeat has the same gyro stamps and rates and the same temperatures. Records that only
-    overlap in time by more than :data:`OVERLAP_WARN_S` (the same hours in two bags) are kept,
-    with a warning.
+    A repeat has the same gyro stamps and rates and the same temperatures. Records that share
+    more than :data:`OVERLAP_WARN_S` of gyro samples, the same stamps with the same rates (the
+    same hours in two bags), are kept, with a warning. Distinct runs whose stamps coincide (a
+    simulator's or a device's clock that starts at the same value each run) differ in their
+    rates: no warning.
     """
     kept: list[ChamberRecord] = []
     warnings, repeated = [], []
@@ -133,11 +135,12 @@ def without_repeats(
             repeated.append(str(record.path))
             continue
         for other in kept:
-            overlap = _overlap_s(other, record)
+            overlap = _shared_s(other, record)
             if overlap > OVERLAP_WARN_S:
                 warnings.append(
-                    f'{record.path}: {overlap:.0f} s of its gyro stamps are also in '
-                    f'{other.path} (the same hours recorded twice?): the fit counts them twice'
+                    f'{record.path}: {overlap:.0f} s of its gyro samples (stamps and rates) are '
+                    f'also in {other.path} (the same hours recorded twice?): the fit counts them '
+                    'twice'
                 )
         kept.append(record)
     return kept, warnings, repeated
@@ -155,13 +158,28 @@ def _same_data(a: ChamberRecord, b: ChamberRecord) -> bool:
     )
 
 
-def _overlap_s(a: ChamberRecord, b: ChamberRecord) -> float:
-    """How long (s) the gyro stamp spans of two records overlap (0 if either is empty)."""
+def _shared_s(a: ChamberRecord, b: ChamberRecord) -> float:
+    """How long (s) the two records hold the same gyro samples: equal stamps and equal rates.
+
+    The span of the shared samples, 0 when fewer than half the common stamps carry equal rates
+    (two runs on clocks that start alike, not one run recorded twice).
+    """
     if not (a.imu_stamps_s.size and b.imu_stamps_s.size):
         return 0.0
-    start = max(a.imu_stamps_s[0], b.imu_stamps_s[0])
-    end = min(a.imu_stamps_s[-1], b.imu_stamps_s[-1])
-    return max(float(end - start), 0.0)
+    if min(a.imu_stamps_s[-1], b.imu_stamps_s[-1]) <= max(a.imu_stamps_s[0], b.imu_stamps_s[0]):
+        return 0.0  # apart in time (the usual case: no sort)
+    common, ia, ib = np.intersect1d(a.imu_stamps_s, b.imu_stamps_s, return_indices=True)
+    if common.size < 2:
+        return 0.0
+    same = np.all(
+        (a.rates_rad_s[ia] == b.rates_rad_s[ib])
+        | (np.isnan(a.rates_rad_s[ia]) & np.isnan(b.rates_rad_s[ib])),
+        axis=1,
+    )
+    if 2 * int(same.sum()) < common.size:
+        return 0.0
+    shared = common[same]
+    return float(shared[-1] - shared[0])
 
 
 def without_outliers(
