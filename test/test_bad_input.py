@@ -462,6 +462,38 @@ def test_bad_coefficients_yaml(
     check('error', code, err, tmp_path / 'none', match)
 
 
+def test_a_folder_of_bags_or_no_bag_gets_the_same_line_from_every_command(
+    bases: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The parent folder given as a bag, and a directory without one: one ERROR each."""
+    folder = bases['mcap'].parent  # 5 bags, a coefficients file
+    empty = tmp_path / 'empty'
+    empty.mkdir()
+    (empty / 'notes.txt').write_text('not a bag')
+    coeffs = str(bases['coeffs'])
+    for path, expected in (
+        (
+            folder,
+            f'ERROR: {folder}: a folder of 5 bags (mcap, mcap_z, ros1.bag, ...), not a bag: '
+            f'name the bags (e.g. {folder / "mcap"})',
+        ),
+        (
+            empty,
+            f'ERROR: {empty}: not a bag (no metadata.yaml, .mcap or .db3 files in this '
+            'directory; expected a rosbag2 directory, .mcap, .db3, .bag)',
+        ),
+    ):
+        for argv in (
+            ['calibrate', str(path), '-o', str(tmp_path / 'c.yaml')],
+            ['evaluate', str(path), '--coeffs', coeffs],
+            ['compensate', str(path), '--coeffs', coeffs, '-o', str(tmp_path / 'out')],
+        ):
+            code = cli.main(argv)
+            err = capsys.readouterr().err
+            assert (code, err.strip().splitlines()) == (1, [expected]), argv
+        assert not (tmp_path / 'c.yaml').exists() and not (tmp_path / 'out').exists()
+
+
 def test_the_matrix_has_at_least_40_cases() -> None:
     assert len(CASES) + len(DATA) + len(YAML) >= 40
 

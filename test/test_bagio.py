@@ -267,7 +267,7 @@ def test_bag_format_refuses_what_is_not_a_bag(tmp_path: Path) -> None:
     (tmp_path / 'empty_dir').mkdir()
     (tmp_path / 'notes.txt').write_text('not a bag\n')
     for path in (tmp_path / 'empty_dir', tmp_path / 'notes.txt'):
-        with pytest.raises(BagError, match='not a recognised bag') as info:
+        with pytest.raises(BagError, match='not a bag') as info:
             bag_format(path)
         assert str(path) in str(info.value)
 

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fog_temp_comp.bag import mcapwrite, ros1write, sqlitewrite
+from fog_temp_comp.bag.bag_path import not_a_bag
 from fog_temp_comp.bag.cdr import Spans
 from fog_temp_comp.bag.names import FORMATS
 from fog_temp_comp.core.units import NS_PER_S
@@ -98,8 +99,9 @@ def s_to_stamp_ns_array(stamps_s: FloatArray) -> NDArray[np.int64]:
 def open_bag(path: str | Path) -> Iterator[AnyReader]:
     """Open a bag for reading (directory, ``.mcap``, ``.db3`` or ROS 1 ``.bag``)."""
     path = Path(path)
-    if not path.exists():
-        raise BagError(f'{path}: no such bag')
+    problem = not_a_bag(path)
+    if problem:
+        raise BagError(problem)
     try:
         reader = _opened_reader(path)
     except Exception as err:  # rosbags raises many types for broken files
@@ -143,6 +145,9 @@ def data_files(path: Path, suffix: str) -> list[Path]:
 def bag_format(path: str | Path) -> str:
     """One of :data:`FORMATS` for an existing bag."""
     path = Path(path)
+    problem = not_a_bag(path)
+    if problem:
+        raise BagError(problem)
     if path.is_dir():  # a file-compressed bag (rosbag2 FILE mode) holds .mcap.zstd / .db3.zstd
         if list(path.glob('*.mcap')) or list(path.glob('*.mcap.zstd')):
             return 'mcap'
@@ -154,9 +159,7 @@ def bag_format(path: str | Path) -> str:
         return 'mcap'
     elif path.suffix == '.db3':
         return 'sqlite3'
-    raise BagError(
-        f'{path}: not a recognised bag (expected a rosbag2 directory, .mcap, .db3, .bag)'
-    )
+    raise BagError(f'{path}: not a bag (expected a rosbag2 directory, .mcap, .db3, .bag)')
 
 
 def _normalise(topic: str) -> str:

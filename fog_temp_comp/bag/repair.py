@@ -149,7 +149,9 @@ def repair_bag(path: Path, out: Path, salvage: Salvage) -> Path:
         else:
             dbs = data_files(path, '.db3')
             if not dbs:
-                raise BagError(f'{path}: not a recognised bag')
+                raise BagError(
+                    f'{path}: not a bag (expected a rosbag2 directory, .mcap, .db3, .bag)'
+                )
             copied = repair_sqlite(dbs, out, salvage)
     expected = metadata_counts(path) if path.is_dir() else {}
     if expected and (salvage.lost_messages is None or salvage.uncounted):

@@ -30,6 +30,7 @@ import apsw
 import numpy as np
 
 from fog_temp_comp.bag import cdr
+from fog_temp_comp.bag.bag_path import not_a_bag
 from fog_temp_comp.bag.bagio import (
     IMU_TYPE,
     TEMPERATURE_TYPE,
@@ -154,8 +155,9 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         self.span_stats: list[ScanStats] = []
 
     def __enter__(self) -> BagStream:
-        if not self.path.exists():
-            raise BagError(f'{self.path}: no such bag')
+        problem = not_a_bag(self.path)
+        if problem:
+            raise BagError(problem)
         self._sqlite_files = None
         loose = loose_sqlite_files(self.path)
         if loose is not None:

@@ -1,0 +1,46 @@
+"""Whether a path given as a bag is one: the same one-line answer from every command."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+__all__ = ['BAG_SUFFIXES', 'not_a_bag']
+
+#: files that make a directory a bag (rosbag2's storage files, plain or file-compressed)
+BAG_SUFFIXES = ('.mcap', '.db3', '.mcap.zstd', '.db3.zstd')
+#: files that are a bag on their own
+_BAG_FILES = ('.mcap', '.db3', '.bag')
+
+
+def _holds_bag_files(directory: Path) -> bool:
+    if (directory / 'metadata.yaml').is_file():
+        return True
+    return any(any(directory.glob('*' + suffix)) for suffix in BAG_SUFFIXES)
+
+
+def not_a_bag(path: Path) -> str | None:
+    """Why ``path`` cannot be a bag (the message, with the path), or None if it may be one.
+
+    A missing path; a directory with neither ``metadata.yaml`` nor storage files, and among
+    those a folder of bags (the user gave its parent: name the bags instead). Files are left
+    to the readers, which know their formats.
+    """
+    if not path.exists():
+        return f'{path}: no such bag'
+    if not path.is_dir() or _holds_bag_files(path):
+        return None
+    inside = sorted(
+        p.name
+        for p in path.iterdir()
+        if (p.is_dir() and _holds_bag_files(p)) or (p.is_file() and p.suffix in _BAG_FILES)
+    )
+    if inside:
+        return (
+            f'{path}: a folder of {len(inside)} bag{"s" if len(inside) > 1 else ""} '
+            f'({", ".join(inside[:3])}{", ..." if len(inside) > 3 else ""}), not a bag: '
+            f'name the bags (e.g. {path / inside[0]})'
+        )
+    return (
+        f'{path}: not a bag (no metadata.yaml, .mcap or .db3 files in this directory; '
+        'expected a rosbag2 directory, .mcap, .db3, .bag)'
+    )
