@@ -18,6 +18,7 @@ from interrupting import interrupt
 
 from fog_temp_comp.bag.bagio import write_chamber_bag
 from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.tools import cli
 from fog_temp_comp.tools.atomic import AtomicOutputs, Terminated, partial_dir
 from fog_temp_comp.tools.commands import CalibrateOptions, calibrate_command
 from fog_temp_comp.tools.simulate import SimulatedRun
@@ -61,6 +62,32 @@ def test_an_existing_output_is_refused_before_anything_is_written(tmp_path: Path
     with pytest.raises(FileExistsError, match='exists already'), AtomicOutputs() as outputs:
         outputs.path(target)
     assert target.read_text() == 'mine' and not partial_dir(target).exists()
+
+
+def test_an_output_in_a_missing_directory_is_named_as_given(
+    tmp_path: Path, short_cycle: SimulatedRun, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The error names the user's -o path and its directory, not the hidden partial one."""
+    bag = write_run(tmp_path / 'in', 'mcap', short_cycle)
+    coeffs = tmp_path / 'c.yaml'
+    assert (
+        cli.main(['calibrate', str(bag), '-o', str(coeffs), '--terms', 'const,T', '--quiet']) == 0
+    )
+    (tmp_path / 'file').write_text('')
+    for parent, why in (
+        (tmp_path / 'no' / 'dir', 'does not exist'),
+        (tmp_path / 'file', 'is not a directory'),
+    ):
+        out = parent / 'out'
+        for argv in (
+            ['compensate', str(bag), '--coeffs', str(coeffs), '-o', str(out)],
+            ['calibrate', str(bag), '-o', str(out)],
+        ):
+            capsys.readouterr()
+            assert cli.main(argv) == 1
+            err = capsys.readouterr().err
+            assert err.splitlines()[-1] == f'ERROR: {out}: directory {parent} {why}', argv
+            assert 'partial' not in err
 
 
 def test_calibrate_failing_after_the_fit_leaves_no_yaml(

@@ -11,6 +11,7 @@ turns it into a non-zero exit code: 1, 130, 143).
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
 import signal
@@ -22,7 +23,13 @@ from pathlib import Path
 from types import FrameType, TracebackType
 from typing import Any, TextIO
 
-__all__ = ['AtomicOutputs', 'Terminated', 'partial_dir', 'terminating_on_signals']
+__all__ = [
+    'AtomicOutputs',
+    'Terminated',
+    'check_output_directory',
+    'partial_dir',
+    'terminating_on_signals',
+]
 
 
 class Terminated(BaseException):
@@ -67,6 +74,13 @@ def terminating_on_signals() -> Iterator[None]:
 def partial_dir(target: Path) -> Path:
     """The hidden directory beside ``target`` that holds its output while it is written."""
     return target.parent / f'.{target.name}.partial-{os.getpid()}'
+
+
+def check_output_directory(target: Path) -> None:
+    """Raise FileNotFoundError naming ``target`` if its directory does not exist."""
+    if not target.parent.is_dir():
+        missing = 'is not a directory' if target.parent.exists() else 'does not exist'
+        raise FileNotFoundError(errno.ENOENT, f'directory {target.parent} {missing}', str(target))
 
 
 def _remove(path: Path) -> None:
@@ -115,6 +129,7 @@ class AtomicOutputs:
         target = Path(target)
         if not (merge_into_dir or replace) and (target.exists() or target.is_symlink()):
             raise FileExistsError(f'{target}: exists already, not overwriting')
+        check_output_directory(target)  # said of the target, not of the hidden directory
         holder = partial_dir(target)
         _remove(holder)
         holder.mkdir(parents=False)

@@ -30,7 +30,7 @@ from fog_temp_comp.core.model_candidates import StructureScore
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.selection import default_candidates, format_results, select_and_calibrate
 from fog_temp_comp.core.sensor_choice import TemperatureSource
-from fog_temp_comp.tools.atomic import AtomicOutputs
+from fog_temp_comp.tools.atomic import AtomicOutputs, check_output_directory
 from fog_temp_comp.tools.evaluate_command import clamp_notes
 from fog_temp_comp.tools.excitation import identifiable_terms
 from fog_temp_comp.tools.salvaged import Salvaged
@@ -99,8 +99,7 @@ def calibrate_command(
     validation bags are replayed through the compensator at full rate.
     """
     stdout = stdout or sys.stdout
-    if not output.parent.is_dir():
-        raise ValueError(f'-o {output}: directory {output.parent} does not exist')
+    check_output_directory(output)  # before the bags are read
     report = options.report_dir if options else None
     with AtomicOutputs(output, report) as outputs:  # -o, --report: complete, or not at all
         return _calibrate(bags, output, outputs, options, settings, gyro_topic, temp_topic, stdout)

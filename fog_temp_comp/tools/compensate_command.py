@@ -39,7 +39,7 @@ from fog_temp_comp.core.restfile import (
     write_learned_bias,
 )
 from fog_temp_comp.tools import blockreplay
-from fog_temp_comp.tools.atomic import AtomicOutputs
+from fog_temp_comp.tools.atomic import AtomicOutputs, check_output_directory
 from fog_temp_comp.tools.chunkreplay import ChunkReplayer, chunked
 from fog_temp_comp.tools.evaluate_command import effective_settings
 from fog_temp_comp.tools.salvaged import Salvaged
@@ -96,6 +96,7 @@ def compensate_command(
     coeffs = load(coeffs_path)
     if out_bag.exists():
         raise FileExistsError(f'{out_bag}: exists already, not overwriting')
+    check_output_directory(out_bag)  # before the bag is read
     settings = effective_settings(coeffs, denoise_method)
     if (rest_bias_in or rest_bias_out) and not (rest is not None and rest.enabled):
         raise ValueError('--rest-bias-in/--rest-bias-out need --rest-learning')
