@@ -20,7 +20,9 @@ Schema (version 1)::
 
 from __future__ import annotations
 
+import difflib
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -84,6 +86,24 @@ def model_equation(terms: tuple[str, ...]) -> str:
     }
     parts = [names.get(t, _hinge_text(t)).format(k=coefficient_key(t)) for t in terms]
     return 'D [deg/h] = ' + ' + '.join(parts)
+
+
+#: every top-level key :func:`to_dict` may write; :func:`from_dict` refuses others
+TOP_LEVEL_KEYS = (
+    'schema_version',
+    'model',
+    'terms',
+    'frame_id',
+    'temperature_frame_id',
+    'temperature_topic',
+    'temperature_type',
+    'temperature_field',
+    'axes',
+    'calibrated_range',
+    'denoise',
+    'fit',
+    'provenance',
+)
 
 
 def to_dict(coeffs: Coefficients) -> dict[str, Any]:
@@ -217,6 +237,7 @@ def from_dict(data: Any) -> Coefficients:
         raise CoefficientsError(
             f'schema_version: {version} is not supported (this package reads {SCHEMA_VERSION})'
         )
+    _refuse_unknown(data, TOP_LEVEL_KEYS, '', 'notes belong under provenance')
     terms = _get(data, 'terms', list)
     for term in terms:
         try:
@@ -225,6 +246,7 @@ def from_dict(data: Any) -> Coefficients:
             raise CoefficientsError(f'terms: {err}') from None
     terms = tuple(str(t) for t in terms)
     axes = _get(data, 'axes', dict)
+    _refuse_unknown(axes, AXES, 'axes.', 'a gyro has the axes x, y, z')
     matrix = np.empty((len(terms), len(AXES)))
     for j, axis in enumerate(AXES):
         entry = _get(axes, axis, dict, where='axes.')
@@ -266,6 +288,21 @@ def from_dict(data: Any) -> Coefficients:
         temperature_topic=temperature_topic,
         temperature_type=temperature_type,
         temperature_field=temperature_field,
+    )
+
+
+def _refuse_unknown(data: dict[Any, Any], known: Sequence[str], where: str, hint: str) -> None:
+    """A key of ``data`` outside ``known`` (a typo, or a key of another file) is an error."""
+    unknown = [str(key) for key in data if key not in known]
+    if not unknown:
+        return
+    close = difflib.get_close_matches(unknown[0], known, n=1, cutoff=0.75)
+    if close:
+        raise CoefficientsError(
+            f'{where}{unknown[0]}: unknown key; did you mean {where}{close[0]}?'
+        )
+    raise CoefficientsError(
+        f'{where}{unknown[0]}: unknown key; the keys are {", ".join(known)} ({hint})'
     )
 
 
