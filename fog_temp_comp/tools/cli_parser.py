@@ -101,18 +101,18 @@ def _add_rest(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_denoise(parser: argparse.ArgumentParser, default: str | None) -> None:
+def _add_denoise(
+    parser: argparse.ArgumentParser,
+    default: str | None,
+    default_text: str = 'as stored in the coefficients file',
+) -> None:
     parser.add_argument(
         '--denoise',
         choices=METHODS,
         default=default,
         help='Tdot estimator: kalman (Kalman filter on T, Tdot), wavelet (the paper), iir '
         '(Butterworth), llr (local linear regression) or none'
-        + (
-            f' (default: {default})'
-            if default
-            else ' (default: as stored in the coefficients file)'
-        ),
+        + f' (default: {default or default_text})',
     )
 
 
@@ -159,11 +159,22 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The ``simulate`` command."""
     p = sub.add_parser('simulate', help='write synthetic thermal-chamber runs as bags')
-    p.add_argument('out_dir', type=Path, metavar='OUT_DIR')
-    p.add_argument('--format', choices=FORMATS, default='mcap', dest='fmt')
+    p.add_argument(
+        'out_dir',
+        type=Path,
+        metavar='OUT_DIR',
+        help='folder for the bags, their <run>.truth.npz and manifest.yaml (created; runs '
+        'added to a folder of the same simulation join its manifest; files are never '
+        'overwritten)',
+    )
+    p.add_argument(
+        '--format', choices=FORMATS, default='mcap', dest='fmt', help='bag format (default mcap)'
+    )
     p.add_argument('--imu-hz', type=float, default=10.0, help='gyro rate (Hz, default 10)')
     p.add_argument('--temp-hz', type=float, default=1.0, help='temperature rate (Hz, default 1)')
-    p.add_argument('--seed', type=int, default=0)
+    p.add_argument(
+        '--seed', type=int, default=0, help="random seed of the runs' noise (default 0)"
+    )
     p.add_argument(
         '--realistic',
         action='store_true',
@@ -269,9 +280,21 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     """The ``calibrate`` command: bags, output, then its option groups."""
     p = sub.add_parser('calibrate', help='fit drift coefficients from chamber bags')
     p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
-    p.add_argument('-o', '--output', type=Path, required=True, metavar='COEFFS.yaml')
+    p.add_argument(
+        '-o',
+        '--output',
+        type=Path,
+        required=True,
+        metavar='COEFFS.yaml',
+        help='the coefficients file to write (never overwritten)',
+    )
     _add_topics(p)
-    _add_denoise(p, None)
+    _add_denoise(
+        p,
+        None,
+        "chosen with the model from the data; given, the paper's terms "
+        'are fitted with it unless --terms',
+    )
     _add_calibrate_input(p.add_argument_group('input'))
     _add_calibrate_model(p.add_argument_group('model'))
     _add_calibrate_selection(p.add_argument_group('selection and validation (held-out runs)'))
@@ -290,8 +313,9 @@ def _add_temp_field(g: argparse._ArgumentGroup | argparse.ArgumentParser) -> Non
         metavar='ID',
         default='',
         help="of a temperature topic that carries several sensors' readings (told by "
-        "header.frame_id), use this sensor's (default: calibrate keeps the first by name; "
-        'compensate and evaluate the one calibrate kept)',
+        "header.frame_id), use this sensor's (default: calibrate fits each and keeps the "
+        'best, the first by name where a flag sets the model; compensate and evaluate the '
+        'one calibrate kept)',
     )
 
 
@@ -439,7 +463,14 @@ def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p = sub.add_parser('compensate', help='replay a bag through the compensator')
     p.add_argument('in_bag', type=Path, metavar='IN_BAG')
     p.add_argument('--coeffs', type=Path, required=True, metavar='COEFFS.yaml')
-    p.add_argument('-o', '--output', type=Path, required=True, metavar='OUT_BAG')
+    p.add_argument(
+        '-o',
+        '--output',
+        type=Path,
+        required=True,
+        metavar='OUT_BAG',
+        help='the bag to write: the input plus the corrected Imu (never overwritten)',
+    )
     _add_topics(p)
     _add_temp_field(p)
     p.add_argument(
@@ -479,4 +510,11 @@ def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         metavar='DIR',
         help='directory with manifest.yaml (default: simulate into OUT)',
     )
-    p.add_argument('--out', type=Path, default=Path('demo_out'), metavar='OUT')
+    p.add_argument(
+        '--out',
+        type=Path,
+        default=Path('demo_out'),
+        metavar='OUT',
+        help='folder for the coefficients of each method and table.md (and bags/ when '
+        'simulated; default demo_out)',
+    )

@@ -57,9 +57,10 @@ def simulate_command(
     base = REALISTIC if realistic else SimulationConfig()
     cfg = config or dataclasses.replace(base, imu_hz=imu_hz, temp_hz=temp_hz, **(vehicle or {}))
     out_dir.mkdir(parents=True, exist_ok=True)
-    manifest = _simulation_manifest(cfg, fmt, seed)
+    manifest = _manifest_to_extend(out_dir / 'manifest.yaml', _simulation_manifest(cfg, fmt, seed))
+    first = len(manifest['runs'])  # runs added to a folder get seeds of their own
     with AtomicOutputs() as outputs:  # all files appear at the end, or none
-        for k, (kind, setpoint) in enumerate(runs or paper_plan()):
+        for k, (kind, setpoint) in enumerate(runs or paper_plan(), start=first):
             run = simulate_run(kind, setpoint, cfg, seed=seed * 1000 + k)
             path = out_dir / bag_name(run.name, fmt)
             bagio.write_chamber_bag(
@@ -92,6 +93,29 @@ def simulate_command(
         manifest_path = outputs.path(out_dir / 'manifest.yaml', replace=True)
         manifest_path.write_text(yaml.safe_dump(manifest, sort_keys=False))
     return 0
+
+
+def _manifest_to_extend(path: Path, new: dict[str, Any]) -> dict[str, Any]:
+    """``new``, or the folder's manifest if it describes the same simulation (runs are added).
+
+    A folder that holds another simulation (other rates, coefficients, seed, format, vehicle)
+    is refused: one manifest describes all of a folder's runs.
+    """
+    if not path.exists():
+        return new
+    try:
+        old = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise ValueError(f'{path}: cannot read the manifest to add runs to: {err}') from None
+    if not isinstance(old, dict) or not isinstance(old.get('runs'), list):
+        raise ValueError(f'{path}: not a manifest of fog-temp-comp simulate')
+    differ = [key for key in new if key != 'runs' and old.get(key) != new[key]]
+    if differ:
+        raise ValueError(
+            f'{path.parent} holds a simulation with other settings ({", ".join(differ)}): '
+            'write these runs to another directory'
+        )
+    return old
 
 
 def _simulation_manifest(cfg: SimulationConfig, fmt: str, seed: int) -> dict[str, Any]:
