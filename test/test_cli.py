@@ -33,12 +33,14 @@ from fog_temp_comp.bag.bagio import (
 )
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.coefficients import load
+from fog_temp_comp.core.compensator_types import CompensatorCounters
 from fog_temp_comp.core.denoise import METHODS
 from fog_temp_comp.core.evaluate import compensate_record
 from fog_temp_comp.core.model import PAPER_TERMS, coefficient_key
 from fog_temp_comp.core.restfile import file_sha256, read_learned_bias
 from fog_temp_comp.core.units import AXES, DEG_H_PER_RAD_S
 from fog_temp_comp.tools import cli, commands
+from fog_temp_comp.tools.evaluate_command import clamp_notes
 from fog_temp_comp.tools.simulate import (
     TRUE_COEFFICIENTS,
     SimulatedRun,
@@ -1296,3 +1298,40 @@ def test_simulate_cli_turn_on_shift_and_rest_motion_phases(
         with pytest.raises(SystemExit):
             cli.main(['simulate', str(tmp_path / 'bad'), *bad])
         assert 'expected' in capsys.readouterr().err
+
+
+def test_simulate_into_a_folder_adds_runs_to_its_manifest(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A second simulate into the folder: its manifest lists both; other settings are refused."""
+    out = tmp_path / 'sim'
+    argv = ['simulate', str(out), '--imu-hz', '1', '--seed', '4', '--runs']
+    assert cli.main([*argv, 'soak:20']) == 0
+    assert cli.main([*argv, 'soak:30']) == 0
+    manifest = yaml.safe_load((out / 'manifest.yaml').read_text())
+    assert [r['name'] for r in manifest['runs']] == ['soak_20', 'soak_30']
+    first, second = (read_record(out / r['bag']) for r in manifest['runs'])
+    noise = [np.diff(r.rates_rad_s[:, 0]) for r in (first, second)]
+    assert not np.allclose(noise[0], noise[1])  # a seed of its own, not the first run's noise
+    capsys.readouterr()
+    assert (
+        cli.main(['simulate', str(out), '--imu-hz', '2', '--seed', '4', '--runs', 'soak:10']) == 1
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f'ERROR: {out} holds a simulation with other settings (imu_hz): write these '
+        'runs to another directory'
+    ]
+    assert sorted(p.name for p in out.iterdir() if 'soak_10' in p.name) == []
+    assert yaml.safe_load((out / 'manifest.yaml').read_text()) == manifest
+
+
+def test_evaluate_notes_never_say_zero_percent(coeffs_yaml: Path) -> None:
+    """A guard that acted on a few samples of many is counted, not rounded to '0 %'."""
+    coeffs = load(coeffs_yaml)
+    few = CompensatorCounters(imu_corrected=10_000, imu_tdot_clamped=3, imu_tdot_extrapolated=60)
+    notes = clamp_notes('run', few, coeffs)
+    assert len(notes) == 2
+    assert notes[0].endswith('for 3 (under 1 %) of the gyro samples')
+    assert notes[1].endswith('for 1 % of the gyro samples')
+    assert clamp_notes('run', CompensatorCounters(imu_corrected=10_000), coeffs) == []

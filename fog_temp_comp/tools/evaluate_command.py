@@ -107,9 +107,7 @@ def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) 
         ),
     ):
         if count:
-            notes.append(
-                f'note: {name}: {text} for {100 * count / total:.0f} % of the gyro samples'
-            )
+            notes.append(f'note: {name}: {text} for {_share(count, total)} of the gyro samples')
     if counters.temperature_faults:
         notes.append(
             f'note: {name}: {counters.temperature_faults} temperature readings further outside '
@@ -125,6 +123,12 @@ def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) 
             'estimate'
         )
     return notes
+
+
+def _share(count: int, total: int) -> str:
+    """``count`` of ``total`` in words: '12 %', or '3 (under 1 %)' where a % would read 0."""
+    percent = 100 * count / total
+    return f'{percent:.0f} %' if percent >= 0.5 else f'{count} (under 1 %)'
 
 
 def effective_settings(coeffs: Coefficients, denoise_method: str | None) -> DenoiseSettings:
