@@ -494,6 +494,17 @@ def test_a_folder_of_bags_or_no_bag_gets_the_same_line_from_every_command(
         assert not (tmp_path / 'c.yaml').exists() and not (tmp_path / 'out').exists()
 
 
+def test_a_cut_bags_warning_names_it_once(
+    bases: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The recovery warning quotes the reason rosbags gave, not our whole open error again."""
+    bag = damage(cut_fraction(0.5))(copy(bases, 'mcap', tmp_path))
+    assert calibrate(bag, tmp_path / 'c.yaml') == 0
+    warning = next(w for w in capsys.readouterr().err.splitlines() if 'recovered (' in w)
+    assert warning.count(str(bag)) == 1 and 'cannot open bag' not in warning, warning
+    assert 'rosbags cannot open it whole: ' in warning
+
+
 def test_the_matrix_has_at_least_40_cases() -> None:
     assert len(CASES) + len(DATA) + len(YAML) >= 40
 

@@ -56,7 +56,8 @@ class _McapReading(_StreamDecoding):
         if not topics:
             return False
         if (self.path / 'metadata.yaml').is_file() or not self.path.is_dir():
-            self.salvage.damage(f'cannot open as a whole bag ({err})')
+            reason = str(err.__cause__ or err).rstrip('.')  # rosbags' words, without our path
+            self.salvage.damage(f'rosbags cannot open it whole: {reason}')
         self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
         self._resolve_temperature(topics)
         if not self._batch_readable():
