@@ -109,7 +109,7 @@ def del_key(path: str) -> Callable[[dict], None]:
         (set_key('temperature_type', 7), 'temperature_type: expected a string'),
         (set_key('fram_id', 'imu'), 'fram_id: unknown key; did you mean frame_id[?]'),
         (set_key('temperature_topc', '/t'), 'did you mean temperature_topic[?]'),
-        (set_key('notes', 'unit 7'), 'notes: unknown key; the keys are .*[(]notes belong under provenance[)]'),
+        (set_key('notes', 'unit 7'), 'notes: unknown key; the keys are .*under provenance[)]'),
         (set_key('axes.w', {'d0_deg_h': 1.0}), 'axes.w: unknown key; the keys are x, y, z'),
     ],
 )

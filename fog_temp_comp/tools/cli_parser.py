@@ -203,9 +203,15 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         help="runs to write instead of the paper's plan, e.g. soak:20,cycle:1.0 (soak setpoint "
         'in degC, cycle rate in degC/min)',
     )
-    g = p.add_argument_group(
-        'vehicle (to judge bias learning at rest; the truth files hold the shift and rotation)'
+    _add_simulate_vehicle(
+        p.add_argument_group(
+            'vehicle (to judge bias learning at rest; the truth files hold the shift and rotation)'
+        )
     )
+
+
+def _add_simulate_vehicle(g: argparse._ArgumentGroup) -> None:
+    """``simulate``'s vehicle options: turn-on shift, power-on heating, rest/motion phases."""
     g.add_argument(
         '--turn-on-shift-deg-h',
         type=_vector3,
