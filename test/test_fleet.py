@@ -177,6 +177,11 @@ def test_fleet_prior_then_calibrate_a_short_run_with_it(
     assert cli.main(['fleet', 'prior', str(out), '-o', str(prior)]) == 0, capsys.readouterr()
     data = yaml.safe_load(prior.read_text())
     assert data['n_units'] == 3 and len(data['left_out']) == 3  # the failed units
+    prior.write_text('kept: true\n')  # an existing -o is refused, not overwritten
+    assert cli.main(['fleet', 'prior', str(out), '-o', str(prior)]) == 1
+    assert 'exists already, not overwriting' in capsys.readouterr().err
+    assert prior.read_text() == 'kept: true\n'
+    prior.write_text(yaml.safe_dump(data))
     assert data['terms'] == OPTIONS['terms'].split(',')
     # a new unit of the model, stopped 7 min into its first ramp
     unit = draw_unit(FLEET_CHAMBER, np.random.default_rng(99))

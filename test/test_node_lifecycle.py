@@ -116,6 +116,20 @@ def test_bad_coefficients_file_fails_configure_and_stays_unconfigured(
         harness.close()
 
 
+def test_a_transition_the_state_has_not_fails_and_the_node_keeps_serving(
+    managed: Any, capfd: pytest.CaptureFixture[str]
+) -> None:
+    harness, manager = managed
+    capfd.readouterr()
+    assert not manager.transition(Transition.TRANSITION_ACTIVATE)  # while unconfigured
+    assert manager.state() == State.PRIMARY_STATE_UNCONFIGURED
+    err = capfd.readouterr().err
+    assert "transition 3 is not available from state 'unconfigured'" in err
+    assert manager.transition(Transition.TRANSITION_CONFIGURE)  # still served
+    assert not manager.transition(Transition.TRANSITION_CONFIGURE)  # twice: not from inactive
+    assert manager.state() == State.PRIMARY_STATE_INACTIVE
+
+
 def test_output_only_while_active_and_tdot_state_kept_across_deactivate(managed: Any) -> None:
     harness, manager = managed
     node = harness.node

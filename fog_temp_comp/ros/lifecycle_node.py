@@ -24,12 +24,17 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, State, TransitionCallbackReturn
+from rclpy.lifecycle.node import LifecycleNodeMixin
 from rclpy.publisher import Publisher
 
 from fog_temp_comp.core.coefficients import CoefficientsError
 from fog_temp_comp.ros.compensator_shell import CompensatorShell
 from fog_temp_comp.ros.spin import run
+
+#: rclpy's own transition step (a private method, present in Humble and Jazzy)
+_RCLPY_CHANGE_STATE = LifecycleNodeMixin._LifecycleNodeMixin__change_state  # type: ignore[attr-defined]
 
 
 class CompensatorLifecycleNode(CompensatorShell, LifecycleNode):
@@ -88,6 +93,23 @@ class CompensatorLifecycleNode(CompensatorShell, LifecycleNode):
         self.save_learned_bias('shutdown')
         self._release()
         return TransitionCallbackReturn.SUCCESS
+
+    def _LifecycleNodeMixin__change_state(self, transition_id: int) -> TransitionCallbackReturn:
+        """A transition the current state has not (ACTIVATE while unconfigured) fails, logged.
+
+        rclpy before ros2/rclpy#1319 (Humble, the Jazzy wheels) lets rcl's "Transition is not
+        registered" escape the change_state service callback and stop the node; rclcpp and
+        newer rclpy answer ``success: False`` and stay in the current state, as this does.
+        """
+        try:
+            return _RCLPY_CHANGE_STATE(self, transition_id)
+        except RCLError as err:
+            label = self._state_machine.current_state[1]
+            self.get_logger().error(
+                f'transition {transition_id} is not available from state {label!r}: '
+                f'{str(err).splitlines()[0]}'
+            )
+            return TransitionCallbackReturn.FAILURE
 
     def _release(self) -> None:
         self.output_enabled = False

@@ -31,6 +31,7 @@ import yaml
 
 from fog_temp_comp.core.model import coefficient_key
 from fog_temp_comp.core.units import AXES
+from fog_temp_comp.tools.atomic import AtomicOutputs
 from fog_temp_comp.tools.fleet_manifest import ParseCalibrate, UnitJob, load_manifest
 from fog_temp_comp.tools.fleet_task import UnitResult, calibrate_unit
 
@@ -317,17 +318,19 @@ def fleet_prior_command(fleet_dir: Path, output: Path, *, stdout: TextIO | None 
     from fog_temp_comp.core.prior import estimate_prior, save_prior
 
     stdout = stdout or sys.stdout
-    rows = read_table(fleet_dir / TABLE_NAME)
-    good = [r for r in rows if r['status'] == 'ok' and not r.get('outlier')]
-    prior, notes = estimate_prior(
-        [(r['unit'], load(fleet_dir / f'{r["unit"]}.yaml')) for r in good]
-    )
-    notes = [
-        f'{r["unit"]}: {r["status"]} {r.get("outlier") or r.get("reason")}'
-        for r in rows
-        if r not in good
-    ] + notes
-    save_prior(prior, output, notes=notes)
+    with AtomicOutputs(output) as outputs:  # an existing -o is refused, never overwritten
+        temporary = outputs.path(output)
+        rows = read_table(fleet_dir / TABLE_NAME)
+        good = [r for r in rows if r['status'] == 'ok' and not r.get('outlier')]
+        prior, notes = estimate_prior(
+            [(r['unit'], load(fleet_dir / f'{r["unit"]}.yaml')) for r in good]
+        )
+        notes = [
+            f'{r["unit"]}: {r["status"]} {r.get("outlier") or r.get("reason")}'
+            for r in rows
+            if r not in good
+        ] + notes
+        save_prior(prior, temporary, notes=notes)
     print(
         f'prior of {len(prior.units)} units ({len(rows) - len(prior.units)} left out), terms '
         f'{",".join(prior.terms)}; wrote {output}',
