@@ -119,7 +119,7 @@ def test_bad_coefficients_file_fails_configure_and_stays_unconfigured(
 def test_a_transition_the_state_has_not_fails_and_the_node_keeps_serving(
     managed: Any, capfd: pytest.CaptureFixture[str]
 ) -> None:
-    harness, manager = managed
+    _, manager = managed
     capfd.readouterr()
     assert not manager.transition(Transition.TRANSITION_ACTIVATE)  # while unconfigured
     assert manager.state() == State.PRIMARY_STATE_UNCONFIGURED
