@@ -144,6 +144,11 @@ def test_output_only_while_active_and_tdot_state_kept_across_deactivate(managed:
     stamp_s = feed_temperature(harness, offline, 1000.0, 120)
     assert harness.send_imu(stamp_s + 0.5, RATE_RAD_S) is None
     assert node.imu_while_inactive == 1
+    status = harness.diagnose()  # said, with the gyro's rate: it arrives, it is not used
+    values = {v.key: v.value for v in status.values}
+    assert 'inactive: output off, 1 gyro messages ignored' in status.message
+    assert values['output'] == 'off (inactive)' and values['imu_while_inactive'] == '1'
+    assert float(values['imu_rate_hz']) > 0
 
     assert manager.transition(Transition.TRANSITION_ACTIVATE)
     assert manager.state() == State.PRIMARY_STATE_ACTIVE
@@ -152,6 +157,9 @@ def test_output_only_while_active_and_tdot_state_kept_across_deactivate(managed:
     out = harness.send_imu(stamp_s + 0.5, RATE_RAD_S)
     assert out is not None
     assert_array_equal(rate_of(out), offline.correct(stamp_s + 0.5, RATE_RAD_S))
+    status = harness.diagnose()
+    assert 'inactive' not in status.message
+    assert {v.key: v.value for v in status.values}['output'] == 'on'
 
     # deactivate: no output, the filter keeps its state and keeps taking temperature
     assert manager.transition(Transition.TRANSITION_DEACTIVATE)

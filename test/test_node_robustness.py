@@ -302,6 +302,20 @@ def test_stale_temperature_follows_policy_and_warns(
         h.close()
 
 
+def test_a_gyro_that_stops_is_an_error_until_it_comes_back(harness: Harness) -> None:
+    harness.send_temperature(T0, 25.0)
+    harness.send_imu(T0 + 0.5, RATE)
+    assert 'no gyro messages' not in harness.diagnose().message
+    status = harness.diagnose()  # nothing since the last report: nothing published
+    assert status.level == ERROR
+    assert 'no gyro messages since the last report: nothing published' in status.message
+    assert diag_values(status)['imu_rate_hz'] == '0'
+    harness.send_temperature(T0 + 1.0, 25.0)
+    harness.send_imu(T0 + 1.5, RATE)
+    status = harness.diagnose()
+    assert 'no gyro messages' not in status.message and status.level != ERROR
+
+
 @pytest.mark.parametrize(('offset_s', 'side'), [(-18.0, 'behind'), (7.0, 'ahead of')])
 def test_temperature_stamped_by_another_clock_is_reported(
     harness: Harness, offset_s: float, side: str
@@ -647,6 +661,7 @@ def test_frame_id_mismatch(
         status = h.diagnose()
         assert 'frame_id differs' in status.message
         assert status.level == (ERROR if require else WARN)
+        assert float(diag_values(status)['imu_rate_hz']) > 0  # received, whatever became of it
         # one stray message does not leave the warning up for the rest of the run
         h.send_imu(T0 + 0.6, RATE)
         status = h.diagnose()

@@ -117,6 +117,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self.output_enabled = True
         #: gyro messages ignored while output_enabled was off
         self.imu_while_inactive = 0
+        #: gyro messages received (any frame_id, active or not): ``imu_rate_hz``
+        self.imu_received = 0
         #: Imu messages handed to the output's publisher (corrected, or passed through as they
         #: came; tests wait for exactly these)
         self.imu_published = 0
@@ -230,6 +232,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._last_counters = dataclasses.replace(self.compensator.status.counters)
         self._last_report_time = time.monotonic()
+        self._last_received = (self.imu_received, self.imu_while_inactive)
         period = self.get_parameter('diagnostics_period_s').value
         self._diag_timer = self.create_timer(period, self.publish_diagnostics)
 
@@ -375,6 +378,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             self.compensator.rest.set_external_rest(msg.data)
 
     def _on_imu(self, msg: Imu) -> None:
+        self.imu_received += 1
         if not self.output_enabled:  # inactive lifecycle node: no output, no gyro state
             self.imu_while_inactive += 1
             return
@@ -420,6 +424,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         counters = self.compensator.status.counters
         previous = self._last_counters
         self._check_forced_window()  # first: the report shows the file it may write
+        received = self.imu_received - self._last_received[0]
         report = build_report(
             self.compensator.status,
             previous,
@@ -427,7 +432,13 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             coefficients_file=self.config.coefficients_file,
             method=self.config.settings.method,
             reading_model=reading_model(self.config.settings),
-            imu_rate_hz=(counters.imu_total - previous.imu_total) / elapsed,
+            imu_rate_hz=received / elapsed,
+            gyro_stopped=not received and self.imu_received > 0,
+            inactive=(
+                None
+                if self.output_enabled
+                else (self.imu_while_inactive, self.imu_while_inactive - self._last_received[1])
+            ),
             temperature_rate_hz=(counters.temperature_total - previous.temperature_total)
             / elapsed,
             stale_after_s=self.compensator.stale_after_s,
@@ -453,6 +464,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self._log_console(counters, previous)
         self._last_counters = dataclasses.replace(counters)
         self._last_report_time = now
+        self._last_received = (self.imu_received, self.imu_while_inactive)
         status = DiagnosticStatus(
             level=bytes([report.level]),
             name=f'{self.get_fully_qualified_name().lstrip("/")}: FOG temperature compensation',
@@ -470,7 +482,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         Asked of the graph while an input is silent; each found is logged (throttled).
         """
         silent = []
-        if not counters.imu_total and not self.imu_while_inactive:
+        if not self.imu_received:
             silent.append((self._imu_sub.topic_name, 'sensor_msgs/msg/Imu'))
         if not counters.temperature_total:
             silent.append((self._temp_sub.topic_name, self._temperature.type_name))

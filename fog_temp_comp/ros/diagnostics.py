@@ -66,6 +66,8 @@ def build_report(
     reading_model: str = '-',
     imu_rate_hz: float,
     temperature_rate_hz: float,
+    gyro_stopped: bool = False,
+    inactive: tuple[int, int] | None = None,
     stale_after_s: float = math.nan,
     frame_mismatches: tuple[int, int] = (0, 0),
     unstamped: int = 0,
@@ -88,9 +90,13 @@ def build_report(
     clocks hours apart that made the node time both on arrival (nan: it did not). ``frames``:
     the temperature frame_id kept; ``frame_mismatches``: gyro messages of another frame_id,
     in all and since the last report; ``type_mismatches``: inputs published as other types.
+    ``imu_rate_hz``: gyro messages received, any frame_id; ``gyro_stopped``: none since the
+    last report after some came; ``inactive``: a lifecycle node's output is off, (gyro
+    messages ignored in all, since the last report).
     """
     counters = status.counters
-    reasons = _temperature_reasons(status, previous, plausible_degC)
+    reasons = _input_reasons(gyro_stopped, inactive)
+    reasons += _temperature_reasons(status, previous, plausible_degC)
     for name, text in _WARN_COUNTERS.items():
         delta = getattr(counters, name) - getattr(previous, name)
         if delta > 0:
@@ -120,6 +126,9 @@ def build_report(
         ('filter_ready', str(status.estimator_ready)),
     ]
     values += _coefficients_values(coefficients, coefficients_file)
+    values.append(('output', 'off (inactive)' if inactive is not None else 'on'))
+    if inactive is not None:
+        values.append(('imu_while_inactive', str(inactive[0])))
     values += [
         *_fault_values(status, plausible_degC),
         ('frame_id_mismatches', str(frame_mismatches[0])),
@@ -136,6 +145,15 @@ def build_report(
             ('rest_bias_file_state', rest_bias_file[1]),
         ]
     return Report(level, message, values)
+
+
+def _input_reasons(gyro_stopped: bool, inactive: tuple[int, int] | None) -> list[tuple[int, str]]:
+    """The gyro input: stopped (an ERROR: nothing is published), or ignored while inactive."""
+    if inactive is not None:
+        return [(OK, f'inactive: output off, {inactive[1]} gyro messages ignored')]
+    if gyro_stopped:
+        return [(ERROR, 'no gyro messages since the last report: nothing published')]
+    return []
 
 
 def _temperature_frames(
