@@ -161,14 +161,22 @@ def test_backwards_stamp_resets_filter_state(model: DriftModel) -> None:
     for k in range(600):
         comp.add_temperature(1000.0 + k, 20.0 + k / 60.0)  # 1 degC/min
     assert comp.status.tdot_degC_per_min > 0.5
-    assert comp.add_temperature(10.0, 30.0)  # clock went back
+    # one stamp far back (a reading recorded late, a bad stamp): out of order, state kept
+    assert not comp.add_temperature(10.0, 30.0)
+    assert comp.add_temperature(1600.0, 30.0)
+    counters = comp.status.counters
+    assert (counters.temperature_out_of_order, counters.time_jumps) == (1, 0)
+    assert comp.status.tdot_degC_per_min > 0.5
+    # the clock went back: the second reading back there confirms the jump
+    assert not comp.add_temperature(10.0, 30.0)
+    assert comp.add_temperature(11.0, 30.0)
     assert comp.status.counters.time_jumps == 1
     assert comp.status.tdot_degC_per_min == 0.0
     assert comp.status.temperature_degC == 30.0
     # history after the jump is fresh: same as a new compensator fed the same samples
     fresh = Compensator(model, DenoiseSettings(method='iir'))
-    fresh.add_temperature(10.0, 30.0)
-    for k in range(1, 100):
+    fresh.add_temperature(11.0, 30.0)
+    for k in range(2, 100):
         comp.add_temperature(10.0 + k, 30.0 - k / 120.0)
         fresh.add_temperature(10.0 + k, 30.0 - k / 120.0)
     assert_array_equal(comp.correct(109.5, np.zeros(3)), fresh.correct(109.5, np.zeros(3)))
@@ -382,8 +390,13 @@ def test_gyro_before_the_first_temperature_waits_for_it_then_passes_through(
     assert outputs == [None] * 21 + [rate] * 3  # 0..10 s waited, 10.5 s on passed
     silent.add_temperature(t0 + 12.0, 25.0)
     assert silent.correct_xyz(t0 + 12.5, *rate) != rate
-    # a time jump back resets the state: the gyro waits for a temperature again
-    assert silent.correct_xyz(t0 - 100.0, *rate) is None
+    # one stamp far back is out of order (corrected); two in a row are a time jump, which
+    # resets the state: the gyro waits for a temperature again
+    assert silent.correct_xyz(t0 - 100.0, *rate) != rate
+    assert silent.correct_xyz(t0 + 13.0, *rate) != rate
+    assert silent.status.counters.time_jumps == 0
+    assert silent.correct_xyz(t0 - 100.0, *rate) != rate
+    assert silent.correct_xyz(t0 - 99.5, *rate) is None
     assert silent.status.counters.time_jumps == 1
 
 
@@ -464,8 +477,8 @@ def _awkward_stream(seed: int, temp_hz: int = 1) -> list[Event]:
     Gyro before the first temperature, a steady ramp and a fast one (Tdot clamped or
     extrapolated), temperatures beyond the calibrated range (clamped), a temperature gap (stale,
     restart), a glitch and a confirmed step, NaN rates and temperatures, duplicate messages,
-    repeated, zero and out-of-order stamps, a time jump back (reset), temperature stamps running
-    ahead of the gyro.
+    repeated, zero and out-of-order stamps (some alone 5 s back), a time jump back (reset),
+    temperature stamps running ahead of the gyro.
     """
     rng = np.random.default_rng(seed)
     events: list[Event] = []
@@ -483,6 +496,8 @@ def _awkward_stream(seed: int, temp_hz: int = 1) -> list[Event]:
             events.append(('T', stamp, (temp + 5.0,)))  # a step, confirmed
         elif k == 1000:
             events.append(('T', stamp, (math.nan,)))
+        elif k == 1100:
+            events.append(('T', stamp - 5.0, (temp,)))  # one reading far back: not a jump
         elif 1600 <= k < 1700:
             events.append(('T', stamp + 15.0, (temp,)))  # ahead of the gyro
         elif k > 5:
@@ -501,6 +516,8 @@ def _awkward_stream(seed: int, temp_hz: int = 1) -> list[Event]:
                     xyz = events[-1][2]  # or the same message twice
             elif rng.random() < 0.001:
                 s = s - 0.3  # out of order
+            elif rng.random() < 0.0005:
+                s = s - 5.0  # out of order by more than the time-jump threshold, alone
             elif rng.random() < 0.0005:
                 s = 0.0  # no stamp
             events.append(('G', s, xyz))
@@ -572,6 +589,9 @@ def _assert_same_state(a: Compensator, b: Compensator) -> None:
     # repr: exact for floats, and NaN compares equal to NaN
     assert repr(a.status) == repr(b.status)
     assert a._correction == b._correction
+    assert repr((a._imu_jump_s, a._temperature_jump_s)) == repr(
+        (b._imu_jump_s, b._temperature_jump_s)
+    )
 
 
 @pytest.mark.parametrize(
@@ -612,7 +632,9 @@ def test_correct_block_equals_correct_xyz_bit_for_bit(
     # the stream exercises what it claims to
     assert counters.imu_duplicate and counters.imu_repeated_stamp
     assert counters.imu_out_of_order and counters.imu_zero_stamp
-    assert counters.time_jumps and counters.imu_nonfinite
+    # the loop, and the temperature coming back from 15 s ahead; the lone stamps back are not
+    assert counters.time_jumps == 2 and counters.imu_nonfinite
+    assert counters.temperature_out_of_order
     bridges = method == 'kalman' and GuardSettings(**guard).temperature_bridge_s > 0  # type: ignore[arg-type]
     assert (counters.temperature_gaps_bridged if bridges else counters.temperature_gaps) > 0
     assert counters.imu_corrected and counters.imu_awaiting_temperature  # gyro before temperature

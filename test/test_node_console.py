@@ -139,18 +139,19 @@ def test_temperature_stale_warns_throttled(
 def test_time_jumps_warn_throttled(
     harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
 ) -> None:
-    """Two gyros on one topic on clocks 2 s apart reset the filter at every message."""
+    """A gyro clock that steps 2 s back, once in each report: one line per throttle period."""
     h = harness_factory()
     h.send_temperature(T0, 25.0)
 
     def cause(k: int) -> None:
         h.send_imu(T0 + 10 * k + 3.0, RATE)
-        h.send_imu(T0 + 10 * k + 1.0, RATE)  # the other gyro's clock, 2 s behind
+        h.send_imu(T0 + 10 * k + 1.0, RATE)  # 2 s back: out of order, alone
+        h.send_imu(T0 + 10 * k + 1.1, RATE)  # back there again: the clock stepped back
 
     lines = three_times(Console(capfd), h, cause, 'WARN', r'^time jump: ')
     assert lines[0].startswith(
-        'time jump: a gyro or temperature stamp 1 s or more before the one before it '
-        '(1 since the last report, 1 in all): filter reset'
+        'time jump: 2 gyro or temperature stamps in a row 1 s or more back (1 since the last '
+        'report, 1 in all): filter reset'
     )
     assert '(1 since the last report, 3 in all)' in lines[1]
 

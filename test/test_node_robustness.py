@@ -211,7 +211,14 @@ def test_gyro_time_jump_backwards_resets_and_reports(harness: Harness) -> None:
     for k in range(30):
         harness.send_temperature(T0 + k, 20.0 + k / 60.0)
         harness.send_imu(T0 + k + 0.5, RATE)
-    out = harness.send_imu(T0 - 3600.0, RATE)  # bag looped
+    counters = harness.node.compensator.status.counters
+    # one stamp an hour back among the rest (a bad stamp): out of order, corrected, no reset
+    assert harness.send_imu(T0 - 3600.0, RATE) is not None
+    assert harness.send_imu(T0 + 30.0, RATE) is not None
+    assert (counters.imu_out_of_order, counters.time_jumps) == (1, 0)
+    assert harness.node.compensator.status.estimator_ready
+    assert harness.send_imu(T0 - 3600.0, RATE) is not None  # the bag looped
+    out = harness.send_imu(T0 - 3599.9, RATE)  # confirmed by the next stamp
     # after the reset there is no temperature yet: the gyro waits for one (not published),
     # rather than taking a stale correction
     assert out is None
@@ -544,9 +551,15 @@ def test_temperature_time_jump_backwards_resets(harness: Harness) -> None:
         harness.send_temperature(T0 + k, 20.0 + k / 10.0)  # 6 degC/min
     harness.send_imu(T0 + 39.5, RATE)
     assert harness.node.compensator.status.tdot_degC_per_min > 1.0
+    status = harness.node.compensator.status
+    harness.send_temperature(T0 + 38.8, 20.0)  # 1.2 s back: a reading late, not a jump
+    harness.send_temperature(T0 + 40.0, 24.0)
+    assert (status.counters.temperature_out_of_order, status.counters.time_jumps) == (1, 0)
     harness.send_temperature(T0 - 1000.0, 20.0)
-    assert harness.node.compensator.status.counters.time_jumps == 1
-    assert harness.node.compensator.status.tdot_degC_per_min == 0.0
+    harness.send_temperature(T0 - 999.0, 20.0)  # the second back there: a jump
+    status = harness.node.compensator.status
+    assert status.counters.time_jumps == 1
+    assert status.tdot_degC_per_min == 0.0
 
 
 def test_single_50_degC_glitch_is_rejected(harness: Harness, coefficients: Coefficients) -> None:

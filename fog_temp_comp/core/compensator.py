@@ -94,6 +94,9 @@ class Compensator(_BlockCorrection):
         self._pending: list[tuple[float, float]] = []  # candidate samples of a temperature step
         self._last_temperature = math.nan
         self._last_reading_stamp_s = math.nan
+        # the first stamp of a time jump per input (s), confirmed by the next one; nan: none
+        self._imu_jump_s = math.nan
+        self._temperature_jump_s = math.nan
         # scalar evaluation of the model (the per-message hot path; no small numpy arrays)
         self._term_functions: list[Callable[[float, float, float], float]] = [
             scalar_term_function(term) for term in model.terms
@@ -181,6 +184,7 @@ class Compensator(_BlockCorrection):
             last_fault_degC=self.status.last_fault_degC,
         )
         self._last_temperature = math.nan
+        self._imu_jump_s = self._temperature_jump_s = math.nan
         self._forget_readings()
         if self.rest is not None:
             self.rest.reset()
@@ -221,7 +225,11 @@ class Compensator(_BlockCorrection):
             status.last_fault_degC = temperature_degC
             self._forget_held()
             return False
-        if stamp_s < last:
+        if stamp_s < last:  # far back: a time jump once the next reading is back there too
+            if not self._temperature_jump_s < stamp_s:
+                self._temperature_jump_s = stamp_s
+                counters.temperature_out_of_order += 1
+                return False
             counters.time_jumps += 1
             self.reset()
             status = self.status
@@ -233,6 +241,7 @@ class Compensator(_BlockCorrection):
         elif not self._plausible(stamp_s, temperature_degC):
             return False
         counters.temperature_accepted += 1
+        self._temperature_jump_s = math.nan
         self._last_temperature = temperature_degC
         self._last_reading_stamp_s = stamp_s
         if self.rest is not None:
@@ -376,6 +385,7 @@ class Compensator(_BlockCorrection):
         elif stamp_s > last:
             status.last_imu_stamp_s = stamp_s
             self._last_rates = (x, y, z)
+            self._imu_jump_s = math.nan
         elif stamp_s == last:
             # the same message twice is dropped; another sample on a coarse clock is corrected
             if (x, y, z) == self._last_rates:
@@ -384,13 +394,8 @@ class Compensator(_BlockCorrection):
             counters.imu_repeated_stamp += 1
             self._last_rates = (x, y, z)
             repeated = True
-        elif last - stamp_s >= guard.time_jump_threshold_s:
-            counters.time_jumps += 1
-            self.reset()
-            status = self.status
-            status.last_imu_stamp_s = stamp_s
         else:
-            counters.imu_out_of_order += 1
+            status = self._gyro_stamp_back(stamp_s, last)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             counters.imu_nonfinite += 1
         if stamp_s > self._held_due_s:  # inf unless the sensor is published only on change
@@ -433,6 +438,25 @@ class Compensator(_BlockCorrection):
         else:
             bx, by, bz = self.rest.applied_rad_s
         return (x - bx, y - by, z - bz)
+
+    def _gyro_stamp_back(self, stamp_s: float, last_s: float) -> CompensatorStatus:
+        """A gyro stamp (s) behind the last one (``last_s``); the status, new after a reset.
+
+        ``time_jump_threshold_s`` or more back, as the message before was (and later than
+        it): a time jump, the state is reset. One alone (a bad stamp, a message recorded late)
+        or a smaller step back: out of order, corrected.
+        """
+        counters = self.status.counters
+        if last_s - stamp_s < self.guard.time_jump_threshold_s:
+            counters.imu_out_of_order += 1
+        elif self._imu_jump_s < stamp_s:
+            counters.time_jumps += 1
+            self.reset()
+            self.status.last_imu_stamp_s = stamp_s
+        else:
+            self._imu_jump_s = stamp_s  # a time jump if the next message is back there too
+            counters.imu_out_of_order += 1
+        return self.status
 
     def _set_correction(
         self, correction_deg_h: tuple[float, float, float], valid: bool = True

@@ -9,6 +9,7 @@ Rates in rad/s (drift in deg/h), stamps in s, temperatures in degC, Tdot in degC
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -39,6 +40,7 @@ class _BlockCorrection:
     _estimator: TdotEstimator
     _correction: tuple[float, float, float]
     _last_rates: tuple[float, float, float]
+    _imu_jump_s: float
     _held: HeldReadings
     _horizon_s: float
     _stale_after_s: float
@@ -252,6 +254,7 @@ class _BlockCorrection:
         status.last_imu_stamp_s = float(t[-1])
         x, y, z = rates[-1].tolist()
         self._last_rates = (x, y, z)  # rad/s, for the next message's repeat test
+        self._imu_jump_s = math.nan  # stamps forward: no time jump pending
         counters.imu_nonfinite += int(np.count_nonzero(~np.isfinite(rates).all(axis=1)))
         has = has_s[seg]
         # stamp_s - status.last_temperature_stamp_s > self._stale_after_s

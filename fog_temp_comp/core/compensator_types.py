@@ -68,8 +68,9 @@ class GuardSettings:
         Bound on ``|Tdot|`` (and the lagged Tdot) fed to the model when ``clamp_tdot`` is off,
         degC/min; values beyond it are clamped to it (reported as clamped).
     time_jump_threshold_s : float
-        A stamp this far behind the previous one is a time jump (bag looped, clock reset) and
-        resets the filter state; a smaller step back is an out-of-order message.
+        Two stamps of one input in a row this far behind the one before are a time jump (bag
+        looped, clock reset) and reset the filter state; one alone (a bad stamp, a message
+        recorded late) or a smaller step back is an out-of-order message.
     max_temperature_step_degC : float
         A temperature sample further than this (plus ``max_temperature_rate_degC_per_min`` times
         the elapsed time) from the previous one is rejected as a glitch, unless

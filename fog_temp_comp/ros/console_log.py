@@ -126,10 +126,10 @@ class ConsoleLogMixin(ParametersMixin):
         jumps = counters.time_jumps - previous.time_jumps
         if jumps:
             log.warning(
-                f'time jump: a gyro or temperature stamp {guard.time_jump_threshold_s:g} s or '
-                f'more before the one before it ({jumps} since the last report, '
-                f'{counters.time_jumps} in all): filter reset, the gyro waits for the next '
-                'temperature (a driver restarted, a bag looped, or two clocks on one topic?)',
+                f'time jump: 2 gyro or temperature stamps in a row {guard.time_jump_threshold_s:g}'
+                f' s or more back ({jumps} since the last report, {counters.time_jumps} in all): '
+                'filter reset, the gyro waits for the next temperature (a driver restarted, a '
+                'bag looped, or two clocks on one topic?)',
                 throttle_duration_sec=every,
             )
         if self._arrival.two_clocks:

@@ -97,14 +97,7 @@ def build_report(
     counters = status.counters
     reasons = _input_reasons(gyro_stopped, inactive)
     reasons += _temperature_reasons(status, previous, plausible_degC)
-    for name, text in _WARN_COUNTERS.items():
-        delta = getattr(counters, name) - getattr(previous, name)
-        if delta > 0:
-            reasons.append((WARN, f'{text} ({delta})'))
-    if frame_mismatches[1]:
-        level = ERROR if require_frame_match else WARN
-        action = 'passed through uncorrected' if require_frame_match else 'corrected anyway'
-        reasons.append((level, f'gyro frame_id differs from calibrated one ({action})'))
+    reasons += _counter_reasons(counters, previous, frame_mismatches[1], require_frame_match)
     reasons += _clock_reasons(temperature_stamp_offset_s, two_clocks, clocks_apart_s, unstamped)
     frame_reasons, frame_values = _temperature_frames(frames)
     reasons += frame_reasons + [(ERROR, m.text()) for m in type_mismatches]
@@ -126,9 +119,7 @@ def build_report(
         ('filter_ready', str(status.estimator_ready)),
     ]
     values += _coefficients_values(coefficients, coefficients_file)
-    values.append(('output', 'off (inactive)' if inactive is not None else 'on'))
-    if inactive is not None:
-        values.append(('imu_while_inactive', str(inactive[0])))
+    values += _output_values(inactive)
     values += [
         *_fault_values(status, plausible_degC),
         ('frame_id_mismatches', str(frame_mismatches[0])),
@@ -145,6 +136,32 @@ def build_report(
             ('rest_bias_file_state', rest_bias_file[1]),
         ]
     return Report(level, message, values)
+
+
+def _counter_reasons(
+    counters: CompensatorCounters,
+    previous: CompensatorCounters,
+    frame_mismatches: int,
+    require_frame_match: bool,
+) -> list[tuple[int, str]]:
+    """WARNs for the counters that rose since the last report; gyro of another frame_id."""
+    reasons = []
+    for name, text in _WARN_COUNTERS.items():
+        delta = getattr(counters, name) - getattr(previous, name)
+        if delta > 0:
+            reasons.append((WARN, f'{text} ({delta})'))
+    if frame_mismatches:
+        level = ERROR if require_frame_match else WARN
+        action = 'passed through uncorrected' if require_frame_match else 'corrected anyway'
+        reasons.append((level, f'gyro frame_id differs from calibrated one ({action})'))
+    return reasons
+
+
+def _output_values(inactive: tuple[int, int] | None) -> list[tuple[str, str]]:
+    """Whether the corrected output is on; the gyro messages ignored while it is off."""
+    if inactive is None:
+        return [('output', 'on')]
+    return [('output', 'off (inactive)'), ('imu_while_inactive', str(inactive[0]))]
 
 
 def _input_reasons(gyro_stopped: bool, inactive: tuple[int, int] | None) -> list[tuple[int, str]]:

@@ -175,7 +175,8 @@ GUARD_PARAMETERS: dict[str, tuple[Any, str]] = {
     ),
     'time_jump_threshold_s': (
         _GUARD_DEFAULTS.time_jump_threshold_s,
-        'a stamp this far (s) behind the previous one resets the filter (bag loop, sim reset)',
+        'two stamps in a row this far (s) behind the one before reset the filter (bag loop, '
+        'sim reset); one alone is out of order',
     ),
     'max_temperature_step_degC': (
         _GUARD_DEFAULTS.max_temperature_step_degC,

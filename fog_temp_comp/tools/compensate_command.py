@@ -149,10 +149,17 @@ def _report_written(
         )
     if counters.time_jumps:
         print(
-            f'WARNING: {run.in_bag}: {counters.time_jumps} time jumps (a gyro stamp behind the '
-            'one before by the time-jump threshold, 1 s by default, or more: stamps out of order '
-            'in the bag, or a stretch recorded twice) restarted the correction, which waited '
-            'for a temperature after each',
+            f'WARNING: {run.in_bag}: {counters.time_jumps} time jumps (two gyro stamps in a row '
+            'behind the one before by the time-jump threshold, 1 s by default, or more: a bag '
+            'looped, or a stretch recorded twice after the rest) restarted the correction, '
+            'which waited for a temperature after each',
+            file=sys.stderr,
+        )
+    if counters.imu_out_of_order:
+        print(
+            f'WARNING: {run.in_bag}: {counters.imu_out_of_order} gyro stamps behind the one '
+            'before (out of order in the bag, or a stretch recorded twice, between live '
+            'messages) got the correction of the moment they came, next to them',
             file=sys.stderr,
         )
     after = ' or after a time jump' if counters.time_jumps else ''
