@@ -108,7 +108,7 @@ def test_faulty_units_fail_alone_with_their_reason(fleet: tuple[Path, Path, int,
     assert set(rows) == set(truth)
     expected = {
         'missing': 'no such bag',
-        'damaged': 'cannot open bag',
+        'damaged': '(damaged, cut short, or not a bag?)',
         'short': 'T is not identifiable',
     }
     for unit, info in truth.items():
@@ -118,6 +118,8 @@ def test_faulty_units_fail_alone_with_their_reason(fleet: tuple[Path, Path, int,
         else:
             assert rows[unit]['status'] == 'failed'
             assert expected[info['fault']] in rows[unit]['reason']
+            log = (out / 'logs' / f'{unit}.txt').read_text()
+            assert 'ERROR: ' in log and expected[info['fault']] in log
             assert f'{unit}: FAILED: ' in stdout
             assert not (out / f'{unit}.yaml').exists()
     assert status == 3  # the number of failed units

@@ -105,7 +105,9 @@ def open_bag(path: str | Path) -> Iterator[AnyReader]:
     try:
         reader = _opened_reader(path)
     except Exception as err:  # rosbags raises many types for broken files
-        raise BagError(f'{path}: cannot open bag: {err}') from err
+        raise BagError(
+            f'{path}: cannot open bag: {err} (damaged, cut short, or not a bag?)'
+        ) from err
     try:
         yield reader
     finally:

@@ -169,7 +169,9 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
             except apsw.Error as err:
                 topics = self._salvage_topics(self._sqlite_files)
                 if not topics:
-                    raise BagError(f'{self.path}: cannot open bag: {err}') from err
+                    raise BagError(
+                        f'{self.path}: cannot open bag: {err} (damaged, cut short, or not a bag?)'
+                    ) from err
             self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
             self._resolve_temperature(topics)
             if self._batch_readable():

@@ -5,7 +5,7 @@
 to an embedded ``LocalCluster`` or to ``--scheduler``, and writes, as units complete:
 
 - ``OUT_DIR/<unit>.yaml``: the coefficients, what ``calibrate`` writes for that unit alone;
-- ``OUT_DIR/logs/<unit>.txt``: what ``calibrate`` printed;
+- ``OUT_DIR/logs/<unit>.txt``: what ``calibrate`` printed (a failed unit's ``ERROR:`` last);
 - ``OUT_DIR/.fleet/<unit>.json``: the unit's content hash and its table row (resume state);
 
 then ``OUT_DIR/fleet.csv`` (one row per unit: status, reason, coefficients, standard errors,

@@ -43,7 +43,8 @@ def calibrate_unit(job: UnitJob, previous_digest: str | None = None) -> UnitResu
             commands.calibrate_command(job.bags, output, options=job.options, stdout=stdout)
         except (*commands.USER_ERRORS, OSError) as err:
             reason = ' '.join(str(err).split())[:MAX_REASON_CHARS] or type(err).__name__
-            return UnitResult(job.unit, 'failed', digest, reason=reason, log=stdout.getvalue())
+            log = stdout.getvalue() + f'ERROR: {err}\n'  # the log says why, in full
+            return UnitResult(job.unit, 'failed', digest, reason=reason, log=log)
         text = output.read_text(encoding='utf-8')
         log = stdout.getvalue().replace(str(output), f'{job.unit}.yaml')
     return UnitResult(job.unit, 'ok', digest, yaml_text=text, log=log)
