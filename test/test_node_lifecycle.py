@@ -137,6 +137,7 @@ def test_output_only_while_active_and_tdot_state_kept_across_deactivate(managed:
     assert manager.state() == State.PRIMARY_STATE_INACTIVE
     harness.connect()
     coeffs = load(EXAMPLE)
+    assert node.get_parameter('denoise').value == coeffs.denoise.method  # the file's, shown
     offline = Compensator(coeffs.model, coeffs.denoise, node.config.guard)
     compensator = node.compensator
 

@@ -843,6 +843,38 @@ def test_runtime_reload_of_coefficients(
     assert node.get_parameter('coefficients_file').value == str(other)
 
 
+def test_filter_parameters_show_the_file_values_and_follow_the_next_file(
+    harness: Harness, tmp_path: Path, coefficients: Coefficients
+) -> None:
+    """`ros2 param get`/`dump` read the filter in effect; one the user set stays the user's."""
+    from rcl_interfaces.srv import GetParameters
+
+    node = harness.node
+    client = harness.peer.create_client(GetParameters, f'/{node.get_name()}/get_parameters')
+    harness.spin_until(client.service_is_ready)
+    names = ['denoise', 'iir_cutoff_hz', 'window_samples', 'coefficients_file']
+    future = client.call_async(GetParameters.Request(names=names))
+    harness.spin_until(future.done)
+    values = future.result().values  # rclpy returns none at all if one name had no value
+    settings = coefficients.denoise
+    assert [values[0].string_value, values[1].double_value, values[2].integer_value] == [
+        settings.method,
+        settings.iir_cutoff_hz,
+        settings.window_samples,
+    ]
+    assert node.set_parameters([Parameter('iir_cutoff_hz', value=0.004)])[0].successful
+    other = tmp_path / 'other.yaml'
+    data = to_dict(coefficients)
+    data['denoise'].update(method='wavelet', window_samples=600, iir_cutoff_hz=0.02)
+    other.write_text(yaml.safe_dump(data))
+    assert node.set_parameters([Parameter('coefficients_file', value=str(other))])[0].successful
+    harness.spin_until(lambda: node.get_parameter('denoise').value == 'wavelet')
+    assert node.get_parameter('window_samples').value == 600  # the new file's
+    assert node.get_parameter('iir_cutoff_hz').value == 0.004  # the user's, kept
+    assert (node.config.settings.method, node.config.settings.iir_cutoff_hz) == ('wavelet', 0.004)
+    assert node.compensator.denoise.window_samples == 600
+
+
 def test_runtime_guard_change_applies_without_reset(harness: Harness) -> None:
     node = harness.node
     harness.send_temperature(T0, 25.0)

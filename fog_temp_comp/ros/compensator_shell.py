@@ -79,6 +79,9 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         """Declare and check the parameters (raises :class:`ParameterError` on a bad one)."""
         self._check_params_files([*params_file_paths, *params_files(cli_args)])
         self._declare_parameters()
+        #: filter parameters not set by the user: they hold the coefficients file's values
+        self._filter_from_file = {n for n in FILTER_PARAMETERS if self._value(n, {}) is None}
+        self._showing_file_values = False
         executor = self.get_parameter('executor').value
         if executor not in EXECUTORS:
             raise ParameterError(
@@ -148,6 +151,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             self.config.rest,
         )
         self._warm_up_start_s = None
+        self._show_filter_in_effect()
         #: which frame_id's temperatures are kept (a topic with several sensors' readings)
         self.temperature_frames = FrameLock(
             self.get_parameter('temperature_frame_id').value
@@ -249,7 +253,40 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self._destroy_output(self._publisher)
 
     # ------------------------------------------------------------------ parameter changes
+    def _show_filter_in_effect(self) -> None:
+        """Give each filter parameter the user left unset the coefficients file's value.
+
+        ``ros2 param get`` and ``dump`` then show the filter in effect (and rclpy answers a
+        GetParameters request naming one parameter without a value with no values at all).
+        Such values stay the file's: the next coefficients file replaces them.
+        """
+        kinds = {Parameter.Type.DOUBLE: float, Parameter.Type.INTEGER: int}
+        self._showing_file_values = True
+        try:
+            for name in sorted(self._filter_from_file):
+                field, ptype, _ = FILTER_PARAMETERS[name]
+                value = kinds.get(ptype, str)(getattr(self.config.settings, field))
+                if isinstance(value, float) and not math.isfinite(value):
+                    continue
+                result = self.set_parameters([Parameter(name, ptype, value)])[0]
+                if not result.successful:  # outside the parameter's range: left unset
+                    self.get_logger().debug(f'{name}: {value!r} not shown: {result.reason}')
+        finally:
+            self._showing_file_values = False
+
+    def _show_filter_in_effect_soon(self) -> None:
+        """:meth:`_show_filter_in_effect` once the parameter change under way is done."""
+
+        def once() -> None:
+            self.destroy_timer(timer)
+            if self.configured:
+                self._show_filter_in_effect()
+
+        timer = self.create_timer(0.0, once)
+
     def _on_set_parameters(self, params: Sequence[Parameter]) -> SetParametersResult:
+        if self._showing_file_values:  # the coefficients file's own values, in effect already
+            return SetParametersResult(successful=True)
         changes = {p.name: p for p in params}
         if 'require_frame_id_match' in changes:
             self._require_frame_match = bool(changes['require_frame_id_match'].value)
@@ -258,6 +295,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         rebuild = set(changes) & ({'coefficients_file'} | set(FILTER_PARAMETERS))
         guard_change = set(changes) & set(GUARD_PARAMETERS)
         if not self.configured:  # lifecycle node not configured: configure checks them
+            self._filter_from_file -= set(changes)
             return SetParametersResult(successful=True)
         if not (rebuild or guard_change):
             return SetParametersResult(successful=True)
@@ -268,6 +306,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             return SetParametersResult(successful=False, reason=str(err))
         if rebuild:  # the learned bias belongs to the old coefficients: keep it in the file
             self.save_learned_bias('reconfigure')
+            self._filter_from_file -= set(changes)
+            self._show_filter_in_effect_soon()
         self.config = config
         self._temperature = temperature
         if rebuild:

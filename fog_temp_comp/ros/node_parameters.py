@@ -434,8 +434,8 @@ class ParametersMixin(_NodeBase):
         """The Tdot filter, guard and rest-learning parameters, from their tables."""
         for name, (_, ptype, text) in FILTER_PARAMETERS.items():
             descriptor = ParameterDescriptor(
-                description=text + '; unset = as in the coefficients file; changing it '
-                'restarts the Tdot filter'
+                description=text + "; unset: the coefficients file's value, set at load; "
+                'changing it restarts the Tdot filter'
             )
             if ptype == _T.DOUBLE:
                 descriptor.floating_point_range = [
@@ -502,8 +502,9 @@ class ParametersMixin(_NodeBase):
             raise CoefficientsError('parameter coefficients_file is not set')
         coefficients = load(resolve_path(path))
         overrides = {}
+        from_file: set[str] = getattr(self, '_filter_from_file', set()) - set(changes)
         for name, (field, _, _) in FILTER_PARAMETERS.items():
-            value = self._value(name, changes)
+            value = None if name in from_file else self._value(name, changes)
             if value is not None:
                 overrides[field] = value
         if overrides.get('method', METHODS[0]) not in METHODS:
