@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -213,6 +215,47 @@ def test_node_starts_from_the_bias_file_and_writes_it_on_shutdown(
     saved = read_learned_bias(bias_file)
     assert saved.windows >= 2 and saved.learned_at_stamp_s > 1140.0
     assert_allclose(saved.bias_deg_h, SHIFT_DEG_H, atol=0.05)
+
+
+CTRL_C_SCRIPT = """
+import os, signal, sys, time
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rosharness import Harness
+from test_node_rest import drive_at_rest, rest_node
+
+rclpy.init()
+harness = Harness(None, rest_node(None, rest_bias_file=sys.argv[1]))
+drive_at_rest(harness, 1000.0, 150)
+try:
+    os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C: rclpy's handler shuts the context down
+    harness.executor.spin_once(timeout_sec=1.0)
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+for _ in range(200):  # its signal thread shuts the context down
+    if not harness.node.context.ok():
+        break
+    time.sleep(0.01)
+assert not harness.node.context.ok()
+harness.close()  # destroy_node writes the learned bias
+"""
+
+
+def test_the_bias_written_after_ctrl_c_is_said_on_stderr(tmp_path: Path) -> None:
+    """A real SIGINT: the shutdown write is said on stderr, with no rosout error after it."""
+    bias_file = tmp_path / 'learned_bias.yaml'
+    done = subprocess.run(
+        [sys.executable, '-c', CTRL_C_SCRIPT, str(bias_file)],
+        cwd=Path(__file__).parent,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert f'rest_bias_file {bias_file} written (shutdown)' in done.stderr
+    assert 'Failed to publish log message to rosout' not in done.stderr, done.stderr
+    assert read_learned_bias(bias_file).windows >= 2
 
 
 @pytest.mark.parametrize(

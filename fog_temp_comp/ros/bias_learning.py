@@ -8,6 +8,7 @@ and after a "learn now" window; the service arms one window learned without the 
 from __future__ import annotations
 
 import os
+import sys
 from typing import Any
 
 from std_srvs.srv import Trigger
@@ -97,12 +98,19 @@ class BiasLearningMixin(ParametersMixin):
             write_learned_bias(path, bias)
         except OSError as err:
             self._rest_bias_state = f'write failed ({why}): {err}'
-            self.get_logger().error(f'rest_bias_file {path}: cannot write it ({why}): {err}')
+            self._say('error', f'rest_bias_file {path}: cannot write it ({why}): {err}')
             return False
         text = ', '.join(f'{v:.3f}' for v in bias.bias_deg_h)
         self._rest_bias_state = f'written ({why}): {text} deg/h (x, y, z)'
-        self.get_logger().info(f'rest_bias_file {path} written ({why}): {text} deg/h (x, y, z)')
+        self._say('info', f'rest_bias_file {path} written ({why}): {text} deg/h (x, y, z)')
         return True
+
+    def _say(self, level: str, text: str) -> None:
+        """Log ``text``; after Ctrl-C (rclpy shut down: no /rosout to log to) on stderr."""
+        if self.context.ok():
+            getattr(self.get_logger(), level)(text)
+        else:
+            print(f'[{level.upper()}] [{self.get_name()}]: {text}', file=sys.stderr)
 
     def destroy_node(self) -> None:
         """Write the learned bias (shutdown), then destroy the node."""
