@@ -354,8 +354,8 @@ def _rest_values(rest: RestStatus) -> list[tuple[str, str]]:
 
 def _stale_reason(counters: CompensatorCounters, previous: CompensatorCounters) -> tuple[int, str]:
     """(level, text) of a stale temperature, by what the gyro messages since got."""
-    if counters.imu_uncorrected > previous.imu_uncorrected:
-        return WARN, 'temperature stale: gyro passed through uncorrected'
+    if counters.imu_uncorrected > previous.imu_uncorrected:  # the output is the raw gyro
+        return ERROR, 'temperature stale: gyro passed through uncorrected'
     if counters.imu_held > previous.imu_held:
         return WARN, 'temperature stale: holding last correction'
     return WARN, 'temperature stale'
