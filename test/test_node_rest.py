@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import subprocess
 import sys
@@ -154,6 +155,27 @@ def test_learn_now_service_forces_one_window_and_writes_the_file(
     assert_allclose(saved.bias_deg_h, SHIFT_DEG_H, atol=0.05)
     assert saved.windows == 1 and saved.temperature_degC == TEMPERATURE_DEGC
     assert saved.coefficients_sha256 == file_sha256(EXAMPLE)
+
+
+def test_a_failed_bias_write_then_a_good_one_both_logged(
+    ros_context: object, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """An ERROR then an INFO from one node: rclpy refuses two severities at one call site."""
+    blocked = tmp_path / 'dir_in_the_way'
+    blocked.mkdir()
+    harness = Harness(ros_context, rest_node(ros_context, rest_bias_file=str(blocked)))
+    try:
+        drive_at_rest(harness, 1000.0, 150)
+        assert not harness.node.save_learned_bias('test')  # a directory: cannot write it
+        harness.node.config = dataclasses.replace(
+            harness.node.config, rest_bias_file=str(tmp_path / 'bias.yaml')
+        )
+        assert harness.node.save_learned_bias('test')
+    finally:
+        harness.close()
+    err = capfd.readouterr().err
+    assert f'rest_bias_file {blocked}: cannot write it (test)' in err
+    assert 'written (test)' in err and 'severity' not in err
 
 
 def test_no_learn_now_service_without_rest_learning(ros_context: object) -> None:

@@ -107,8 +107,11 @@ class BiasLearningMixin(ParametersMixin):
 
     def _say(self, level: str, text: str) -> None:
         """Log ``text``; after Ctrl-C (rclpy shut down: no /rosout to log to) on stderr."""
-        if self.context.ok():
-            getattr(self.get_logger(), level)(text)
+        if self.context.ok():  # a call site per severity: rclpy refuses two at one
+            if level == 'error':
+                self.get_logger().error(text)
+            else:
+                self.get_logger().info(text)
         else:
             print(f'[{level.upper()}] [{self.get_name()}]: {text}', file=sys.stderr)
 
