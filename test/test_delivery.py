@@ -30,7 +30,7 @@ from fog_temp_comp.ros.node import CompensatorNode
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.simulate import SimulatedRun
 
-from simdata import gyro_events, temperature_events, write_events, write_run
+from simdata import Event, gyro_events, temperature_events, write_events, write_run
 
 COEFFS = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
 BURST_S = 20.0
@@ -172,14 +172,19 @@ def test_compensate_tells_stamps_out_of_order_from_a_time_jump(
     again = (run.imu_stamps_s >= run.imu_stamps_s[0] + 600) & (
         run.imu_stamps_s < run.imu_stamps_s[0] + 660
     )
-    shift_ns = 700 * 10**9  # logged 700 s later, with its own header stamps
-    events = temperature_events(run)
-    for k, (t, w) in enumerate(zip(run.imu_stamps_s, run.rates_rad_s, strict=True)):
-        ns = round(t * 1e9)
-        events.append((ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w)))
-        if again[k]:
-            events.append((ns + shift_ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w)))
-    bag = write_events(tmp_path / 'twice', 'mcap', events)
+
+    def with_stretch_again(log_shift_s: float) -> list[Event]:
+        """The run's events and the stretch's gyro messages again, logged later by that."""
+        events = temperature_events(run)
+        for shift, rows in ((0.0, slice(None)), (log_shift_s, again)):
+            for t, w in zip(run.imu_stamps_s[rows], run.rates_rad_s[rows], strict=True):
+                ns = round(t * 1e9)
+                log_ns = ns + round(shift * 1e9)
+                events.append((log_ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w)))
+        return events
+
+    # logged 700 s later, with its own header stamps, among the live messages
+    bag = write_events(tmp_path / 'twice', 'mcap', with_stretch_again(700.0))
     assert (
         cli.main(['compensate', str(bag), '--coeffs', str(COEFFS), '-o', str(tmp_path / 'o')]) == 0
     )
@@ -191,15 +196,8 @@ def test_compensate_tells_stamps_out_of_order_from_a_time_jump(
     assert len(warnings) == 1 and back in warnings[0], warnings
     assert 'time jump' not in said.out
     # the stretch alone, after the live messages: two stamps back in a row, a time jump
-    events = temperature_events(run)
-    for t, w in zip(run.imu_stamps_s, run.rates_rad_s, strict=True):
-        ns = round(t * 1e9)
-        events.append((ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w)))
-    after_ns = round((run.imu_stamps_s[-1] - run.imu_stamps_s[again][0] + 1.0) * 1e9)
-    for t, w in zip(run.imu_stamps_s[again], run.rates_rad_s[again], strict=True):
-        ns = round(t * 1e9)
-        events.append((ns + after_ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w)))
-    bag = write_events(tmp_path / 'looped', 'mcap', events)
+    after_s = run.imu_stamps_s[-1] - run.imu_stamps_s[again][0] + 1.0
+    bag = write_events(tmp_path / 'looped', 'mcap', with_stretch_again(after_s))
     assert (
         cli.main(['compensate', str(bag), '--coeffs', str(COEFFS), '-o', str(tmp_path / 'l')]) == 0
     )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ['BAG_SUFFIXES', 'not_a_bag']
+__all__ = ['BAG_SUFFIXES', 'UNOPENED_HINT', 'not_a_bag']
 
 #: files that make a directory a bag (rosbag2's storage files, plain or file-compressed)
 BAG_SUFFIXES = ('.mcap', '.db3', '.mcap.zstd', '.db3.zstd')
@@ -16,6 +16,10 @@ def _holds_bag_files(directory: Path) -> bool:
     if (directory / 'metadata.yaml').is_file():
         return True
     return any(any(directory.glob('*' + suffix)) for suffix in BAG_SUFFIXES)
+
+
+#: said after rosbags' reason where a bag cannot be opened
+UNOPENED_HINT = '(damaged, cut short, or not a bag?)'
 
 
 def not_a_bag(path: Path) -> str | None:

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fog_temp_comp.bag import mcapwrite, ros1write, sqlitewrite
-from fog_temp_comp.bag.bag_path import not_a_bag
+from fog_temp_comp.bag.bag_path import UNOPENED_HINT, not_a_bag
 from fog_temp_comp.bag.cdr import Spans
 from fog_temp_comp.bag.names import FORMATS
 from fog_temp_comp.core.units import NS_PER_S
@@ -105,9 +105,7 @@ def open_bag(path: str | Path) -> Iterator[AnyReader]:
     try:
         reader = _opened_reader(path)
     except Exception as err:  # rosbags raises many types for broken files
-        raise BagError(
-            f'{path}: cannot open bag: {err} (damaged, cut short, or not a bag?)'
-        ) from err
+        raise BagError(f'{path}: cannot open bag: {err} {UNOPENED_HINT}') from err
     try:
         yield reader
     finally:

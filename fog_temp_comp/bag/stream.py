@@ -30,7 +30,7 @@ import apsw
 import numpy as np
 
 from fog_temp_comp.bag import cdr
-from fog_temp_comp.bag.bag_path import not_a_bag
+from fog_temp_comp.bag.bag_path import UNOPENED_HINT, not_a_bag
 from fog_temp_comp.bag.bagio import (
     IMU_TYPE,
     TEMPERATURE_TYPE,
@@ -169,9 +169,7 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
             except apsw.Error as err:
                 topics = self._salvage_topics(self._sqlite_files)
                 if not topics:
-                    raise BagError(
-                        f'{self.path}: cannot open bag: {err} (damaged, cut short, or not a bag?)'
-                    ) from err
+                    raise BagError(f'{self.path}: cannot open bag: {err} {UNOPENED_HINT}') from err
             self.imu_topic = resolve_topic_in(topics, self._gyro_topic, IMU_TYPE, '--gyro-topic')
             self._resolve_temperature(topics)
             if self._batch_readable():

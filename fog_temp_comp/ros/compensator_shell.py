@@ -261,18 +261,22 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         Such values stay the file's: the next coefficients file replaces them.
         """
         kinds = {Parameter.Type.DOUBLE: float, Parameter.Type.INTEGER: int}
+        shown = []
+        for name in sorted(self._filter_from_file):
+            field, ptype, _ = FILTER_PARAMETERS[name]
+            value = kinds.get(ptype, str)(getattr(self.config.settings, field))
+            if not (isinstance(value, float) and not math.isfinite(value)):
+                shown.append(Parameter(name, ptype, value))
         self._showing_file_values = True
-        try:
-            for name in sorted(self._filter_from_file):
-                field, ptype, _ = FILTER_PARAMETERS[name]
-                value = kinds.get(ptype, str)(getattr(self.config.settings, field))
-                if isinstance(value, float) and not math.isfinite(value):
-                    continue
-                result = self.set_parameters([Parameter(name, ptype, value)])[0]
-                if not result.successful:  # outside the parameter's range: left unset
-                    self.get_logger().debug(f'{name}: {value!r} not shown: {result.reason}')
+        try:  # each set alone: one outside its parameter's range is left unset
+            results = self.set_parameters(shown)
         finally:
             self._showing_file_values = False
+        for param, result in zip(shown, results, strict=True):
+            if not result.successful:
+                self.get_logger().debug(
+                    f'{param.name}: {param.value!r} not shown: {result.reason}'
+                )
 
     def _show_filter_in_effect_soon(self) -> None:
         """:meth:`_show_filter_in_effect` once the parameter change under way is done."""
