@@ -156,6 +156,40 @@ def test_executor_parameter(ros_context: object, coeffs_file: Path, name: str) -
         node.destroy_node()
 
 
+@pytest.mark.parametrize(('name', 'severity'), [('auto', 'INFO'), ('events', 'WARN')])
+def test_executor_without_events_executor_falls_back_and_says_so(
+    ros_context: object,
+    coeffs_file: Path,
+    name: str,
+    severity: str,
+    monkeypatch: pytest.MonkeyPatch,
+    capfd: pytest.CaptureFixture[str],
+) -> None:
+    """As on Humble's rclpy (no ``rclpy.experimental``): single-threaded, one line on stderr."""
+    import sys
+
+    from rclpy.executors import SingleThreadedExecutor
+
+    from fog_temp_comp.ros.node import make_executor
+
+    monkeypatch.setitem(sys.modules, 'rclpy.experimental', None)  # import raises ImportError
+    overrides = [
+        Parameter('coefficients_file', value=str(coeffs_file)),
+        Parameter('executor', value=name),
+    ]
+    node = CompensatorNode(context=ros_context, parameter_overrides=overrides)
+    try:
+        capfd.readouterr()
+        executor = make_executor(node)
+        executor.shutdown()
+        assert isinstance(executor, SingleThreadedExecutor)
+        lines = [ln for ln in capfd.readouterr().err.splitlines() if 'EventsExecutor' in ln]
+        assert len(lines) == 1 and f'[{severity}]' in lines[0], lines
+        assert f'executor {name}: this rclpy has no rclpy.experimental.EventsExecutor' in lines[0]
+    finally:
+        node.destroy_node()
+
+
 def test_gyro_input_queue_is_deep_and_overridable(ros_context: object, coeffs_file: Path) -> None:
     """Best effort like sensor data, but 100 deep (a lost gyro sample is lost to the INS)."""
     from rclpy.qos import ReliabilityPolicy, qos_profile_sensor_data

@@ -19,7 +19,6 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
-from rclpy._rclpy_pybind11 import RCLError
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
@@ -44,6 +43,7 @@ from fog_temp_comp.ros.diagnostics import build_report, reading_model
 from fog_temp_comp.ros.input_types import TypeMismatch, type_mismatches
 from fog_temp_comp.ros.node_parameters import FILTER_PARAMETERS, GUARD_PARAMETERS
 from fog_temp_comp.ros.params import ParameterError, params_files, unknown_warnings
+from fog_temp_comp.ros.rclpy_compat import RCLError
 from fog_temp_comp.ros.spin import EXECUTORS
 from fog_temp_comp.ros.temperature_input import (
     DEFAULT_FIELD,

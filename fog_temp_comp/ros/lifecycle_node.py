@@ -24,13 +24,13 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from rclpy._rclpy_pybind11 import RCLError
 from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, State, TransitionCallbackReturn
 from rclpy.lifecycle.node import LifecycleNodeMixin
 from rclpy.publisher import Publisher
 
 from fog_temp_comp.core.coefficients import CoefficientsError
 from fog_temp_comp.ros.compensator_shell import CompensatorShell
+from fog_temp_comp.ros.rclpy_compat import RCLError
 from fog_temp_comp.ros.spin import run
 
 #: rclpy's own transition step (a private method, present in Humble and Jazzy)

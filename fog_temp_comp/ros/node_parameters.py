@@ -371,9 +371,10 @@ class ParametersMixin(_NodeBase):
             'auto',
             ParameterDescriptor(
                 description="executor of `ros2 run`: 'events' (rclpy.experimental."
-                'EventsExecutor, Jazzy and later: keeps up with a 2 kHz gyro), '
+                "EventsExecutor, in Jazzy's rclpy, not Humble's: keeps up with a 2 kHz gyro), "
                 "'single' (SingleThreadedExecutor), or 'auto' (events where rclpy has it, "
-                "else single); 'events' without it falls back to single with a warning",
+                "else single, said at INFO); 'events' without it falls back to single with a "
+                'warning',
                 read_only=True,
                 additional_constraints="one of 'auto', 'events', 'single'",
             ),

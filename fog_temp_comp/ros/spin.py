@@ -10,12 +10,12 @@ import sys
 from collections.abc import Callable, Sequence
 
 import rclpy
-from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from fog_temp_comp.core.coefficients import CoefficientsError
 from fog_temp_comp.ros.params import ParameterError, params_files, read_params_file
+from fog_temp_comp.ros.rclpy_compat import RCLError, events_executor_factory
 
 __all__ = ['EXECUTORS', 'make_executor', 'run']
 
@@ -24,21 +24,26 @@ EXECUTORS = ('auto', 'events', 'single')
 
 
 def make_executor(node: Node) -> Executor:
-    """The executor the node's ``executor`` parameter names (see its description)."""
+    """The executor the node's ``executor`` parameter names (see its description).
+
+    Where this rclpy has no ``EventsExecutor`` (Humble), ``auto`` says so at INFO and
+    ``events`` at WARN, and both spin a ``SingleThreadedExecutor``.
+    """
     name = node.get_parameter('executor').value
-    if name not in ('auto', 'events', 'single'):
+    if name not in EXECUTORS:
         raise ValueError(f"parameter executor: {name!r} is not one of 'auto', 'events', 'single'")
     if name in ('auto', 'events'):
-        try:
-            from rclpy.experimental import EventsExecutor  # Jazzy and later
-        except ImportError:
-            if name == 'events':
-                node.get_logger().warning(
-                    'executor events: rclpy.experimental.EventsExecutor is not available in '
-                    'this ROS distribution; using the SingleThreadedExecutor'
-                )
+        events_executor = events_executor_factory()
+        if events_executor is not None:
+            return events_executor(context=node.context)
+        text = (
+            f'executor {name}: this rclpy has no rclpy.experimental.EventsExecutor (Humble); '
+            'spinning a SingleThreadedExecutor (see the README on fast gyros)'
+        )
+        if name == 'events':
+            node.get_logger().warning(text)
         else:
-            return EventsExecutor(context=node.context)
+            node.get_logger().info(text)
     return SingleThreadedExecutor(context=node.context)
 
 
