@@ -97,6 +97,7 @@ def del_key(path: str) -> Callable[[dict], None]:
         (set_key('schema_version', 2), 'schema_version'),
         (del_key('schema_version'), 'schema_version'),
         (set_key('terms', ['const', 'T4']), 'terms'),
+        (set_key('terms', ['const', 'T', 'T', 'Tdot']), 'terms: T listed more than once'),
         (del_key('calibrated_range'), 'calibrated_range'),
         (set_key('calibrated_range.temperature_degC', [60.0, -40.0]), 'temperature_degC'),
         (set_key('calibrated_range.tdot_degC_per_min', [0.1]), 'tdot_degC_per_min'),
@@ -244,3 +245,11 @@ def test_a_bias_table_round_trips_with_its_knots_in_the_keys(tmp_path: Path) -> 
     back = load(path)
     assert back.model.terms == terms
     assert_array_equal(back.model.coefficients, model.coefficients)
+
+
+def test_a_model_with_a_term_twice_is_refused() -> None:
+    """Listed twice, a term's coefficient would be applied twice."""
+    from fog_temp_comp.core.model import DriftModel
+
+    with pytest.raises(ValueError, match='listed twice'):
+        DriftModel(('const', 'T', 'T'), np.zeros((3, 3)), (-40.0, 60.0), (-1.0, 1.0))

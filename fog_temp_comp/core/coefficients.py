@@ -245,6 +245,10 @@ def from_dict(data: Any) -> Coefficients:
         except ValueError as err:
             raise CoefficientsError(f'terms: {err}') from None
     terms = tuple(str(t) for t in terms)
+    keys = [coefficient_key(t) for t in terms]
+    twice = sorted({t for t, k in zip(terms, keys, strict=True) if keys.count(k) > 1})
+    if twice:  # its coefficient would be applied once per listing
+        raise CoefficientsError(f'terms: {", ".join(twice)} listed more than once')
     axes = _get(data, 'axes', dict)
     _refuse_unknown(axes, AXES, 'axes.', 'a gyro has the axes x, y, z')
     matrix = np.empty((len(terms), len(AXES)))

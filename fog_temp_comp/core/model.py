@@ -224,8 +224,9 @@ class DriftModel:
             )
         if not np.all(np.isfinite(coeffs)):
             raise ValueError('coefficients must be finite')
-        for term in self.terms:
-            coefficient_key(term)
+        keys = [coefficient_key(term) for term in self.terms]
+        if len(set(keys)) != len(keys):
+            raise ValueError(f'terms {tuple(self.terms)}: a term listed twice would count twice')
         coeffs.setflags(write=False)
         object.__setattr__(self, 'coefficients', coeffs)
         object.__setattr__(self, 'terms', tuple(self.terms))
