@@ -41,6 +41,12 @@ from fog_temp_comp.core.restfile import (
 from fog_temp_comp.tools import blockreplay
 from fog_temp_comp.tools.atomic import AtomicOutputs, check_output_directory
 from fog_temp_comp.tools.chunkreplay import ChunkReplayer, chunked
+from fog_temp_comp.tools.compensate_report import (
+    check_temperature_used,
+    report_faults,
+    report_gaps,
+    report_nonfinite_gyro,
+)
 from fog_temp_comp.tools.evaluate_command import effective_settings
 from fog_temp_comp.tools.salvaged import Salvaged
 from fog_temp_comp.tools.temperature_sources import with_yaml_temperature_topic
@@ -124,8 +130,9 @@ def compensate_command(
     )
     (n_out, counters), compensator = run.replay(out_bag, strict, coeffs)
     _report_written(run, out_bag, n_out, counters, chosen=output_topic is None, stdout=stdout)
-    _report_faults(run.in_bag, compensator)
-    _report_gaps(run.in_bag, compensator.status.counters)
+    report_faults(run.in_bag, compensator)
+    report_gaps(run.in_bag, compensator.status.counters)
+    report_nonfinite_gyro(run.in_bag, compensator.status.counters)
     if compensator.rest is not None:
         _report_rest(compensator.rest, coeffs_path, rest_bias_out, stdout)
     return 0
@@ -172,49 +179,6 @@ def _report_written(
     )
 
 
-def _report_faults(in_bag: Path, compensator: Compensator) -> None:
-    """A ``WARNING`` line where readings were rejected as a sensor fault."""
-    status = compensator.status
-    faults = status.counters.temperature_faults
-    if faults:
-        low, high = compensator.plausible_temperature_degC
-        print(
-            f'WARNING: {in_bag}: {faults} temperature readings outside the plausible '
-            f'[{low:.1f}, {high:.1f}] degC (the calibrated range +- '
-            f'{compensator.guard.temperature_fault_margin_degC:g} degC) rejected as a sensor '
-            f'fault (the last {status.last_fault_degC:.6g} degC): meanwhile the gyro '
-            + (
-                'got the last correction held'
-                if compensator.guard.stale_policy == 'hold'
-                else 'passed through uncorrected'
-            ),
-            file=sys.stderr,
-        )
-
-
-def _report_gaps(in_bag: Path, counters: CompensatorCounters) -> None:
-    """A line where the temperature paused for longer than the stale time (a gap).
-
-    ``NOTE`` where the Kalman filter bridged every gap, ``WARNING`` where one restarted the
-    Tdot estimate (its terms left out until the filter warmed up again).
-    """
-    bridged, restarted = counters.temperature_gaps_bridged, counters.temperature_gaps
-    if not (bridged or restarted):
-        return
-    parts = [f'{bridged} bridged by the Kalman filter'] if bridged else []
-    if restarted:
-        parts.append(
-            f'{restarted} restarted the Tdot estimate, whose terms waited for its warm-up'
-        )
-    gaps = bridged + restarted
-    print(
-        f'{"WARNING" if restarted else "NOTE"}: {in_bag}: {gaps} temperature '
-        f'gap{"s" if gaps > 1 else ""} ({"; ".join(parts)}); {counters.imu_held} gyro messages '
-        'in all got the last correction held while the temperature was stale',
-        file=sys.stderr,
-    )
-
-
 def _on_one_clock(
     run: _Compensate, in_bag: Path, out_bag: Path, strict: bool
 ) -> tuple[tuple[int, CompensatorCounters], Compensator]:
@@ -253,6 +217,7 @@ def _replay_atomically(
                 f'{in_bag}: no gyro message was read (an empty gyro topic, or a bag whose '
                 'metadata.yaml does not match its data)'
             )
+        check_temperature_used(in_bag, run.topics[1], result[0][1])
         if in_bag.is_file() and out_bag.suffix == _FILE_SUFFIX.get(run.fmt):
             _as_single_file(target)
         return result
