@@ -32,6 +32,8 @@ class Score:
     stability_after_deg_h: float
     range_before_deg_h: float
     range_after_deg_h: float
+    #: tau-s windows the run held (-1: not told); under 2, no stability: all nan
+    windows: int = -1
 
     def ratio(self, quantity: str) -> float:
         """``'stability'`` or ``'range'`` after / before; nan where before is 0.
@@ -97,10 +99,12 @@ def score_record(
         after = window_means(stamps_s, corrected_rad_s * DEG_H_PER_RAD_S, tau)
         sb, sa = bias_stability(before), bias_stability(after)
         rb, ra = bias_range(before), bias_range(after)
+        windows = int(before.shape[0])
+        if windows < 2:  # the range of one window is 0: no measurement either
+            rb, ra = np.full(3, np.nan), np.full(3, np.nan)
         for j, axis in enumerate(AXES):
-            scores.append(
-                Score(name, axis, tau, float(sb[j]), float(sa[j]), float(rb[j]), float(ra[j]))
-            )
+            values = (float(sb[j]), float(sa[j]), float(rb[j]), float(ra[j]))
+            scores.append(Score(name, axis, tau, *values, windows=windows))
     return scores
 
 
@@ -119,7 +123,13 @@ def format_scores(scores: Sequence[Score]) -> str:
             f'{_ratio_text(s.ratio("range"))}'
         )
     lines.append('(deg/h; stability = std of tau-s means, range = max-min of tau-s means)')
-    if any(math.isnan(s.ratio('stability')) for s in scores):
+    short = sorted({s.tau_s for s in scores if 0 <= s.windows < 2})
+    if short:
+        lines.append(
+            f'(nan at tau {", ".join(f"{t:g}" for t in short)} s: the run is shorter than two '
+            'windows of tau: nothing to measure at that averaging time)'
+        )
+    if any(math.isnan(s.ratio('stability')) and not 0 <= s.windows < 2 for s in scores):
         lines.append(
             "(ratio -: that axis's raw rate never changes, or is NaN: nothing to compare)"
         )
