@@ -323,6 +323,15 @@ DATA: list[tuple[str, str, Callable[[dict[str, np.ndarray]], None], str, str]] =
      lambda a: a.__setitem__('temp_stamps_s', a['temp_stamps_s'] - 1e5), 'error', 'overlap'),
     ('no gyro messages', 'ros1', lambda a: _empty(a, 'imu_stamps_s', 'rates_rad_s'), 'error',
      ''),
+    ('temperature NaN throughout', 'mcap', lambda a: a['temperature_degC'].__setitem__(
+        slice(None), np.nan), 'error', 'no finite temperature reading on /imu/temperature'),
+    ('gyro NaN throughout', 'sqlite3', lambda a: a['rates_rad_s'].__setitem__(
+        slice(None), np.nan), 'error', 'no finite gyro rate on /imu/data_raw'),
+    ('gyro rate 1e308', 'mcap', lambda a: a['rates_rad_s'].__setitem__((100, 0), 1e308),
+     'diagnostic', 'dropped 1 of'),
+    ('one temperature stamped an hour after the rest', 'mcap', lambda a: a[
+        'temp_stamps_s'].__setitem__(-1, a['temp_stamps_s'][-1] + 3600.0), 'diagnostic',
+     'the run is split there, 0 gyro bins and 1 temperature readings left alone'),
 ]  # fmt: skip
 
 

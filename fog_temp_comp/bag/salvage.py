@@ -21,7 +21,22 @@ from fog_temp_comp.bag.bagio import BagError
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.units import NS_PER_S
 
-__all__ = ['RecoveryError', 'Salvage', 'finite_only', 'split_at_gaps']
+__all__ = [
+    'MAX_RATE_RAD_S',
+    'RecoveryError',
+    'Salvage',
+    'finite_only',
+    'split_at_data_gaps',
+    'split_at_gaps',
+]
+
+#: a gyro rate beyond this (rad/s, about 570,000 deg/s) is no measurement: dropped as NaN is
+MAX_RATE_RAD_S = 1e4
+
+#: a pause in both streams longer than this (s), and than :data:`GAP_SAMPLES` temperature
+#: intervals, splits a run: a clock jump, or a stray reading stamped far from the rest
+GAP_MIN_S = 600.0
+GAP_SAMPLES = 100
 
 
 class RecoveryError(BagError):
@@ -143,8 +158,11 @@ def split_at_gaps(record: ChamberRecord, salvage: Salvage | None) -> list[Chambe
     if salvage is None:
         return [record]
     cuts = sorted((a, b) for a, b in salvage.gap_spans_s() if b is not None)
-    if not cuts:
-        return [record]
+    return _cut(record, cuts) if cuts else [record]
+
+
+def _cut(record: ChamberRecord, cuts: list[tuple[float, float]]) -> list[ChamberRecord]:
+    """The pieces of ``record`` between the spans ``cuts`` (s, sorted): with both streams."""
     pieces = []
     low = -np.inf
     for start, end in [*cuts, (np.inf, np.inf)]:
@@ -164,8 +182,40 @@ def split_at_gaps(record: ChamberRecord, salvage: Salvage | None) -> list[Chambe
     return pieces
 
 
+def split_at_data_gaps(
+    record: ChamberRecord,
+) -> tuple[list[ChamberRecord], list[float], int, int]:
+    """The record cut where both streams pause far longer than they sample (a clock jump).
+
+    A pause longer than :data:`GAP_MIN_S` and :data:`GAP_SAMPLES` median temperature
+    intervals, with no gyro or temperature sample inside, cuts the run; pieces without both
+    streams (a stray reading stamped an hour after the rest) are dropped; where none has both,
+    the streams do not overlap and the record is returned whole. Returns the pieces,
+    the gaps (s), and the gyro and temperature samples dropped with those pieces.
+    """
+    temp_t = record.temp_stamps_s
+    if temp_t.size < 2 or not record.imu_stamps_s.size:
+        return [record], [], 0, 0
+    interval = float(np.median(np.diff(temp_t)))
+    limit = max(GAP_MIN_S, GAP_SAMPLES * interval)
+    stamps = np.union1d(record.imu_stamps_s, temp_t)
+    at = np.flatnonzero(np.diff(stamps) > limit)
+    if not at.size:
+        return [record], [], 0, 0
+    cuts = [(float(np.nextafter(stamps[k], np.inf)), float(stamps[k + 1])) for k in at]
+    pieces = _cut(record, cuts)
+    if not pieces:  # the streams apart: not a jump; the caller says they do not overlap
+        return [record], [], 0, 0
+    gyro = record.imu_stamps_s.size - sum(p.imu_stamps_s.size for p in pieces)
+    temp = temp_t.size - sum(p.temp_stamps_s.size for p in pieces)
+    return pieces, [float(stamps[k + 1] - stamps[k]) for k in at], gyro, temp
+
+
 def finite_only(record: ChamberRecord) -> tuple[ChamberRecord, int, int, list[int]]:
     """The record without its non-finite samples (NaN, inf in stamp or value).
+
+    A gyro rate beyond :data:`MAX_RATE_RAD_S` counts as not finite (no gyro measures it; its
+    square would overflow).
 
     An axis with no finite rate at all (a one-axis gyro whose driver fills the other two with
     NaN) is not a reason to drop every sample: it is set to 0 (no drift to fit: zero
@@ -175,7 +225,8 @@ def finite_only(record: ChamberRecord) -> tuple[ChamberRecord, int, int, list[in
     (0-2) set to 0.
     """
     rates = record.rates_rad_s
-    finite = np.isfinite(rates)
+    with np.errstate(invalid='ignore'):
+        finite = np.abs(rates) <= MAX_RATE_RAD_S  # False for NaN
     dead = np.flatnonzero(~finite.any(axis=0)).tolist() if rates.shape[0] else []
     if dead and len(dead) < rates.shape[1]:
         rates = rates.copy()

@@ -196,7 +196,7 @@ def _attempt(
     records = [
         earth(piece)
         for b in bags
-        for piece in salvaged.split(on_one_clock(reduce_record, b, period, **args))
+        for piece in salvaged.split(on_one_clock(reduce_record, b, period, **args), period)
     ]
     if choose and source is None and several_sensors(records):
         raise SeveralSensorsError(records)  # each sensor's readings get an attempt of their own

@@ -70,6 +70,8 @@ def evaluate_command(
             )
 
         record = with_yaml_temperature_topic(read, coeffs, temp_topic, temp_field, sys.stderr)
+        # non-finite (or absurd) samples dropped with a warning; none usable: an error
+        record = salvaged.finite(record, fitted=False)
         corrected, status = replay_record(
             record, coeffs, effective_settings(coeffs, denoise_method), guard
         )
