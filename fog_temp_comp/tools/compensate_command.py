@@ -41,12 +41,7 @@ from fog_temp_comp.core.restfile import (
 from fog_temp_comp.tools import blockreplay
 from fog_temp_comp.tools.atomic import AtomicOutputs, check_output_directory
 from fog_temp_comp.tools.chunkreplay import ChunkReplayer, chunked
-from fog_temp_comp.tools.compensate_report import (
-    check_temperature_used,
-    report_faults,
-    report_gaps,
-    report_nonfinite_gyro,
-)
+from fog_temp_comp.tools.compensate_report import check_temperature_used, report_input
 from fog_temp_comp.tools.evaluate_command import effective_settings
 from fog_temp_comp.tools.salvaged import Salvaged
 from fog_temp_comp.tools.temperature_sources import with_yaml_temperature_topic
@@ -130,9 +125,7 @@ def compensate_command(
     )
     (n_out, counters), compensator = run.replay(out_bag, strict, coeffs)
     _report_written(run, out_bag, n_out, counters, chosen=output_topic is None, stdout=stdout)
-    report_faults(run.in_bag, compensator)
-    report_gaps(run.in_bag, compensator.status.counters)
-    report_nonfinite_gyro(run.in_bag, compensator.status.counters)
+    report_input(run.in_bag, compensator)  # faults, gaps, NaN gyro
     if compensator.rest is not None:
         _report_rest(compensator.rest, coeffs_path, rest_bias_out, stdout)
     return 0

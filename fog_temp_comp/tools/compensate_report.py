@@ -8,7 +8,20 @@ from pathlib import Path
 from fog_temp_comp.bag.bagio import BagError
 from fog_temp_comp.core.compensator import Compensator, CompensatorCounters
 
-__all__ = ['check_temperature_used', 'report_faults', 'report_gaps', 'report_nonfinite_gyro']
+__all__ = [
+    'check_temperature_used',
+    'report_faults',
+    'report_gaps',
+    'report_input',
+    'report_nonfinite_gyro',
+]
+
+
+def report_input(in_bag: Path, compensator: Compensator) -> None:
+    """The warnings on the input the replay found: sensor faults, gaps, NaN gyro rates."""
+    report_faults(in_bag, compensator)
+    report_gaps(in_bag, compensator.status.counters)
+    report_nonfinite_gyro(in_bag, compensator.status.counters)
 
 
 def report_faults(in_bag: Path, compensator: Compensator) -> None:
