@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ['BAG_SUFFIXES', 'UNOPENED_HINT', 'not_a_bag']
+__all__ = ['BAG_SUFFIXES', 'UNOPENED_HINT', 'bag_directory', 'inside_bag', 'not_a_bag']
 
 #: files that make a directory a bag (rosbag2's storage files, plain or file-compressed)
 BAG_SUFFIXES = ('.mcap', '.db3', '.mcap.zstd', '.db3.zstd')
@@ -47,4 +47,35 @@ def not_a_bag(path: Path) -> str | None:
     return (
         f'{path}: not a bag (no metadata.yaml, .mcap or .db3 files in this directory; '
         'expected a rosbag2 directory, .mcap, .db3, .bag)'
+    )
+
+
+def bag_directory(path: Path) -> Path | None:
+    """The rosbag2 directory ``path`` is or belongs to, or None (a bag file on its own).
+
+    A directory given as a bag is one; a file is part of one where its directory holds a
+    ``metadata.yaml`` (``run/run_0.mcap``).
+    """
+    if path.is_dir():
+        return path
+    if (path.parent / 'metadata.yaml').is_file():
+        return path.parent
+    return None
+
+
+def inside_bag(output: Path, in_bag: Path) -> str | None:
+    """Why ``output`` may not be written where it is (the message), or None if it may.
+
+    An output inside the input's rosbag2 directory would be read as part of that bag
+    afterwards (readers take the data files present, listed in ``metadata.yaml`` or not).
+    """
+    bag_dir = bag_directory(in_bag)
+    if bag_dir is None:
+        return None
+    inside, where = bag_dir.resolve(), output.resolve()
+    if where != inside and inside not in where.parents:
+        return None
+    return (
+        f'{output}: inside the input bag directory {bag_dir} (read as part of that bag '
+        'afterwards); write it elsewhere, e.g. beside the bag directory'
     )

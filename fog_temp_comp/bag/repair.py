@@ -40,7 +40,7 @@ from fog_temp_comp.bag.ros1scan import Ros1Bag, Ros1Connection, Ros1FormatError
 from fog_temp_comp.bag.salvage import RecoveryError, Salvage
 from fog_temp_comp.bag.sqlitesalvage import SqliteDamage, expected_pages, salvage_rows
 from fog_temp_comp.bag.sqlitesalvage import salvage_topics as sqlite_topics
-from fog_temp_comp.bag.sqlitescan import loose_sqlite_files, metadata_counts
+from fog_temp_comp.bag.sqlitescan import loose_data_files, loose_sqlite_files, metadata_counts
 
 __all__ = ['needs_repair', 'repair_bag', 'repair_mcap', 'repaired_bag']
 
@@ -111,8 +111,9 @@ def needs_repair(path: Path) -> tuple[bool, str | None]:
         return False, None
     mcaps = data_files(path, '.mcap')
     if mcaps and path.exists():
-        if path.is_dir() and not (path / 'metadata.yaml').is_file():
-            return True, 'no metadata.yaml (recorder killed?): read the .mcap files'
+        loose = loose_data_files(path, '.mcap')
+        if loose is not None:  # no metadata.yaml, or one that does not list the files present
+            return True, loose[1]
         return any(f.is_file() and not _ends_with_magic(f) for f in mcaps), None
     loose = loose_sqlite_files(path)
     if loose is not None:

@@ -29,6 +29,7 @@ import yaml
 from numpy.typing import NDArray
 
 __all__ = [
+    'loose_data_files',
     'loose_sqlite_files',
     'metadata_counts',
     'nth_log_time',
@@ -70,23 +71,40 @@ def loose_sqlite_files(path: str | Path) -> tuple[list[Path], str] | None:
     Returns (files in name order, what is wrong with the metadata), or None when the
     directory has no ``.db3`` files or its metadata lists exactly the files present.
     """
+    return loose_data_files(path, '.db3')
+
+
+def loose_data_files(path: str | Path, suffix: str) -> tuple[list[Path], str] | None:
+    """The ``suffix`` files of a bag directory whose ``metadata.yaml`` is missing or stale.
+
+    Returns (files in name order, what is wrong with the metadata), or None when the
+    directory has no such files or its metadata lists exactly the files present. Files it
+    does not list are named (one added to the directory, e.g. an output written there, is
+    read too: the files present are the bag's data, as after a recorder killed).
+    """
     path = Path(path)
     if not path.is_dir():
         return None
-    files = sorted(path.glob('*.db3'))
+    files = sorted(path.glob('*' + suffix))
     if not files:
         return None
     metadata = path / 'metadata.yaml'
     if not metadata.is_file():
-        return files, 'no metadata.yaml (recorder killed?): read the .db3 files'
+        return files, f'no metadata.yaml (recorder killed?): read the {suffix} files'
     try:
         info = yaml.safe_load(metadata.read_text())['rosbag2_bagfile_information']
         listed = sorted(path / name for name in info['relative_file_paths'])
     except (yaml.YAMLError, KeyError, TypeError, AttributeError, UnicodeDecodeError):
-        return files, 'unreadable metadata.yaml: read the .db3 files'
+        return files, f'unreadable metadata.yaml: read the {suffix} files'
     if listed == files:
         return None
-    return files, 'stale metadata.yaml (lists other files): read the .db3 files present'
+    unlisted = [f.name for f in files if f not in listed]
+    if unlisted and all(f in files for f in listed):
+        return files, (
+            f'stale metadata.yaml (does not list {", ".join(unlisted)}: added to the bag '
+            f'directory?): read the {suffix} files present'
+        )
+    return files, f'stale metadata.yaml (lists other files): read the {suffix} files present'
 
 
 def metadata_counts(path: str | Path) -> dict[str, int]:

@@ -45,7 +45,12 @@ from fog_temp_comp.bag.progress import Progress
 from fog_temp_comp.bag.ros1scan import Ros1Bag
 from fog_temp_comp.bag.ros1stream import _Ros1Reading
 from fog_temp_comp.bag.salvage import Salvage
-from fog_temp_comp.bag.sqlitescan import loose_sqlite_files, plain_sqlite_files, topic_types
+from fog_temp_comp.bag.sqlitescan import (
+    loose_data_files,
+    loose_sqlite_files,
+    plain_sqlite_files,
+    topic_types,
+)
 from fog_temp_comp.bag.sqlitestream import _SqliteReading
 from fog_temp_comp.bag.streamchunk import Chunk, FloatArray, StampOrder
 from fog_temp_comp.bag.streamdecode import _decoder, get_field
@@ -265,6 +270,9 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         decoders = {c.id: _decoder(c, reader.is2) for c in conns}
         mcap_files = self._mcap_files()
         if mcap_files and self._batch_readable() and len(conns) == 2:
+            loose = loose_data_files(self.path, '.mcap')
+            if loose is not None:  # the files present are read, those metadata.yaml lists or not
+                self.salvage.damage(loose[1])
             yield from self._scan_mcap(mcap_files, decoders, conns)
             return
         yield from self._read_messages(reader, conns, decoders)
