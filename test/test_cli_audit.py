@@ -8,11 +8,32 @@ from pathlib import Path
 
 import pytest
 
+from fog_temp_comp.bag.bagio import IMU_TYPE, open_bag
+from fog_temp_comp.bag.topic_names import output_topic_for
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.commands import CalibrateOptions
+from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
+
+from simdata import write_run
 
 REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / 'bags'
+#: a short chamber: 15..25 degC at 0.5 Hz
+SMALL = SimulationConfig(
+    imu_hz=0.5,
+    temp_hz=0.5,
+    low_degC=15.0,
+    high_degC=25.0,
+    start_degC=20.0,
+    cycle_soak_s=300.0,
+    soak_duration_s=600.0,
+)
+
+
+def topic_types(path: Path) -> dict[str, str]:
+    """Topic -> message type of a bag."""
+    with open_bag(path) as reader:
+        return {name: info.msgtype or '' for name, info in reader.topics.items()}
 
 
 @pytest.fixture(scope='module')
@@ -76,3 +97,82 @@ def test_a_data_file_that_metadata_yaml_does_not_list_is_named(
     assert 'does not list out.mcap' in capsys.readouterr().err
     assert cli.main(['evaluate', str(soak), '--coeffs', str(coeffs), '--strict']) == 1
     assert 'does not list out.mcap' in capsys.readouterr().err
+
+
+@pytest.fixture(scope='module')
+def fog_rate_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A short cycle with the gyro on ``/fog/rate`` (no REP 145 name)."""
+    run = simulate_run('cycle', 1.0, SMALL, seed=5)
+    return write_run(tmp_path_factory.mktemp('fog') / 'fog', 'mcap', run, imu_topic='/fog/rate')
+
+
+def table_rows(text: str, name: str) -> list[list[str]]:
+    """The evaluate table's rows of the bag ``name``, without the name."""
+    return [row.split()[1:] for row in text.splitlines() if row.split()[:1] == [name]]
+
+
+def test_the_corrected_imu_of_another_gyro_topic_is_told_apart_when_read_again(
+    fog_rate_bag: Path, coeffs: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``/fog/rate`` gives ``/fog/rate_compensated``: the output is evaluated with no flag."""
+    out = tmp_path / 'out'
+    assert (
+        cli.main(['compensate', str(fog_rate_bag), '--coeffs', str(coeffs), '-o', str(out)]) == 0
+    )
+    assert 'corrected Imu on /fog/rate_compensated' in capsys.readouterr().out
+    assert topic_types(out) == {**topic_types(fog_rate_bag), '/fog/rate_compensated': IMU_TYPE}
+    tables = []
+    for bag in (fog_rate_bag, out):
+        assert cli.main(['evaluate', str(bag), '--coeffs', str(coeffs)]) == 0
+        tables.append(table_rows(capsys.readouterr().out, bag.name))
+    assert len(tables[0]) == 6 and tables[0] == tables[1]
+
+
+def test_evaluating_the_corrected_output_again_is_warned_about(
+    soak: Path, coeffs: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``/imu/data`` beside ``/imu/data_raw`` named by hand: compensated twice, so a WARNING."""
+    out = tmp_path / 'out'
+    assert cli.main(['compensate', str(soak), '--coeffs', str(coeffs), '-o', str(out)]) == 0
+    assert 'corrected Imu on /imu/data ' in capsys.readouterr().out  # the sample bags' name kept
+    for command in ('evaluate', 'compensate'):
+        argv = [command, str(out), '--coeffs', str(coeffs), '--gyro-topic', '/imu/data']
+        if command == 'compensate':
+            argv += ['-o', str(tmp_path / 'again')]
+        assert cli.main(argv) == 0
+        err = capsys.readouterr().err
+        assert err.count('WARNING: --gyro-topic /imu/data: looks like this package') == 1
+        assert 'beside the raw rate /imu/data_raw' in err
+    assert cli.main(['evaluate', str(out), '--coeffs', str(coeffs)]) == 0
+    assert 'WARNING' not in capsys.readouterr().err  # the raw rate, chosen by the names
+
+
+@pytest.mark.parametrize(
+    ('topic', 'why'),
+    [
+        ('bad topic!', "has ' ' '!'"),
+        ('/a//b', 'has //'),
+        ('/a/1b', 'starting with a digit'),
+        ('/a/b/', 'ends with /'),
+        ('/' + 'a' * 300, 'longer than 247'),
+    ],
+)
+def test_compensate_refuses_an_invalid_output_topic(
+    soak: Path, coeffs: Path, capsys: pytest.CaptureFixture[str], topic: str, why: str
+) -> None:
+    out = soak.parent / 'out'
+    argv = ['compensate', str(soak), '--coeffs', str(coeffs), '-o', str(out)]
+    assert cli.main([*argv, '--output-topic', topic]) == 1
+    line = error_line(capsys)
+    assert '--output-topic' in line and 'not a valid ROS topic name' in line and why in line
+    assert not out.exists()
+
+
+def test_an_invalid_topic_name_made_from_the_gyro_topic_is_refused() -> None:
+    """A ROS 1 bag's odd gyro topic gives an odd default output topic: name one instead."""
+    with pytest.raises(ValueError, match=r'not a valid ROS topic name.*--output-topic'):
+        output_topic_for(None, '/imu-1/rate', {'/imu-1/rate'}, Path('x'))
+    assert output_topic_for(None, '/imu/data_raw', {'/imu/data_raw'}, Path('x')) == '/imu/data'
+    assert output_topic_for(None, '/data_raw', {'/data_raw'}, Path('x')) == '/data'
+    both = {'/imu/data_raw', '/imu/data'}
+    assert output_topic_for(None, '/imu/data_raw', both, Path('x')) == '/imu/data_raw_compensated'

@@ -21,6 +21,7 @@ from fog_temp_comp.bag import mcapwrite, ros1write, sqlitewrite
 from fog_temp_comp.bag.bag_path import UNOPENED_HINT, not_a_bag
 from fog_temp_comp.bag.cdr import Spans
 from fog_temp_comp.bag.names import FORMATS
+from fog_temp_comp.bag.topic_names import OUTPUT_SUFFIX, corrected_of
 from fog_temp_comp.core.units import NS_PER_S
 
 if TYPE_CHECKING:  # rosbags is imported where it is used: the package's own readers need none
@@ -30,8 +31,6 @@ if TYPE_CHECKING:  # rosbags is imported where it is used: the package's own rea
 
 FloatArray = NDArray[np.float64]
 IMU_TYPE = 'sensor_msgs/msg/Imu'
-#: what ``compensate`` appends to the gyro topic for its output where ``/imu/data`` is taken
-OUTPUT_SUFFIX = '_compensated'
 TEMPERATURE_TYPE = 'sensor_msgs/msg/Temperature'
 #: bare numbers a driver may publish its temperature as (degC in their ``data``)
 NUMBER_TYPES = ('std_msgs/msg/Float64', 'std_msgs/msg/Float32')
@@ -243,6 +242,14 @@ def resolve_topic_in(
             if name in topics:
                 if topics[name] != msgtype:
                     raise BagError(f'{flag} {topic}: has type {topics[name]}, expected {msgtype}')
+                raw = corrected_of(name, topics) if msgtype == IMU_TYPE else None
+                if raw is not None:
+                    print(
+                        f"WARNING: {flag} {name}: looks like this package's corrected output "
+                        f'(beside the raw rate {raw}): its drift was removed already, and '
+                        'compensating it corrects it a second time',
+                        file=sys.stderr,
+                    )
                 return name
         listing = ', '.join(f'{n} ({t})' for n, t in sorted(topics.items())) or 'none'
         raise MissingTopicError(f'{flag} {topic}: not in bag; topics: {listing}')

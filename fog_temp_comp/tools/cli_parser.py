@@ -482,8 +482,9 @@ def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument(
         '--output-topic',
         metavar='T',
-        help='topic of the corrected Imu (default /imu/data; where the input has /imu/data, '
-        'the gyro topic + _compensated)',
+        help='topic of the corrected Imu (default: NS/data for a gyro on NS/data_raw, so '
+        '/imu/data for /imu/data_raw; else, or where the input has NS/data, the gyro topic + '
+        '_compensated); a valid ROS topic name',
     )
     _add_time_source(p)
     _add_denoise(p, None)

@@ -13,7 +13,7 @@ import dataclasses
 import os
 import shutil
 import sys
-from collections.abc import Callable, Collection
+from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +27,12 @@ from fog_temp_comp.bag.repair import repaired_bag
 from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.streamdecode import check_field
 from fog_temp_comp.bag.temperature_topic import resolve_temperature
+from fog_temp_comp.bag.topic_names import (
+    OUTPUT_SUFFIX,
+    check_topic_name,
+    default_output_topic,
+    output_topic_for,
+)
 from fog_temp_comp.bag.unstamped import ClocksApartError, UnsetStamps
 from fog_temp_comp.core.coefficients import Coefficients, load
 from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, GuardSettings
@@ -89,10 +95,9 @@ def compensate_command(
     (:func:`~fog_temp_comp.tools.temperature_sources.with_yaml_temperature_topic`).
     ``temp_frame_id`` (default: the coefficients' ``temperature_frame_id``) picks one sensor's
     readings of a topic that carries several.
-    ``output_topic`` defaults to :data:`DEFAULT_OUTPUT_TOPIC`,
-    or, where the input has that topic already (a driver that publishes its raw rate there), to
-    the gyro topic with ``_compensated`` appended (:func:`output_topic_for`); a given topic that
-    the input has is refused.
+    ``output_topic`` defaults to ``<ns>/data`` for a gyro on ``<ns>/data_raw``, else (or where
+    the input has that topic) to the gyro topic + ``_compensated`` (:func:`output_topic_for`);
+    a given topic that the input has, or that is no valid ROS topic name, is refused.
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
@@ -116,6 +121,8 @@ def compensate_command(
         raise BagError('--temp-field needs --temp-topic (the topic that carries the field)')
     if output_topic and not output_topic.startswith('/'):
         output_topic = '/' + output_topic
+    if output_topic:
+        check_topic_name(output_topic, '--output-topic')
     run = _Compensate(
         in_bag=in_bag,
         fmt=bagio.bag_format(in_bag),
@@ -144,9 +151,11 @@ def _report_written(
     stdout: TextIO,
 ) -> None:
     """The output line; a ``NOTE:`` first where the default output topic was in the input."""
-    if chosen and run.output_used != DEFAULT_OUTPUT_TOPIC:
+    used = str(run.output_used)
+    preferred = default_output_topic(used.removesuffix(OUTPUT_SUFFIX))  # of the gyro topic
+    if chosen and used.endswith(OUTPUT_SUFFIX) and used != preferred:
         print(
-            f'NOTE: {DEFAULT_OUTPUT_TOPIC} is a topic of {run.in_bag}: the corrected Imu goes '
+            f'NOTE: {preferred} is a topic of {run.in_bag}: the corrected Imu goes '
             f'to {run.output_used} (choose another with --output-topic)',
             file=stdout,
         )
@@ -264,34 +273,6 @@ def _report_rest(
     else:
         write_learned_bias(rest_bias_out, bias)
         print(f'wrote {rest_bias_out} (learned bias)', file=stdout)
-
-
-#: the corrected Imu's topic unless the input has it (the node's output topic too)
-DEFAULT_OUTPUT_TOPIC = '/imu/data'
-
-
-def output_topic_for(
-    given: str | None, gyro_topic: str, topics: Collection[str], bag: Path
-) -> str:
-    """The corrected Imu's topic in ``bag``, whose topics are ``topics``.
-
-    ``given`` (``--output-topic``) if the bag does not have it; without one,
-    :data:`DEFAULT_OUTPUT_TOPIC`, or ``gyro_topic`` + ``_compensated`` where the bag has that.
-
-    Raises
-    ------
-    BagError
-        If the topic chosen is in the bag already.
-
-    """
-    topic = given
-    if topic is None:
-        topic = DEFAULT_OUTPUT_TOPIC
-        if topic in topics:
-            topic = gyro_topic + bagio.OUTPUT_SUFFIX
-    if topic in topics:
-        raise BagError(f'--output-topic {topic}: already in {bag}; choose another')
-    return topic
 
 
 class ReplayError(BagError):
