@@ -7,11 +7,13 @@ import shutil
 from pathlib import Path
 
 import pytest
+import yaml
 
 from fog_temp_comp.bag.bagio import IMU_TYPE, open_bag
 from fog_temp_comp.bag.topic_names import output_topic_for
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.commands import CalibrateOptions
+from fog_temp_comp.tools.demo import DEMO_FILES
 from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
 
 from simdata import write_run
@@ -176,3 +178,28 @@ def test_an_invalid_topic_name_made_from_the_gyro_topic_is_refused() -> None:
     assert output_topic_for(None, '/data_raw', {'/data_raw'}, Path('x')) == '/data'
     both = {'/imu/data_raw', '/imu/data'}
     assert output_topic_for(None, '/imu/data_raw', both, Path('x')) == '/imu/data_raw_compensated'
+
+
+def test_the_demo_runs_again_into_its_own_output_folder_only(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A second run replaces the demo's files; a folder with anything else is left alone."""
+    bags = tmp_path / 'bags'
+    bags.mkdir()
+    for name in ('cycle_1', 'soak_10'):  # the small ones: the fastest cycle trains
+        shutil.copytree(BAGS / name, bags / name)
+    runs = [{'name': 'cycle_0p2', 'bag': 'cycle_1'}, {'name': 'soak_10', 'bag': 'soak_10'}]
+    (bags / 'manifest.yaml').write_text(yaml.safe_dump({'runs': runs}))
+    out = tmp_path / 'demo_out'
+    argv = ['demo', '--bags', str(bags), '--out', str(out)]
+    assert cli.main(argv) == 0
+    assert 'replacing' not in capsys.readouterr().out
+    first = (out / 'table.md').read_text()
+    assert cli.main(argv) == 0
+    assert f"replacing the demo's earlier output in {out}" in capsys.readouterr().out
+    assert (out / 'table.md').read_text() == first
+    (out / 'notes.txt').write_text('mine\n')
+    assert cli.main(argv) == 1
+    line = error_line(capsys)
+    assert 'not a demo output folder (holds notes.txt)' in line
+    assert sorted(p.name for p in out.iterdir()) == sorted([*DEMO_FILES, 'notes.txt'])

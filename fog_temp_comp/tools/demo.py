@@ -38,6 +38,35 @@ HEADERS = {'none': 'none', 'iir': 'IIR', 'wavelet': 'wavelet', 'default': 'defau
 PAPER_PROTOCOL = GuardSettings()
 
 
+#: the files the demo writes into its output folder (and ``bags/``, simulated when not given)
+DEMO_FILES = frozenset({*(f'coeffs_{m}.yaml' for m in METHODS), 'table.md'})
+
+
+def clear_demo_output(out_dir: Path) -> list[str]:
+    """Remove what an earlier demo wrote into ``out_dir``, so that it runs again; the names.
+
+    Only a folder that holds nothing but the demo's files (:data:`DEMO_FILES`, a simulated
+    ``bags/`` folder, which is kept and reused) is cleared; anything else in it is refused
+    with a FileExistsError, nothing removed.
+    """
+    if not out_dir.exists():
+        return []
+    if not out_dir.is_dir():
+        raise FileExistsError(f'{out_dir}: exists already and is not a folder, not overwriting')
+    names = {p.name for p in out_dir.iterdir()}
+    others = sorted(names - DEMO_FILES - {'bags'})
+    if others:
+        shown = ', '.join(others[:3]) + (', ...' if len(others) > 3 else '')
+        raise FileExistsError(
+            f'{out_dir}: not a demo output folder (holds {shown}), not overwriting; '
+            'choose another --out'
+        )
+    removed = sorted(names & DEMO_FILES)
+    for name in removed:
+        (out_dir / name).unlink()
+    return removed
+
+
 @dataclass(frozen=True)
 class DemoRow:
     """10 s scores of one run and axis: before, and after with each method (deg/h)."""
@@ -108,8 +137,13 @@ def format_table(rows: list[DemoRow]) -> str:
 
 
 def demo_command(*, bags_dir: Path | None, out_dir: Path, stdout: TextIO | None = None) -> int:
-    """Run the demo; exit code 1 if compensation fails to improve any cycle run's stability."""
+    """Run the demo; exit code 1 if compensation fails to improve any cycle run's stability.
+
+    The demo's own earlier output in ``out_dir`` is replaced (:func:`clear_demo_output`).
+    """
     stdout = stdout or sys.stdout
+    if clear_demo_output(out_dir):
+        print(f"replacing the demo's earlier output in {out_dir}", file=stdout)
     if bags_dir is None:
         bags_dir = out_dir / 'bags'
         if not (bags_dir / 'manifest.yaml').exists():
