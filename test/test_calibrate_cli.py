@@ -138,7 +138,7 @@ def validation_rows(stdout: str) -> dict[tuple[str, str, float], list[float]]:
     assert lines[start].split()[:3] == ['run', 'axis', 'tau_s']
     assert set(lines[start + 1]) == {'-'}
     end = next(k for k in range(start, len(lines)) if lines[k].startswith('(deg/h'))
-    assert all(line.startswith('note: ') for line in lines[end + 1 :])
+    assert all(line.startswith(('note: ', 'wrote ')) for line in lines[end + 1 :])
     rows = {}
     for line in lines[start + 2 : end]:
         run, axis, tau, *values = line.split()
@@ -622,7 +622,7 @@ def test_a_bump_in_the_training_bag_is_dropped_and_reported(
     assert calibrate([train_bag], reference, '--terms', 'const,T,Tdot') == 0
     capsys.readouterr()
     assert calibrate([bag], out, '--terms', 'const,T,Tdot') == 0
-    warning = [line for line in capsys.readouterr().out.splitlines() if 'outliers' in line]
+    warning = [line for line in capsys.readouterr().err.splitlines() if 'outliers' in line]
     assert len(warning) == 1 and warning[0].startswith('WARNING: ')
     assert '1 of ' in warning[0] and 'a bump, a rotation or a data error?' in warning[0]
     data = read_yaml(out)

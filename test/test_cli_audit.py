@@ -203,3 +203,33 @@ def test_the_demo_runs_again_into_its_own_output_folder_only(
     line = error_line(capsys)
     assert 'not a demo output folder (holds notes.txt)' in line
     assert sorted(p.name for p in out.iterdir()) == sorted([*DEMO_FILES, 'notes.txt'])
+
+
+def test_calibrate_refuses_a_report_path_that_is_a_file_before_the_fit(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Refused up front, and no ``wrote`` line for a file not written."""
+    taken = tmp_path / 'afile'
+    taken.write_text('mine\n')
+    out = tmp_path / 'c.yaml'
+    argv = ['calibrate', str(BAGS / 'cycle_0p2'), '-o', str(out), '--terms', 'const,T,Tdot']
+    assert cli.main([*argv, '--report', str(taken), '--quiet']) == 1
+    said = capsys.readouterr()
+    assert said.out == ''  # before the fit
+    assert said.err.splitlines() == [
+        f'ERROR: {taken}: exists already and is not a directory, not overwriting'
+    ]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['afile']
+    assert taken.read_text() == 'mine\n'
+
+
+def test_calibrate_says_wrote_once_the_outputs_are_in_place(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out, report = tmp_path / 'c.yaml', tmp_path / 'report'
+    argv = ['calibrate', str(BAGS / 'cycle_0p2'), '-o', str(out), '--terms', 'const,T,Tdot']
+    assert cli.main([*argv, '--report', str(report), '--quiet']) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert 'wrote' not in lines[0]
+    assert lines[-2:] == [f'wrote {out}', f'report: {report / "index.html"}']
+    assert out.is_file() and (report / 'index.html').is_file()

@@ -111,8 +111,10 @@ def test_calibrate_on_the_same_run_twice_fits_it_once(
     out = tmp_path / 'many.yaml'
     assert cli.main(['calibrate', str(bag), str(link), str(copy), '-o', str(out), '--quiet']) == 0
     said = capsys.readouterr()
-    warnings = [line for line in (said.out + said.err).splitlines() if 'same data' in line]
-    assert len(warnings) == 2, warnings
+    warnings = [line for line in said.err.splitlines() if 'same data' in line]
+    assert len(warnings) == 2, warnings  # on stderr, as the other warnings, --quiet or not
+    assert 'same data' not in said.out
+    assert 'on 1 bag(s) (2 left out, repeating another)' in said.out  # what was fitted
     got, want = load(out), load(once)
     assert got.model.terms == want.model.terms
     np.testing.assert_allclose(got.model.coefficients, want.model.coefficients, rtol=1e-12)
@@ -145,7 +147,7 @@ def test_a_run_in_kelvin_gets_the_fit_of_the_same_run_in_degrees_celsius(
         out = tmp_path / f'{name}.yaml'
         assert cli.main(['calibrate', str(bag), '-o', str(out), '--quiet']) == 0
         said = capsys.readouterr()
-        fits[name] = (load(out), [x for x in said.out.splitlines() if 'kelvin, not degC' in x])
+        fits[name] = (load(out), [x for x in said.err.splitlines() if 'kelvin, not degC' in x])
     (celsius, celsius_said), (kelvin, kelvin_said) = fits['celsius'], fits['kelvin']
     assert celsius_said == [] and len(kelvin_said) == 1
     assert kelvin_said[0].startswith(f'WARNING: {tmp_path / "kelvin"}: temperatures on ')

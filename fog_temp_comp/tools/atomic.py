@@ -129,6 +129,10 @@ class AtomicOutputs:
         target = Path(target)
         if not (merge_into_dir or replace) and (target.exists() or target.is_symlink()):
             raise FileExistsError(f'{target}: exists already, not overwriting')
+        if merge_into_dir and target.exists() and not target.is_dir():
+            raise FileExistsError(
+                f'{target}: exists already and is not a directory, not overwriting'
+            )
         check_output_directory(target)  # said of the target, not of the hidden directory
         holder = partial_dir(target)
         _remove(holder)

@@ -92,17 +92,25 @@ def calibrate_command(
     gyro_topic: str | None = None,
     temp_topic: str | None = None,
     stdout: TextIO | None = None,
+    stderr: TextIO | None = None,
 ) -> int:
     """Fit coefficients on ``bags`` and write them to ``output`` (YAML).
 
     Training bags are streamed and reduced to the Tdot grid (bounded memory); held-out and
-    validation bags are replayed through the compensator at full rate.
+    validation bags are replayed through the compensator at full rate. The fit's warnings go
+    to ``stderr`` (default ``sys.stderr``).
     """
     stdout = stdout or sys.stdout
     check_output_directory(output)  # before the bags are read
     report = options.report_dir if options else None
     with AtomicOutputs(output, report) as outputs:  # -o, --report: complete, or not at all
-        return _calibrate(bags, output, outputs, options, settings, gyro_topic, temp_topic, stdout)
+        index = _calibrate(
+            bags, output, outputs, options, settings, gyro_topic, temp_topic, (stdout, stderr)
+        )
+    print(f'wrote {output}', file=stdout)  # once in place, not before
+    if index is not None:
+        print(f'report: {index}', file=stdout)
+    return 0
 
 
 def _calibrate(
@@ -113,11 +121,19 @@ def _calibrate(
     settings: DenoiseSettings | None,
     gyro_topic: str | None,
     temp_topic: str | None,
-    stdout: TextIO,
-) -> int:
-    """:func:`calibrate_command` writing its outputs to the temporary paths of ``outputs``."""
+    streams: tuple[TextIO, TextIO | None],
+) -> Path | None:
+    """:func:`calibrate_command` writing its outputs to the temporary paths of ``outputs``.
+
+    Returns the report's index page (where it will be once committed), or None. ``streams``:
+    stdout, and stderr for the fit's warnings (None: ``sys.stderr``).
+    """
+    stdout, stderr = streams
     yaml_path = outputs.path(output)  # first: an existing -o is refused before any bag is read
     opt = options or CalibrateOptions()
+    report_dir = None
+    if opt.report_dir is not None:  # a --report that cannot be written: before the fit, too
+        report_dir = outputs.path(opt.report_dir, merge_into_dir=True)
     if opt.terms is not None and not opt.terms:
         raise ValueError('--terms: give at least one model term')
     opt = dataclasses.replace(
@@ -145,18 +161,17 @@ def _calibrate(
     if opt.no_constant:
         coeffs = _without_constant(coeffs)
     save(coeffs, yaml_path)
-    _print_fit(result, coeffs, len(records), output, stdout)
+    _print_fit(result, coeffs, len(records), stdout, stderr or sys.stderr)
     runs = _validate(opt, coeffs, [(b.name, load_record(b)) for b in opt.validate], stdout)
-    if opt.report_dir is not None:
-        if not runs:  # no validation bags: show the training runs
-            guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
-            for record in records:
-                corrected, _ = replay_record(record, coeffs, guard=guard)
-                runs.append((f'{record.path.name} (training)', record, corrected))
-        report_dir = outputs.path(opt.report_dir, merge_into_dir=True)
-        index = _write_calibration_report(report_dir, bags, runs, result, coeffs, provenance)
-        print(f'report: {opt.report_dir / index.name}', file=stdout)
-    return 0
+    if opt.report_dir is None or report_dir is None:
+        return None
+    if not runs:  # no validation bags: show the training runs
+        guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
+        for record in records:
+            corrected, _ = replay_record(record, coeffs, guard=guard)
+            runs.append((f'{record.path.name} (training)', record, corrected))
+    index = _write_calibration_report(report_dir, bags, runs, result, coeffs, provenance)
+    return opt.report_dir / index.name
 
 
 def _read_args(opt: CalibrateOptions) -> dict[str, Any]:
@@ -289,17 +304,25 @@ def _fit(
 
 
 def _print_fit(
-    result: CalibrationResult, coeffs: Coefficients, n_bags: int, output: Path, stdout: TextIO
+    result: CalibrationResult, coeffs: Coefficients, n_bags: int, stdout: TextIO, stderr: TextIO
 ) -> None:
-    """The fitted terms, each fit's statistics, the calibrated range and the warnings."""
+    """The fitted terms, each fit's statistics, the calibrated range; the warnings on stderr.
+
+    The bags counted are those fitted on (a repeat of another left out), ``n_bags`` where the
+    provenance does not name them.
+    """
     model = coeffs.model
     lag, sensor_lag = coeffs.denoise.coil_lag_s, coeffs.denoise.sensor_lag_s
+    fitted = coeffs.provenance.get('bags')
+    n_bags = len(set(fitted)) if isinstance(fitted, list) and fitted else n_bags
+    repeats = len(coeffs.provenance.get('repeated_bags') or ())
     print(
-        f'fitted {", ".join(model.terms)} on {n_bags} bag(s), Tdot estimator '
+        f'fitted {", ".join(model.terms)} on {n_bags} bag(s)'
+        + (f' ({repeats} left out, repeating another)' if repeats else '')
+        + f', Tdot estimator '
         f'{coeffs.denoise.method}'
         + (f', coil lag {lag:.0f} s' if lag else '')
-        + (f', sensor lag {sensor_lag:.0f} s' if sensor_lag else '')
-        + f'; wrote {output}',
+        + (f', sensor lag {sensor_lag:.0f} s' if sensor_lag else ''),
         file=stdout,
     )
     for line in format_fits(result.fits):
@@ -311,7 +334,7 @@ def _print_fit(
         file=stdout,
     )
     for warning in result.warnings:
-        print(f'WARNING: {warning}', file=stdout)
+        print(f'WARNING: {warning}', file=stderr)
 
 
 def _validate(

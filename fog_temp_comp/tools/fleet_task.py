@@ -40,7 +40,9 @@ def calibrate_unit(job: UnitJob, previous_digest: str | None = None) -> UnitResu
     with tempfile.TemporaryDirectory(prefix='fog-fleet-') as tmp:
         output = Path(tmp) / f'{job.unit}.yaml'
         try:
-            commands.calibrate_command(job.bags, output, options=job.options, stdout=stdout)
+            commands.calibrate_command(
+                job.bags, output, options=job.options, stdout=stdout, stderr=stdout
+            )  # the warnings in the unit's log too
         except (*commands.USER_ERRORS, OSError) as err:
             reason = ' '.join(str(err).split())[:MAX_REASON_CHARS] or type(err).__name__
             log = stdout.getvalue() + f'ERROR: {err}\n'  # the log says why, in full
