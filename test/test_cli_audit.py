@@ -233,3 +233,39 @@ def test_calibrate_says_wrote_once_the_outputs_are_in_place(
     assert 'wrote' not in lines[0]
     assert lines[-2:] == [f'wrote {out}', f'report: {report / "index.html"}']
     assert out.is_file() and (report / 'index.html').is_file()
+
+
+@pytest.mark.parametrize(
+    ('args', 'error'),
+    [
+        (['--imu-hz', 'inf'], 'ERROR: --imu-hz inf: must be within (0, 1000] Hz'),
+        (['--temp-hz', 'inf'], 'ERROR: --temp-hz inf: must be within (0, 1000] Hz'),
+        (['--imu-hz', '1e9'], 'ERROR: --imu-hz 1e+09: must be within (0, 1000] Hz'),
+        (['--temp-hz', '1e7'], 'ERROR: --temp-hz 1e+07: must be within (0, 1000] Hz'),
+        (['--imu-hz', 'nan'], 'ERROR: --imu-hz nan: must be within (0, 1000] Hz'),
+        (['--seed', '-1'], 'ERROR: --seed -1: must be >= 0'),
+        (['--runs', 'soak:20,soak:20.0'], 'ERROR: --runs: soak_20 given twice'),
+        (
+            ['--runs', 'soak:2000'],
+            'ERROR: --runs soak:2000: a soak at 2000 degC; allowed -60..100',
+        ),
+        (['--runs', 'cycle:0'], 'ERROR: --runs cycle:0: a cycle at 0 degC/min; allowed 0.01..20'),
+        (['--imu-hz', '100'], 'ERROR: cycle_0p2: 7,150,800 messages (70,800 s at --imu-hz 100'),
+        (['--fleet', '2', '--imu-hz', 'inf'], 'ERROR: --imu-hz inf: must be within'),
+        (['--fleet', '2', '--seed', '-3'], 'ERROR: --seed -3: must be >= 0'),
+    ],
+)
+def test_simulate_refuses_what_it_cannot_simulate_before_anything_is_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], error: str
+) -> None:
+    out = tmp_path / 'sim'
+    assert cli.main(['simulate', str(out), *args]) == 1
+    assert error_line(capsys).startswith(error)
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_simulate_accepts_the_bounds(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / 'sim'
+    argv = ['simulate', str(out), '--runs', 'soak:-60,soak:100', '--imu-hz', '0.01']
+    assert cli.main([*argv, '--temp-hz', '0.01']) == 0
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ['soak_100', 'soak_m60']

@@ -170,10 +170,14 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument(
         '--format', choices=FORMATS, default='mcap', dest='fmt', help='bag format (default mcap)'
     )
-    p.add_argument('--imu-hz', type=float, default=10.0, help='gyro rate (Hz, default 10)')
-    p.add_argument('--temp-hz', type=float, default=1.0, help='temperature rate (Hz, default 1)')
     p.add_argument(
-        '--seed', type=int, default=0, help="random seed of the runs' noise (default 0)"
+        '--imu-hz', type=float, default=10.0, help='gyro rate (Hz, default 10; at most 1000)'
+    )
+    p.add_argument(
+        '--temp-hz', type=float, default=1.0, help='temperature rate (Hz, default 1; at most 1000)'
+    )
+    p.add_argument(
+        '--seed', type=int, default=0, help="random seed of the runs' noise (>= 0, default 0)"
     )
     p.add_argument(
         '--realistic',
@@ -201,7 +205,8 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         type=_runs,
         metavar='KIND:SETPOINT,...',
         help="runs to write instead of the paper's plan, e.g. soak:20,cycle:1.0 (soak setpoint "
-        'in degC, cycle rate in degC/min)',
+        'in degC, -60..100; cycle rate in degC/min, 0.01..20; each once; at most 5,000,000 '
+        'messages a run)',
     )
     _add_simulate_vehicle(
         p.add_argument_group(

@@ -26,6 +26,7 @@ from fog_temp_comp.bag import bagio
 from fog_temp_comp.core.model import coefficient_key
 from fog_temp_comp.core.units import AXES
 from fog_temp_comp.tools.simulate import REALISTIC, SimulatedRun, SimulationConfig, simulate_run
+from fog_temp_comp.tools.simulate_limits import check_rates, check_runs, check_seed
 
 FAULTS = ('missing', 'damaged', 'short', 'bad_coil')
 #: unit-to-unit spread: d0 (deg/h), dt (deg/h/degC) std; dtdot, T^2, coil lag relative std
@@ -84,7 +85,10 @@ def simulate_fleet_command(
     stdout = stdout or sys.stdout
     if n_units < 1:
         raise ValueError(f'--fleet {n_units}: must be >= 1')
+    check_seed(seed)
+    check_rates(imu_hz, temp_hz)
     base = base or dataclasses.replace(REALISTIC, imu_hz=imu_hz, temp_hz=temp_hz)
+    check_runs([('cycle', cycle_degC_per_min)], base)
     rng = np.random.default_rng((seed, 14))
     out_dir.mkdir(parents=True, exist_ok=True)
     units: dict[str, Any] = {}

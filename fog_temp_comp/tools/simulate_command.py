@@ -52,10 +52,16 @@ def simulate_command(
     """
     # here, not at the top: the simulator needs scipy.signal (~1 s), no other command does
     from fog_temp_comp.tools.simulate import REALISTIC, SimulationConfig, paper_plan, simulate_run
+    from fog_temp_comp.tools.simulate_limits import check_rates, check_runs, check_seed
 
     stdout = stdout or sys.stdout
+    check_seed(seed)
+    if config is None:
+        check_rates(imu_hz, temp_hz)
     base = REALISTIC if realistic else SimulationConfig()
     cfg = config or dataclasses.replace(base, imu_hz=imu_hz, temp_hz=temp_hz, **(vehicle or {}))
+    check_rates(cfg.imu_hz, cfg.temp_hz)
+    check_runs(runs or paper_plan(), cfg)  # all of them before the first is simulated
     out_dir.mkdir(parents=True, exist_ok=True)
     manifest = _manifest_to_extend(out_dir / 'manifest.yaml', _simulation_manifest(cfg, fmt, seed))
     first = len(manifest['runs'])  # runs added to a folder get seeds of their own
