@@ -269,3 +269,18 @@ def test_simulate_accepts_the_bounds(tmp_path: Path, capsys: pytest.CaptureFixtu
     argv = ['simulate', str(out), '--runs', 'soak:-60,soak:100', '--imu-hz', '0.01']
     assert cli.main([*argv, '--temp-hz', '0.01']) == 0
     assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ['soak_100', 'soak_m60']
+
+
+@pytest.mark.parametrize(
+    ('given', 'name'), [('file', 'out.db3'), ('file', 'out.bag'), ('directory', 'out.DB3')]
+)
+def test_compensate_refuses_an_output_named_as_another_format(
+    soak: Path, coeffs: Path, capsys: pytest.CaptureFixture[str], given: str, name: str
+) -> None:
+    """The output has the input's format: not a directory named like a file of another."""
+    in_bag = soak / 'soak_10.mcap' if given == 'file' else soak
+    out = soak.parent / name
+    assert cli.main(['compensate', str(in_bag), '--coeffs', str(coeffs), '-o', str(out)]) == 1
+    line = error_line(capsys)
+    assert f'-o {out}: a {out.suffix.lower()} name' in line and 'name it out.mcap' in line
+    assert not out.exists()

@@ -4,7 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ['BAG_SUFFIXES', 'UNOPENED_HINT', 'bag_directory', 'inside_bag', 'not_a_bag']
+__all__ = [
+    'BAG_SUFFIXES',
+    'UNOPENED_HINT',
+    'bag_directory',
+    'inside_bag',
+    'misnamed_output',
+    'not_a_bag',
+]
 
 #: files that make a directory a bag (rosbag2's storage files, plain or file-compressed)
 BAG_SUFFIXES = ('.mcap', '.db3', '.mcap.zstd', '.db3.zstd')
@@ -78,4 +85,24 @@ def inside_bag(output: Path, in_bag: Path) -> str | None:
     return (
         f'{output}: inside the input bag directory {bag_dir} (read as part of that bag '
         'afterwards); write it elsewhere, e.g. beside the bag directory'
+    )
+
+
+#: the suffix that names a bag of each storage format
+FORMAT_SUFFIX = {'mcap': '.mcap', 'sqlite3': '.db3', 'ros1': '.bag'}
+
+
+def misnamed_output(output: Path, fmt: str) -> str | None:
+    """Why ``output`` may not name a bag of format ``fmt`` (the message), or None if it may.
+
+    A name ending in another format's suffix is refused: ``out.db3`` for an MCAP output would
+    be a rosbag2 directory named like an sqlite3 file, holding ``out.db3.mcap``.
+    """
+    suffix, want = output.suffix.lower(), FORMAT_SUFFIX[fmt]
+    if suffix not in FORMAT_SUFFIX.values() or suffix == want:
+        return None
+    return (
+        f"-o {output}: a {suffix} name, but the output has the input's format ({fmt}, "
+        f'{want}): name it {output.with_suffix(want).name}'
+        + ('' if fmt == 'ros1' else ' or without a suffix (a rosbag2 directory)')
     )

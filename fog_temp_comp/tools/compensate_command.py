@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from fog_temp_comp.bag import bagio, mcapwrite
-from fog_temp_comp.bag.bag_path import inside_bag
+from fog_temp_comp.bag.bag_path import inside_bag, misnamed_output
 from fog_temp_comp.bag.bagio import BagError, BagWriter
 from fog_temp_comp.bag.one_clock import on_one_clock
 from fog_temp_comp.bag.repair import repaired_bag
@@ -105,6 +105,8 @@ def compensate_command(
         raise FileExistsError(f'{out_bag}: exists already, not overwriting')
     if (inside := inside_bag(out_bag, in_bag)) is not None:
         raise ValueError(inside)
+    if (misnamed := misnamed_output(out_bag, bagio.bag_format(in_bag))) is not None:
+        raise ValueError(misnamed)
     check_output_directory(out_bag)  # before the bag is read
     settings = effective_settings(coeffs, denoise_method)
     if (rest_bias_in or rest_bias_out) and not (rest is not None and rest.enabled):
