@@ -284,3 +284,25 @@ def test_compensate_refuses_an_output_named_as_another_format(
     line = error_line(capsys)
     assert f'-o {out}: a {out.suffix.lower()} name' in line and 'name it out.mcap' in line
     assert not out.exists()
+
+
+def test_a_gyro_frame_id_other_than_the_coefficients_is_warned_of(
+    soak: Path, coeffs: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One WARNING line, as the node's ('corrected anyway'); none where the frame_id fits."""
+    text = coeffs.read_text()
+    assert '\nframe_id: imu_link\n' in text  # the sample bags' gyro frame
+    other = tmp_path / 'other.yaml'
+    other.write_text(text.replace('\nframe_id: imu_link\n', '\nframe_id: other_link\n'))
+    for yaml_path, warned in ((coeffs, False), (other, True)):
+        for command in ('evaluate', 'compensate'):
+            argv = [command, str(soak), '--coeffs', str(yaml_path)]
+            if command == 'compensate':
+                argv += ['-o', str(tmp_path / f'out_{warned}')]
+            assert cli.main(argv) == 0
+            lines = [x for x in capsys.readouterr().err.splitlines() if 'frame_id' in x]
+            expected = (
+                f"WARNING: {soak}: gyro frame_id differs from calibrated one ('imu_link', the "
+                "coefficients 'other_link': another gyro?): corrected anyway, as on the node"
+            )
+            assert lines == ([expected] if warned else [])

@@ -161,6 +161,17 @@ def bag_format(path: str | Path) -> str:
     raise BagError(f'{path}: not a bag (expected a rosbag2 directory, .mcap, .db3, .bag)')
 
 
+def first_frame_id(reader: AnyReader, topic: str) -> str | None:
+    """The header frame_id of ``topic``'s first message, or None (no message, undecodable)."""
+    conns = [c for c in reader.connections if c.topic == topic]
+    try:
+        for conn, _, raw in reader.messages(connections=conns):
+            return str(reader.deserialize(raw, conn.msgtype).header.frame_id)
+    except Exception:  # a damaged bag: the replay says what is wrong
+        return None
+    return None
+
+
 def _normalise(topic: str) -> str:
     return topic if topic.startswith('/') else '/' + topic
 

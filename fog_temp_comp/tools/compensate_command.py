@@ -49,7 +49,7 @@ from fog_temp_comp.tools import blockreplay
 from fog_temp_comp.tools.atomic import AtomicOutputs, check_output_directory
 from fog_temp_comp.tools.chunkreplay import ChunkReplayer, chunked
 from fog_temp_comp.tools.compensate_report import check_temperature_used, report_input
-from fog_temp_comp.tools.evaluate_command import effective_settings
+from fog_temp_comp.tools.evaluate_command import effective_settings, frame_mismatch
 from fog_temp_comp.tools.salvaged import Salvaged
 from fog_temp_comp.tools.temperature_sources import with_yaml_temperature_topic
 
@@ -136,6 +136,8 @@ def compensate_command(
         temp_frame_id=temp_frame_id or coeffs.temperature_frame_id,
     )
     (n_out, counters), compensator = run.replay(out_bag, strict, coeffs)
+    if (mismatch := frame_mismatch(in_bag, run.gyro_frame, coeffs.frame_id)) is not None:
+        print(mismatch, file=sys.stderr)
     _report_written(run, out_bag, n_out, counters, chosen=output_topic is None, stdout=stdout)
     report_input(run.in_bag, compensator)  # faults, gaps, NaN gyro
     if compensator.rest is not None:
@@ -298,6 +300,8 @@ class _Compensate:
     temp_field: str | None = None
     #: of a temperature topic with several sensors' readings, this one's ('': choose)
     temp_frame_id: str = ''
+    #: the gyro topic's first frame_id (None: not read)
+    gyro_frame: str | None = None
 
     def replay(
         self, out_bag: Path, strict: bool, coeffs: Coefficients
@@ -366,6 +370,7 @@ class _Compensate:
         with opened:
             imu_name = bagio.resolve_topic(reader, gyro_topic, bagio.IMU_TYPE, '--gyro-topic')
             self.output_used = output_topic_for(output_topic, imu_name, reader.topics, self.in_bag)
+            self.gyro_frame = bagio.first_frame_id(reader, imu_name)
             temp_name = self._temperature_topic(reader, temp_topic, imu_name)
             job = _CompensateJob(
                 reader=reader,

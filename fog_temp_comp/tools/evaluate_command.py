@@ -75,12 +75,24 @@ def evaluate_command(
         corrected, status = replay_record(
             record, coeffs, effective_settings(coeffs, denoise_method), guard
         )
+        if (mismatch := frame_mismatch(bag, record.frame_id, coeffs.frame_id)) is not None:
+            print(mismatch, file=sys.stderr)
         scores += score_record(bag.name, record.imu_stamps_s, record.rates_rad_s, corrected)
         notes += clamp_notes(bag.name, status.counters, coeffs)
     print(format_scores(scores), file=stdout)
     for note in notes:
         print(note, file=stdout)
     return 0
+
+
+def frame_mismatch(bag: Path, frame_id: str | None, calibrated: str) -> str | None:
+    """The ``WARNING`` where the gyro's frame_id is not the coefficients' (as the node's)."""
+    if not calibrated or frame_id is None or frame_id == calibrated:
+        return None
+    return (
+        f'WARNING: {bag}: gyro frame_id differs from calibrated one ({frame_id!r}, the '
+        f'coefficients {calibrated!r}: another gyro?): corrected anyway, as on the node'
+    )
 
 
 def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) -> list[str]:
