@@ -316,7 +316,7 @@ DATA: list[tuple[str, str, Callable[[dict[str, np.ndarray]], None], str, str]] =
     ('gyro rate all zero (angular_velocity not filled)', 'ros1', lambda a: a.__setitem__(
         'rates_rad_s', a['rates_rad_s'] * 0.0), 'error', 'never changes on any axis'),
     ('temperature in kelvin', 'mcap', lambda a: a.__setitem__(
-        'temperature_degC', a['temperature_degC'] + 273.15), 'ok', ''),
+        'temperature_degC', a['temperature_degC'] + 273.15), 'diagnostic', 'kelvin, not degC'),
     ('gyro and temperature not overlapping', 'mcap',
      lambda a: a.__setitem__('temp_stamps_s', a['temp_stamps_s'] + 1e5), 'error', 'overlap'),
     ('gyro and temperature not overlapping', 'sqlite3',

@@ -278,6 +278,7 @@ def test_clocks_hours_apart_are_aligned_by_receive_time_without_a_flag(
         corrected = read_record(
             out, gyro_topic='/imu/data', temp_topic=TEMP, time_source='receive'
         )
+        assert 'corrected output' in capsys.readouterr().err  # read as such here, on purpose
         table = [line for line in captured.out.splitlines() if line.startswith('apart')]
         results[label] = (yaml.safe_load(coeffs.read_text())['axes'], corrected.rates_rad_s, table)
     assert results['default'][0] == results['receive'][0]
