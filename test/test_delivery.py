@@ -180,7 +180,8 @@ def test_compensate_tells_stamps_out_of_order_from_a_time_jump(
             for t, w in zip(run.imu_stamps_s[rows], run.rates_rad_s[rows], strict=True):
                 ns = round(t * 1e9)
                 log_ns = ns + round(shift * 1e9)
-                events.append((log_ns, 1, '/imu/data_raw', bagio.make_imu(ns, 'f', w)))
+                imu = bagio.make_imu(ns, 'imu_link', w)  # the coefficients' gyro frame
+                events.append((log_ns, 1, '/imu/data_raw', imu))
         return events
 
     # logged 700 s later, with its own header stamps, among the live messages
