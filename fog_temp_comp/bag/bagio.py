@@ -166,7 +166,8 @@ def first_frame_id(reader: AnyReader, topic: str) -> str | None:
     conns = [c for c in reader.connections if c.topic == topic]
     try:
         for conn, _, raw in reader.messages(connections=conns):
-            return str(reader.deserialize(raw, conn.msgtype).header.frame_id)
+            msg: Any = reader.deserialize(raw, conn.msgtype)
+            return str(msg.header.frame_id)
     except Exception:  # a damaged bag: the replay says what is wrong
         return None
     return None

@@ -95,19 +95,12 @@ def compensate_command(
     (:func:`~fog_temp_comp.tools.temperature_sources.with_yaml_temperature_topic`).
     ``temp_frame_id`` (default: the coefficients' ``temperature_frame_id``) picks one sensor's
     readings of a topic that carries several.
-    ``output_topic`` defaults to ``<ns>/data`` for a gyro on ``<ns>/data_raw``, else (or where
-    the input has that topic) to the gyro topic + ``_compensated`` (:func:`output_topic_for`);
-    a given topic that the input has, or that is no valid ROS topic name, is refused.
+    ``output_topic``: :func:`~fog_temp_comp.bag.topic_names.output_topic_for` (by default
+    ``<ns>/data`` of ``<ns>/data_raw``, else the gyro topic + ``_compensated``).
     """
     stdout = stdout or sys.stdout
     coeffs = load(coeffs_path)
-    if out_bag.exists():
-        raise FileExistsError(f'{out_bag}: exists already, not overwriting')
-    if (inside := inside_bag(out_bag, in_bag)) is not None:
-        raise ValueError(inside)
-    if (misnamed := misnamed_output(out_bag, bagio.bag_format(in_bag))) is not None:
-        raise ValueError(misnamed)
-    check_output_directory(out_bag)  # before the bag is read
+    _check_output(in_bag, out_bag)  # before the bag is read
     settings = effective_settings(coeffs, denoise_method)
     if (rest_bias_in or rest_bias_out) and not (rest is not None and rest.enabled):
         raise ValueError('--rest-bias-in/--rest-bias-out need --rest-learning')
@@ -143,6 +136,21 @@ def compensate_command(
     if compensator.rest is not None:
         _report_rest(compensator.rest, coeffs_path, rest_bias_out, stdout)
     return 0
+
+
+def _check_output(in_bag: Path, out_bag: Path) -> None:
+    """Refuse an ``-o`` that cannot be the output, before the bag is read.
+
+    One that exists, lies inside the input's bag directory (read as part of it afterwards), is
+    named as a bag of another format, or whose directory is missing.
+    """
+    if out_bag.exists():
+        raise FileExistsError(f'{out_bag}: exists already, not overwriting')
+    if (inside := inside_bag(out_bag, in_bag)) is not None:
+        raise ValueError(inside)
+    if (misnamed := misnamed_output(out_bag, bagio.bag_format(in_bag))) is not None:
+        raise ValueError(misnamed)
+    check_output_directory(out_bag)
 
 
 def _report_written(
