@@ -227,7 +227,7 @@ def test_calibrate_says_wrote_once_the_outputs_are_in_place(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out, report = tmp_path / 'c.yaml', tmp_path / 'report'
-    argv = ['calibrate', str(BAGS / 'cycle_0p2'), '-o', str(out), '--terms', 'const,T,Tdot']
+    argv = ['calibrate', str(BAGS / 'cycle_1'), '-o', str(out), '--terms', 'const,T,Tdot']
     assert cli.main([*argv, '--report', str(report), '--quiet']) == 0
     lines = capsys.readouterr().out.splitlines()
     assert 'wrote' not in lines[0]
