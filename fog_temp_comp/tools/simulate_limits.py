@@ -21,9 +21,9 @@ __all__ = [
 ]
 
 #: the highest gyro or temperature rate (Hz): a FOG's fastest output
-MAX_RATE_HZ = 1000.0
-#: gyro plus temperature messages of one run at most (~1 GB of arrays while simulating)
-MAX_MESSAGES_PER_RUN = 5_000_000
+MAX_RATE_HZ = 10_000.0
+#: gyro plus temperature messages of one run at most (~3.5 GB of arrays while simulating)
+MAX_MESSAGES_PER_RUN = 20_000_000
 #: soak setpoints (degC): a thermal chamber's reach, around the simulated -40..60 degC cycles
 SOAK_RANGE_DEGC = (-60.0, 100.0)
 #: cycle rates (degC/min): from a slow chamber ramp to a fast one
