@@ -30,7 +30,9 @@ def _add_topics(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--temp-topic',
         metavar='T',
-        help="sensor_msgs/Temperature topic (default: the bag's only one)",
+        help="sensor_msgs/Temperature topic, or with --temp-field any type's (default: the "
+        "bag's only Temperature topic, else a bare std_msgs Float32/Float64 one named as a "
+        'temperature)',
     )
 
 
@@ -121,7 +123,14 @@ def _add_fleet(sub: Any) -> None:
     fleet = p.add_subparsers(dest='fleet_command', required=True, metavar='FLEET_COMMAND')
     f = fleet.add_parser('calibrate', help='calibrate every unit of a manifest, one task each')
     f.add_argument('manifest', type=Path, metavar='MANIFEST', help='YAML or CSV: unit -> bag(s)')
-    f.add_argument('-o', '--output', type=Path, required=True, metavar='OUT_DIR')
+    f.add_argument(
+        '-o',
+        '--output',
+        type=Path,
+        required=True,
+        metavar='OUT_DIR',
+        help="folder of the units' coefficients, logs, fleet table and report (resumable)",
+    )
     f.add_argument(
         '--scheduler',
         metavar='ADDR',
@@ -133,7 +142,14 @@ def _add_fleet(sub: Any) -> None:
     f.add_argument('--no-report', action='store_true', help='no OUT_DIR/report/index.html')
     f = fleet.add_parser('prior', help="the fleet's coefficient distribution as a prior")
     f.add_argument('fleet_dir', type=Path, metavar='OUT_DIR', help='a `fleet calibrate` output')
-    f.add_argument('-o', '--output', type=Path, required=True, metavar='PRIOR.yaml')
+    f.add_argument(
+        '-o',
+        '--output',
+        type=Path,
+        required=True,
+        metavar='PRIOR.yaml',
+        help='the prior to write, for `calibrate --prior` (never overwritten)',
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -290,7 +306,13 @@ def _runs(text: str) -> list[tuple[str, float]]:
 def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The ``calibrate`` command: bags, output, then its option groups."""
     p = sub.add_parser('calibrate', help='fit drift coefficients from chamber bags')
-    p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
+    p.add_argument(
+        'bags',
+        type=Path,
+        nargs='+',
+        metavar='BAG',
+        help='chamber runs to fit together: rosbag2 folders, .mcap/.db3 files or ROS 1 .bag',
+    )
     p.add_argument(
         '-o',
         '--output',
@@ -311,8 +333,18 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     _add_calibrate_selection(p.add_argument_group('selection and validation (held-out runs)'))
 
 
-def _add_temp_field(g: argparse._ArgumentGroup | argparse.ArgumentParser) -> None:
-    """``--temp-field`` (a field of a message of any type) and ``--temp-frame-id``."""
+def _add_temp_field(
+    g: argparse._ArgumentGroup | argparse.ArgumentParser, calibrate: bool = False
+) -> None:
+    """``--temp-field`` (a field of a message of any type) and ``--temp-frame-id``.
+
+    The default of ``--temp-frame-id`` is told as ``calibrate`` (or else the others) has it.
+    """
+    default = (
+        'calibrate fits each and keeps the best, the first by name where a flag sets the model'
+        if calibrate
+        else 'the one calibrate kept, named in the coefficients file'
+    )
     g.add_argument(
         '--temp-field',
         metavar='FIELD',
@@ -324,28 +356,28 @@ def _add_temp_field(g: argparse._ArgumentGroup | argparse.ArgumentParser) -> Non
         metavar='ID',
         default='',
         help="of a temperature topic that carries several sensors' readings (told by "
-        "header.frame_id), use this sensor's (default: calibrate fits each and keeps the "
-        'best, the first by name where a flag sets the model; compensate and evaluate the '
-        'one calibrate kept)',
+        f"header.frame_id), use this sensor's (default: {default})",
     )
 
 
-def _add_gyro_frame_id(g: argparse._ArgumentGroup | argparse.ArgumentParser) -> None:
+def _add_gyro_frame_id(
+    g: argparse._ArgumentGroup | argparse.ArgumentParser, calibrate: bool = False
+) -> None:
     """``--gyro-frame-id``: one gyro's messages of a topic that carries several."""
+    default = 'the first by name' if calibrate else "the coefficients' frame_id"
     g.add_argument(
         '--gyro-frame-id',
         metavar='ID',
         default='',
         help="of a gyro topic that carries several gyros' messages (told by header.frame_id), "
-        "use this gyro's (default: calibrate keeps the first by name; evaluate the "
-        "coefficients' frame_id)",
+        f"use this gyro's (default: {default})",
     )
 
 
 def _add_calibrate_input(g: argparse._ArgumentGroup) -> None:
     """Input options of calibrate: temperature field, time source, Earth rate."""
-    _add_temp_field(g)
-    _add_gyro_frame_id(g)
+    _add_temp_field(g, calibrate=True)
+    _add_gyro_frame_id(g, calibrate=True)
     _add_time_source(g)
     g.add_argument('--quiet', action='store_true', help='no progress line on stderr')
     _add_strict(g)
@@ -472,8 +504,14 @@ def _add_time_source(p: Any) -> None:
 def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The ``compensate`` command."""
     p = sub.add_parser('compensate', help='replay a bag through the compensator')
-    p.add_argument('in_bag', type=Path, metavar='IN_BAG')
-    p.add_argument('--coeffs', type=Path, required=True, metavar='COEFFS.yaml')
+    p.add_argument('in_bag', type=Path, metavar='IN_BAG', help='the bag to correct (any format)')
+    p.add_argument(
+        '--coeffs',
+        type=Path,
+        required=True,
+        metavar='COEFFS.yaml',
+        help='the coefficients file `calibrate` wrote (as the node loads it)',
+    )
     p.add_argument(
         '-o',
         '--output',
@@ -501,8 +539,14 @@ def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The ``evaluate`` command."""
     p = sub.add_parser('evaluate', help='bias stability and range before/after compensation')
-    p.add_argument('bags', type=Path, nargs='+', metavar='BAG')
-    p.add_argument('--coeffs', type=Path, required=True, metavar='COEFFS.yaml')
+    p.add_argument('bags', type=Path, nargs='+', metavar='BAG', help='runs to score, each apart')
+    p.add_argument(
+        '--coeffs',
+        type=Path,
+        required=True,
+        metavar='COEFFS.yaml',
+        help='the coefficients file `calibrate` wrote (as the node loads it)',
+    )
     _add_topics(p)
     _add_temp_field(p)
     _add_gyro_frame_id(p)
