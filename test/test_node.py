@@ -269,3 +269,40 @@ def test_diagnostics_timer_runs_on_sim_time_under_each_executor(
         executor.shutdown()
         probe.destroy_node()
         node.destroy_node()
+
+
+def test_calibrate_prints_the_node_remapping_for_the_bags_topics(
+    ros_context: object,
+    tmp_path: Path,
+    short_cycle_fast: SimulatedRun,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """On /fog/rate and /fog/temp, the line calibrate prints starts a node on those topics."""
+    import shlex
+
+    from fog_temp_comp.tools import cli
+
+    from simdata import write_run
+
+    bags = {}
+    fog_topics = {'imu_topic': '/fog/rate', 'temp_topic': '/fog/temp'}
+    for name, topics in (('rep145', {}), ('fog', fog_topics)):
+        bags[name] = write_run(tmp_path / name, 'mcap', short_cycle_fast, **topics)
+    for name, bag in bags.items():
+        out = tmp_path / f'{name}.yaml'
+        argv = ['calibrate', str(bag), '-o', str(out), '--terms', 'const,T,Tdot', '--quiet']
+        assert cli.main(argv) == 0
+        lines = [ln for ln in capsys.readouterr().out.splitlines() if 'ros2 run' in ln]
+        if name == 'rep145':  # the node's own topics: nothing to say
+            assert not lines
+            continue
+        assert len(lines) == 1, lines
+        words = shlex.split(lines[0].split('run it with: ', 1)[1])
+        assert words[:4] == ['ros2', 'run', 'fog_temp_comp', 'compensator']
+        node = CompensatorNode(context=ros_context, cli_args=words[4:])
+        try:
+            assert node._imu_sub.topic_name == '/fog/rate'
+            assert node._temp_sub.topic_name == '/fog/temp'
+            assert node.get_parameter('coefficients_file').value == str(out.resolve())
+        finally:
+            node.destroy_node()

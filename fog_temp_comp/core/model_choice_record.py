@@ -69,6 +69,7 @@ def format_scores(scores: Sequence[StructureScore], chosen: StructureScore) -> s
     lines.append(f'chosen: {chosen.structure.name}')
     lines.append(
         '(cross-validated score: geometric mean of held-out stability after/before at 10 s and '
-        '100 s; k = fitted parameters per axis; the simplest within the tolerance wins)'
+        '100 s; k = fitted parameters per axis; the simplest within the tolerance wins, unless '
+        'the quantized-likelihood line below names another)'
     )
     return '\n'.join(lines)

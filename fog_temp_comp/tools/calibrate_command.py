@@ -19,7 +19,7 @@ from fog_temp_comp.bag.one_clock import on_one_clock
 from fog_temp_comp.bag.reduce import reduce_record
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.calibration import CalibrationResult, calibrate_detailed
-from fog_temp_comp.core.coefficients import Coefficients, save
+from fog_temp_comp.core.coefficients import Coefficients, load, save
 from fog_temp_comp.core.compensator import GuardSettings
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS, DenoiseSettings
 from fog_temp_comp.core.earth import earth_rate_body_deg_h, parse_orientation, remove_earth_rate
@@ -108,6 +108,9 @@ def calibrate_command(
             bags, output, outputs, options, settings, gyro_topic, temp_topic, (stdout, stderr)
         )
     print(f'wrote {output}', file=stdout)  # once in place, not before
+    remap = node_remapping(output)
+    if remap:
+        print(remap, file=stdout)
     if index is not None:
         print(f'report: {index}', file=stdout)
     return 0
@@ -172,6 +175,31 @@ def _calibrate(
             runs.append((f'{record.path.name} (training)', record, corrected))
     index = _write_calibration_report(report_dir, bags, runs, result, coeffs, provenance)
     return opt.report_dir / index.name
+
+
+#: the node's input topics (relative: remapped with ``-r``)
+NODE_INPUTS = ('imu/data_raw', 'imu/temperature')
+
+
+def node_remapping(coeffs_path: Path) -> str:
+    """The ``ros2 run`` line for the fitted bags' topics, where they are not the node's; else ''.
+
+    Read from the file's ``provenance`` (one gyro and one temperature topic: several bags on
+    different topics give no single line).
+    """
+    provenance = load(coeffs_path).provenance
+    gyro, temp = provenance.get('gyro_topics') or [], provenance.get('temperature_topics') or []
+    if len(gyro) != 1 or len(temp) != 1:
+        return ''
+    pairs = [(n, t) for n, t in zip(NODE_INPUTS, (gyro[0], temp[0]), strict=True)]
+    if all(t == f'/{n}' for n, t in pairs):
+        return ''
+    remaps = ' '.join(f'-r {n}:={t}' for n, t in pairs)
+    return (
+        "the bags' topics are not the node's inputs (imu/data_raw, imu/temperature); run it "
+        f'with: ros2 run fog_temp_comp compensator --ros-args -p coefficients_file:='
+        f'{coeffs_path.resolve()} {remaps}'
+    )
 
 
 def _read_args(opt: CalibrateOptions) -> dict[str, Any]:
