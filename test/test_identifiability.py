@@ -98,8 +98,9 @@ def test_three_soak_bags_with_drop_fit_t_only_and_warn(
     out = tmp_path / 'c.yaml'
     args = ['calibrate', *map(str, SOAKS), '-o', str(out), '--quiet', '--drop-unidentifiable']
     assert cli.main(args) == 0
-    stdout = capsys.readouterr().out
-    warnings = [line for line in stdout.splitlines() if line.startswith('WARNING: term')]
+    captured = capsys.readouterr()
+    assert 'WARNING' not in captured.out  # warnings go to stderr
+    warnings = [line for line in captured.err.splitlines() if line.startswith('WARNING: term')]
     assert len(warnings) == 1
     assert warnings[0].startswith('WARNING: term Tdot dropped (--drop-unidentifiable): the 3 ')
     coeffs = load(out)

@@ -151,7 +151,7 @@ def _calibrate(
     read = _read_args(opt)
     # of several temperature sensors in the bags, calibrate on each and keep the best
     choose = _automatic(opt) and opt.temp_field is None and not opt.temp_frame_id
-    attempt = functools.partial(_attempt, opt, bags, read, earth, provenance, choose)
+    attempt = functools.partial(_attempt, opt, bags, read, earth, provenance, choose, stderr)
     attempted = fit_on_best_source(attempt, choose=choose, stdout=stdout)
     records, result = attempted.records, attempted.result
     opt, read = attempted.extra
@@ -223,14 +223,16 @@ def _attempt(
     earth: Callable[[ChamberRecord], ChamberRecord],
     provenance: dict[str, Any],
     choose: bool,
+    err: TextIO | None,
     source: TemperatureSource | None,
     out: TextIO,
 ) -> Attempt:
     """Read the training (and held-out) bags with ``source``'s readings and fit.
 
-    Prints to ``out``; the attempt's ``extra`` holds the options and reader arguments used.
+    Prints to ``out``, its warnings to ``err`` (None: ``sys.stderr``); the attempt's ``extra``
+    holds the options and reader arguments used.
     """
-    salvaged = Salvaged()
+    salvaged = Salvaged(err)
     args = {**read, **source_read_args(source), 'on_salvage': salvaged.add}
     if choose and (source is None or source.frame_id):  # the table after the fits says which
         args['frame_notes'] = False  # sensor of a topic is kept (of topics: their notes)
@@ -244,7 +246,8 @@ def _attempt(
     if choose and source is None and several_sensors(records):
         raise SeveralSensorsError(records)  # each sensor's readings get an attempt of their own
     if opt.prior is None:  # with a fleet prior, the prior carries what a short run lacks
-        terms = identifiable_terms(records, opt.terms, drop=opt.drop_unidentifiable, stdout=out)
+        drop = opt.drop_unidentifiable
+        terms = identifiable_terms(records, opt.terms, drop=drop, stderr=err or sys.stderr)
         opt = dataclasses.replace(opt, terms=terms)
     heldout = [earth(on_one_clock(read_record, b, **args)) for b in opt.heldout]
     result, chosen = _fit(opt, records, heldout, {**provenance, **salvaged.provenance()}, out)

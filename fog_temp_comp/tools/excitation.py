@@ -16,7 +16,7 @@ def identifiable_terms(
     terms: Sequence[str] | None,
     *,
     drop: bool,
-    stdout: TextIO,
+    stderr: TextIO,
 ) -> tuple[str, ...] | None:
     """The terms to fit: ``terms`` unchanged when the records excite them all.
 
@@ -38,6 +38,6 @@ def identifiable_terms(
     for problem in problems:
         print(
             f'WARNING: term {problem.term} dropped (--drop-unidentifiable): {problem.reason}',
-            file=stdout,
+            file=stderr,
         )
     return tuple(t for t in wanted if t not in dropped)
