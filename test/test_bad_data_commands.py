@@ -198,3 +198,25 @@ def test_a_stream_whose_stamps_are_all_the_same_is_refused_for_that_reason(
         assert all(w.startswith('WARNING: ') for w in warnings), err
         assert 'never changes' not in err
     assert not (tmp_path / 'c.yaml').exists()
+
+
+def test_compensate_says_when_every_temperature_reading_has_the_same_stamp(
+    base: tuple[Arrays, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The node drops them as repeated stamps and holds the correction: compensate says both."""
+    arrays, coeffs = base
+    stamps = np.full(arrays['temp_stamps_s'].size, arrays['temp_stamps_s'][0])
+    path = bag(tmp_path, arrays, temp_stamps_s=stamps)
+    out = tmp_path / 'out'
+    code, _, err = run_cli(
+        ['compensate', str(path), '--coeffs', str(coeffs), '-o', str(out)], capsys
+    )
+    assert code == 0, err
+    n = stamps.size
+    assert f'{n - 1} of {n} temperature readings dropped for their stamps' in err
+    assert 'got the last correction held while the temperature was stale' in err
+    code, _, err = run_cli(  # the clean run: neither line
+        ['compensate', str(bag(tmp_path / 'clean', arrays)), '--coeffs', str(coeffs), '-o',
+         str(tmp_path / 'out2')], capsys
+    )  # fmt: skip
+    assert code == 0 and 'WARNING' not in err, err

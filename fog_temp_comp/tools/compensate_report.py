@@ -21,6 +21,7 @@ def report_input(in_bag: Path, compensator: Compensator) -> None:
     """The warnings on the input the replay found: sensor faults, gaps, NaN gyro rates."""
     report_faults(in_bag, compensator)
     report_gaps(in_bag, compensator.status.counters)
+    report_dropped_temperature(in_bag, compensator.status.counters)
     report_nonfinite_gyro(in_bag, compensator.status.counters)
 
 
@@ -52,6 +53,13 @@ def report_gaps(in_bag: Path, counters: CompensatorCounters) -> None:
     """
     bridged, restarted = counters.temperature_gaps_bridged, counters.temperature_gaps
     if not (bridged or restarted):
+        if counters.imu_held:  # stale with no reading after: no gap closed
+            print(
+                f'WARNING: {in_bag}: {counters.imu_held} gyro messages got the last correction '
+                'held while the temperature was stale (no reading with a new stamp for longer '
+                'than the stale time)',
+                file=sys.stderr,
+            )
         return
     parts = [f'{bridged} bridged by the Kalman filter'] if bridged else []
     if restarted:
@@ -65,6 +73,19 @@ def report_gaps(in_bag: Path, counters: CompensatorCounters) -> None:
         'in all got the last correction held while the temperature was stale',
         file=sys.stderr,
     )
+
+
+def report_dropped_temperature(in_bag: Path, counters: CompensatorCounters) -> None:
+    """A ``WARNING`` line where readings were dropped for their stamps (as the node drops them)."""
+    repeated, behind = counters.temperature_duplicate, counters.temperature_out_of_order
+    if repeated or behind:
+        print(
+            f'WARNING: {in_bag}: {repeated + behind} of {counters.temperature_total} temperature '
+            f'readings dropped for their stamps, as the node drops them ({repeated} with the '
+            f'stamp of the one before, {behind} stamped before it): a driver that does not '
+            'stamp each reading? (--time-source receive times them by the bag)',
+            file=sys.stderr,
+        )
 
 
 def report_nonfinite_gyro(in_bag: Path, counters: CompensatorCounters) -> None:
