@@ -8,28 +8,19 @@ from pathlib import Path
 
 import pytest
 import yaml
+from test_cli import SMALL
 
 from fog_temp_comp.bag.bagio import IMU_TYPE, open_bag
 from fog_temp_comp.bag.topic_names import output_topic_for
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.commands import CalibrateOptions
 from fog_temp_comp.tools.demo import DEMO_FILES
-from fog_temp_comp.tools.simulate import SimulationConfig, simulate_run
+from fog_temp_comp.tools.simulate import simulate_run
 
 from simdata import write_run
 
 REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / 'bags'
-#: a short chamber: 15..25 degC at 0.5 Hz
-SMALL = SimulationConfig(
-    imu_hz=0.5,
-    temp_hz=0.5,
-    low_degC=15.0,
-    high_degC=25.0,
-    start_degC=20.0,
-    cycle_soak_s=300.0,
-    soak_duration_s=600.0,
-)
 
 
 def topic_types(path: Path) -> dict[str, str]:

@@ -501,10 +501,8 @@ def _add_time_source(p: Any) -> None:
     )
 
 
-def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """The ``compensate`` command."""
-    p = sub.add_parser('compensate', help='replay a bag through the compensator')
-    p.add_argument('in_bag', type=Path, metavar='IN_BAG', help='the bag to correct (any format)')
+def _add_coeffs(p: argparse.ArgumentParser) -> None:
+    """``--coeffs``: the coefficients file of compensate and evaluate."""
     p.add_argument(
         '--coeffs',
         type=Path,
@@ -512,6 +510,13 @@ def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         metavar='COEFFS.yaml',
         help='the coefficients file `calibrate` wrote (as the node loads it)',
     )
+
+
+def _add_compensate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``compensate`` command."""
+    p = sub.add_parser('compensate', help='replay a bag through the compensator')
+    p.add_argument('in_bag', type=Path, metavar='IN_BAG', help='the bag to correct (any format)')
+    _add_coeffs(p)
     p.add_argument(
         '-o',
         '--output',
@@ -540,13 +545,7 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     """The ``evaluate`` command."""
     p = sub.add_parser('evaluate', help='bias stability and range before/after compensation')
     p.add_argument('bags', type=Path, nargs='+', metavar='BAG', help='runs to score, each apart')
-    p.add_argument(
-        '--coeffs',
-        type=Path,
-        required=True,
-        metavar='COEFFS.yaml',
-        help='the coefficients file `calibrate` wrote (as the node loads it)',
-    )
+    _add_coeffs(p)
     _add_topics(p)
     _add_temp_field(p)
     _add_gyro_frame_id(p)
