@@ -136,6 +136,20 @@ def test_slow_tilt_is_detected_by_the_accelerometer() -> None:
     assert_array_equal(error_on, error_off)
 
 
+@pytest.mark.parametrize('bad', [np.nan, np.inf])
+def test_a_non_finite_accelerometer_sample_does_not_hide_a_tilt(bad: float) -> None:
+    """One NaN (or inf) per window once made every check pass: the tilt was learned as bias."""
+    sc = scenario([(600, 'tilt')], seed=6, rate_deg_h=200.0)
+    sc.accel_m_s2[:: int(FS_HZ * 3), 1] = bad  # one sample every 3 s, in every 10 s window
+    loose = RestSettings(enabled=True, residual_limit_deg_h=1000.0)
+    error_off, _ = run(sc, None)
+    error_on, compensator = run(sc, loose)
+    assert compensator.rest is not None
+    status = compensator.rest.status
+    assert status.windows_rest == 0 and status.windows_tilting > 50
+    assert_array_equal(error_on, error_off)
+
+
 @pytest.mark.parametrize('rate_deg_h', [50.0, -30.0])
 def test_slow_yaw_is_bounded_by_the_residual_limit(rate_deg_h: float) -> None:
     # about the vertical the accelerometer sees nothing: the limit reports it and applies nothing

@@ -229,7 +229,8 @@ class RestLearner:
         g[4] += dy * dy
         g[5] += dz * dz
         window.n += 1
-        if accel_m_s2 is not None:
+        # a non-finite accelerometer sample is left out (NaN would pass every check below)
+        if accel_m_s2 is not None and math.isfinite(sum(accel_m_s2)):
             half = 0 if stamp_s - window.start_s < 0.5 * settings.window_s else 1
             acc = window.accel
             o = 6 * half
