@@ -70,6 +70,6 @@ def format_scores(scores: Sequence[StructureScore], chosen: StructureScore) -> s
     lines.append(
         '(cross-validated score: geometric mean of held-out stability after/before at 10 s and '
         '100 s; k = fitted parameters per axis; the simplest within the tolerance wins, unless '
-        'the quantized-likelihood line below names another)'
+        'the line on a quantized sensor below names another)'
     )
     return '\n'.join(lines)
