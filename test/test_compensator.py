@@ -182,6 +182,53 @@ def test_backwards_stamp_resets_filter_state(model: DriftModel) -> None:
     assert_array_equal(comp.correct(109.5, np.zeros(3)), fresh.correct(109.5, np.zeros(3)))
 
 
+YEAR_S = 365 * 86400.0
+
+
+def _warm_gyro_stream(model: DriftModel) -> tuple[Compensator, list[float]]:
+    """A compensator fed a 1 degC/min ramp and gyro samples; the gyro stamps that follow."""
+    comp = Compensator(model, DenoiseSettings(method='iir'))
+    for k in range(300):
+        comp.add_temperature(1000.0 + k, 20.0 + k / 60.0)
+        comp.correct_xyz(1000.5 + k, 0.0, 0.0, 0.0)
+    return comp, [1300.0 + 0.1 * k for k in range(1, 30)]
+
+
+@pytest.mark.parametrize('block', [False, True])
+def test_a_lone_gyro_stamp_far_ahead_is_out_of_order_not_a_jump(
+    model: DriftModel, block: bool
+) -> None:
+    comp, after = _warm_gyro_stream(model)
+    reference, _ = _warm_gyro_stream(model)
+    ahead = 1299.6 + YEAR_S  # a bad stamp (a corrupt sec field), then the stream goes on
+    assert comp.correct_xyz(ahead, 0.0, 0.0, 0.0) is not None
+    rates = np.zeros((len(after), 3))
+    if block:
+        out, kept = comp.correct_block(after, rates)
+    else:
+        out = np.array([comp.correct_xyz(t, 0.0, 0.0, 0.0) for t in after])
+        kept = np.ones(len(after), dtype=bool)
+    expected, _ = reference.correct_block(after, rates)
+    counters = comp.status.counters
+    assert kept.all() and (counters.time_jumps, counters.imu_out_of_order) == (0, 1)
+    assert comp.status.estimator_ready and comp.status.last_imu_stamp_s == after[-1]
+    assert_array_equal(out, expected)  # what the stream gets without the bad stamp
+
+
+def test_a_gyro_loop_after_a_stamp_far_ahead_still_resets(model: DriftModel) -> None:
+    comp, _ = _warm_gyro_stream(model)
+    comp.correct_xyz(1299.6 + YEAR_S, 0.0, 0.0, 0.0)
+    # back below everything before (a bag looped): a time jump, as without the stamp ahead
+    comp.correct_xyz(900.0, 0.0, 0.0, 0.0)
+    comp.correct_xyz(900.1, 0.0, 0.0, 0.0)
+    assert comp.status.counters.time_jumps == 1
+    # a real leap ahead (a clock set), the stamps going on from it: no reset either way
+    comp, _ = _warm_gyro_stream(model)
+    for k in range(5):
+        comp.correct_xyz(1299.6 + YEAR_S + k, 0.0, 0.0, 0.0)
+    assert (comp.status.counters.time_jumps, comp.status.counters.imu_out_of_order) == (0, 0)
+
+
 def test_temperature_is_clamped_to_calibrated_range(model: DriftModel) -> None:
     comp = Compensator(model, DenoiseSettings())
     comp.add_temperature(1.0, 75.0)  # 15 degC beyond the calibrated 60: within the margin

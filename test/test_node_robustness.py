@@ -229,6 +229,21 @@ def test_gyro_time_jump_backwards_resets_and_reports(harness: Harness) -> None:
     assert 'time jump' in harness.diagnose().message
 
 
+def test_gyro_stamp_far_ahead_alone_is_out_of_order_no_reset(harness: Harness) -> None:
+    for k in range(30):
+        harness.send_temperature(T0 + k, 20.0 + k / 60.0)
+        harness.send_imu(T0 + k + 0.5, RATE)
+    harness.diagnose()
+    counters = harness.node.compensator.status.counters
+    assert harness.send_imu(T0 + 29.6 + 365 * 86400.0, RATE) is not None  # a bad stamp
+    for k in range(1, 5):
+        assert harness.send_imu(T0 + 29.6 + 0.1 * k, RATE) is not None
+    assert (counters.imu_out_of_order, counters.time_jumps) == (1, 0)
+    assert harness.node.compensator.status.estimator_ready
+    message = harness.diagnose().message
+    assert 'out-of-order gyro stamps (1)' in message and 'time jump' not in message
+
+
 def test_burst_of_10000_messages_is_survived_and_accounted_for(
     harness: Harness, coefficients: Coefficients
 ) -> None:

@@ -97,6 +97,8 @@ class Compensator(_BlockCorrection):
         # the first stamp of a time jump per input (s), confirmed by the next one; nan: none
         self._imu_jump_s = math.nan
         self._temperature_jump_s = math.nan
+        # the gyro stamp before the last one (s): a lone leap ahead is told from it
+        self._imu_before_s = math.nan
         # scalar evaluation of the model (the per-message hot path; no small numpy arrays)
         self._term_functions: list[Callable[[float, float, float], float]] = [
             scalar_term_function(term) for term in model.terms
@@ -184,7 +186,7 @@ class Compensator(_BlockCorrection):
             last_fault_degC=self.status.last_fault_degC,
         )
         self._last_temperature = math.nan
-        self._imu_jump_s = self._temperature_jump_s = math.nan
+        self._imu_jump_s = self._temperature_jump_s = self._imu_before_s = math.nan
         self._forget_readings()
         if self.rest is not None:
             self.rest.reset()
@@ -386,6 +388,7 @@ class Compensator(_BlockCorrection):
             status.last_imu_stamp_s = stamp_s
             self._last_rates = (x, y, z)
             self._imu_jump_s = math.nan
+            self._imu_before_s = last
         elif stamp_s == last:
             # the same message twice is dropped; another sample on a coarse clock is corrected
             if (x, y, z) == self._last_rates:
@@ -395,7 +398,7 @@ class Compensator(_BlockCorrection):
             self._last_rates = (x, y, z)
             repeated = True
         else:
-            status = self._gyro_stamp_back(stamp_s, last)
+            status = self._gyro_stamp_back(stamp_s, last, (x, y, z))
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
             counters.imu_nonfinite += 1
         if stamp_s > self._held_due_s:  # inf unless the sensor is published only on change
@@ -439,16 +442,27 @@ class Compensator(_BlockCorrection):
             bx, by, bz = self.rest.applied_rad_s
         return (x - bx, y - by, z - bz)
 
-    def _gyro_stamp_back(self, stamp_s: float, last_s: float) -> CompensatorStatus:
+    def _gyro_stamp_back(
+        self, stamp_s: float, last_s: float, rates: tuple[float, float, float]
+    ) -> CompensatorStatus:
         """A gyro stamp (s) behind the last one (``last_s``); the status, new after a reset.
 
         ``time_jump_threshold_s`` or more back, as the message before was (and later than
         it): a time jump, the state is reset. One alone (a bad stamp, a message recorded late)
-        or a smaller step back: out of order, corrected.
+        or a smaller step back: out of order, corrected. Back from a lone stamp that leapt
+        that far ahead, and on from the stamp before that one: the leap was the bad stamp,
+        counted out of order, and the stamps go on from this one (no reset).
         """
         counters = self.status.counters
-        if last_s - stamp_s < self.guard.time_jump_threshold_s:
+        threshold = self.guard.time_jump_threshold_s
+        before = self._imu_before_s
+        if last_s - stamp_s < threshold:
             counters.imu_out_of_order += 1
+        elif stamp_s > before > -math.inf and last_s - before >= threshold:
+            counters.imu_out_of_order += 1  # the stamp far ahead, not this one
+            self.status.last_imu_stamp_s = stamp_s
+            self._last_rates = rates
+            self._imu_jump_s = math.nan
         elif self._imu_jump_s < stamp_s:
             counters.time_jumps += 1
             self.reset()

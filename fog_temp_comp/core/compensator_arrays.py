@@ -41,6 +41,7 @@ class _BlockCorrection:
     _correction: tuple[float, float, float]
     _last_rates: tuple[float, float, float]
     _imu_jump_s: float
+    _imu_before_s: float
     _held: HeldReadings
     _horizon_s: float
     _stale_after_s: float
@@ -251,6 +252,8 @@ class _BlockCorrection:
         (has_s, last_s, ok_s, e_stamp_s, e_temp_s, e_tdot_s, e_lag_s) = (
             np.array(v) for v in zip(*snaps, strict=True)
         )
+        # the stamp before the last, as correct_xyz leaves it
+        self._imu_before_s = float(t[-2]) if n > 1 else status.last_imu_stamp_s
         status.last_imu_stamp_s = float(t[-1])
         x, y, z = rates[-1].tolist()
         self._last_rates = (x, y, z)  # rad/s, for the next message's repeat test
