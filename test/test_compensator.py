@@ -229,6 +229,33 @@ def test_a_gyro_loop_after_a_stamp_far_ahead_still_resets(model: DriftModel) -> 
     assert (comp.status.counters.time_jumps, comp.status.counters.imu_out_of_order) == (0, 0)
 
 
+@pytest.mark.parametrize('method', ['iir', 'kalman'])
+def test_a_lone_temperature_stamp_far_ahead_is_rejected_not_a_jump(
+    model: DriftModel, method: str
+) -> None:
+    def warm() -> Compensator:
+        comp = Compensator(model, DenoiseSettings(method=method))
+        for k in range(300):
+            comp.add_temperature(1000.0 + k, 20.0 + k / 60.0)
+        return comp
+
+    comp, reference = warm(), warm()
+    comp.add_temperature(1300.0 + YEAR_S, 25.0)  # a bad stamp, then the stream goes on
+    for k in range(5):
+        assert comp.add_temperature(1300.0 + k, 25.0 + k / 60.0)
+        reference.add_temperature(1300.0 + k, 25.0 + k / 60.0)
+    counters = comp.status.counters
+    assert (counters.time_jumps, counters.temperature_gaps) == (0, 0)
+    assert (counters.temperature_out_of_order, counters.temperature_accepted) == (1, 305)
+    assert comp.status.estimator_ready
+    assert comp.status.tdot_degC_per_min == reference.status.tdot_degC_per_min
+    assert_array_equal(comp.correct(1304.5, np.zeros(3)), reference.correct(1304.5, np.zeros(3)))
+    # a real gap (the stream going on from the reading ahead) is still a gap
+    comp.add_temperature(1400.0, 26.0)
+    comp.add_temperature(1401.0, 26.0)
+    assert comp.status.counters.temperature_gaps + counters.temperature_gaps_bridged == 1
+
+
 def test_temperature_is_clamped_to_calibrated_range(model: DriftModel) -> None:
     comp = Compensator(model, DenoiseSettings())
     comp.add_temperature(1.0, 75.0)  # 15 degC beyond the calibrated 60: within the margin

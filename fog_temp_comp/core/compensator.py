@@ -37,6 +37,7 @@ from fog_temp_comp.core.model import DriftModel, scalar_term_function
 from fog_temp_comp.core.rest import RestLearner, RestSettings
 from fog_temp_comp.core.tdot import make_estimator
 from fog_temp_comp.core.tdot_estimate import TdotEstimate, TdotEstimator
+from fog_temp_comp.core.temperature_leap import TemperatureLeap, _TemperatureLeaps
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H, S_PER_MIN
 
 __all__ = [
@@ -50,7 +51,7 @@ __all__ = [
 ]
 
 
-class Compensator(_BlockCorrection):
+class Compensator(_BlockCorrection, _TemperatureLeaps):
     """Online temperature-drift compensation for a 3-axis gyro.
 
     Parameters
@@ -99,6 +100,7 @@ class Compensator(_BlockCorrection):
         self._temperature_jump_s = math.nan
         # the gyro stamp before the last one (s): a lone leap ahead is told from it
         self._imu_before_s = math.nan
+        self._leap: TemperatureLeap | None = None  # the state before a reading far ahead
         # scalar evaluation of the model (the per-message hot path; no small numpy arrays)
         self._term_functions: list[Callable[[float, float, float], float]] = [
             scalar_term_function(term) for term in model.terms
@@ -187,6 +189,7 @@ class Compensator(_BlockCorrection):
         )
         self._last_temperature = math.nan
         self._imu_jump_s = self._temperature_jump_s = self._imu_before_s = math.nan
+        self._leap = None
         self._forget_readings()
         if self.rest is not None:
             self.rest.reset()
@@ -207,6 +210,7 @@ class Compensator(_BlockCorrection):
         if not (math.isfinite(stamp_s) and math.isfinite(temperature_degC)) or stamp_s <= 0:
             counters.temperature_rejected += 1
             return False
+        leap, self._leap = self._leap, None
         held = self._held
         if held.next_s < stamp_s:  # put back the held readings before this one
             self._put_back_held(stamp_s - 0.5 * held.period_s)
@@ -228,6 +232,9 @@ class Compensator(_BlockCorrection):
             self._forget_held()
             return False
         if stamp_s < last:  # far back: a time jump once the next reading is back there too
+            if leap is not None and stamp_s > leap.before_s:  # on from before a lone leap
+                self._undo_leap(leap)
+                return self.add_temperature(stamp_s, temperature_degC)
             if not self._temperature_jump_s < stamp_s:
                 self._temperature_jump_s = stamp_s
                 counters.temperature_out_of_order += 1
@@ -239,6 +246,8 @@ class Compensator(_BlockCorrection):
             stamp_s - last > self._stale_after_s
             or (stamp_s >= self._next_hole and self._crosses_hole(stamp_s))
         ):
+            if stamp_s - last >= max(guard.time_jump_threshold_s, self._stale_after_s):
+                self._save_leap()  # undone if the next reading goes on from before it
             self._after_gap(stamp_s - last)
         elif not self._plausible(stamp_s, temperature_degC):
             return False
