@@ -41,7 +41,7 @@ from fog_temp_comp.ros.bias_learning import BiasLearningMixin
 from fog_temp_comp.ros.console_log import ConsoleLogMixin
 from fog_temp_comp.ros.diagnostics import build_report, reading_model
 from fog_temp_comp.ros.input_types import TypeMismatch, type_mismatches
-from fog_temp_comp.ros.node_parameters import FILTER_PARAMETERS, GUARD_PARAMETERS
+from fog_temp_comp.ros.node_parameters import FILTER_PARAMETERS, GUARD_PARAMETERS, Config
 from fog_temp_comp.ros.params import ParameterError, params_files, unknown_warnings
 from fog_temp_comp.ros.rclpy_compat import RCLError
 from fog_temp_comp.ros.spin import EXECUTORS
@@ -289,46 +289,50 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         timer = self.create_timer(0.0, once)
 
     def _on_set_parameters(self, params: Sequence[Parameter]) -> SetParametersResult:
+        """Check the whole change first: a refused one changes nothing (atomic requests too)."""
         if self._showing_file_values:  # the coefficients file's own values, in effect already
             return SetParametersResult(successful=True)
         changes = {p.name: p for p in params}
+        rebuild = set(changes) & ({'coefficients_file'} | set(FILTER_PARAMETERS))
+        if not self.configured:  # lifecycle node not configured: configure checks them
+            self._filter_from_file -= set(changes)
+        elif rebuild or set(changes) & set(GUARD_PARAMETERS):
+            try:
+                config = self._build_config(changes)
+                temperature = self._reloaded_temperature_input(config.coefficients)
+            except (CoefficientsError, ValueError, TypeError) as err:
+                return SetParametersResult(successful=False, reason=str(err))
+            self._apply_config(config, temperature, rebuild, set(changes))
         if 'require_frame_id_match' in changes:
             self._require_frame_match = bool(changes['require_frame_id_match'].value)
         if 'inflate_covariance' in changes:
             self._inflate_covariance = bool(changes['inflate_covariance'].value)
-        rebuild = set(changes) & ({'coefficients_file'} | set(FILTER_PARAMETERS))
-        guard_change = set(changes) & set(GUARD_PARAMETERS)
-        if not self.configured:  # lifecycle node not configured: configure checks them
-            self._filter_from_file -= set(changes)
-            return SetParametersResult(successful=True)
-        if not (rebuild or guard_change):
-            return SetParametersResult(successful=True)
-        try:
-            config = self._build_config(changes)
-            temperature = self._reloaded_temperature_input(config.coefficients)
-        except (CoefficientsError, ValueError, TypeError) as err:
-            return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def _apply_config(
+        self, config: Config, temperature: TemperatureInput, rebuild: set[str], changed: set[str]
+    ) -> None:
+        """Put a checked config in effect: new guards, or (``rebuild``) a new compensator."""
         if rebuild:  # the learned bias belongs to the old coefficients: keep it in the file
             self.save_learned_bias('reconfigure')
-            self._filter_from_file -= set(changes)
+            self._filter_from_file -= changed
             self._show_filter_in_effect_soon()
         self.config = config
         self._temperature = temperature
-        if rebuild:
-            counters = self.compensator.status.counters
-            last_reading = self.compensator.last_reading
-            self.compensator = Compensator(
-                config.coefficients.model, config.settings, config.guard, config.rest
-            )
-            if last_reading is not None:  # the gyro goes on corrected, not waiting
-                self.compensator.add_temperature(*last_reading)
-            self.compensator.status.counters = counters
-            self._load_learned_bias()
-            self.reconfigurations += 1
-            self._log_config(f'reconfigured ({", ".join(sorted(rebuild))})')
-        else:
+        if not rebuild:
             self.compensator.guard = config.guard
-        return SetParametersResult(successful=True)
+            return
+        counters = self.compensator.status.counters
+        last_reading = self.compensator.last_reading
+        self.compensator = Compensator(
+            config.coefficients.model, config.settings, config.guard, config.rest
+        )
+        if last_reading is not None:  # the gyro goes on corrected, not waiting
+            self.compensator.add_temperature(*last_reading)
+        self.compensator.status.counters = counters
+        self._load_learned_bias()
+        self.reconfigurations += 1
+        self._log_config(f'reconfigured ({", ".join(sorted(rebuild))})')
 
     def _reloaded_temperature_input(self, coeffs: Coefficients) -> TemperatureInput:
         """The temperature input of new coefficients; ValueError where its type changes.

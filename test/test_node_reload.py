@@ -1,0 +1,94 @@
+"""Parameter changes on the running node: a refused one changes nothing; a reload keeps on.
+
+A reload (coefficients file, filter parameter) keeps the new file's temperature sensor and,
+while the temperature is out, the held correction.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from rclpy.parameter import Parameter
+from rosharness import Harness, rate_of
+
+from fog_temp_comp.core.coefficients import Coefficients, save
+from fog_temp_comp.core.denoise import DenoiseSettings
+from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
+from fog_temp_comp.core.units import RAD_S_PER_DEG_H
+from fog_temp_comp.ros.node import CompensatorNode
+
+T0 = 1_700_000_000.0
+RATE = np.array([1e-4, -2e-4, 3e-4])  # rad/s
+
+
+def coefficients(**fields: str) -> Coefficients:
+    model = DriftModel(
+        PAPER_TERMS,
+        np.array([[-12.5, 3.2, -0.85], [-8.7e-4, 2.4e-3, -1.6e-3], [0.93, -0.62, 0.45]]),
+        Range(-40.0, 60.0),
+        Range(-0.5, 0.5),
+    )
+    return Coefficients(
+        model=model,
+        denoise=DenoiseSettings(method='iir'),
+        frame_id='imu_link',
+        fit={axis: {'residual_std_deg_h': 0.02} for axis in 'xyz'},
+        provenance={'created_utc': '2026-01-01T00:00:00Z', 'bags': ['chamber_run']},
+        **fields,
+    )
+
+
+def coeffs_file(tmp_path: Path, name: str = 'coeffs.yaml', **fields: str) -> Path:
+    path = tmp_path / name
+    save(coefficients(**fields), path)
+    return path
+
+
+def expected(temperature: float) -> np.ndarray:
+    return coefficients().model.drift_deg_h(temperature, 0.0) * RAD_S_PER_DEG_H
+
+
+def start(context: object, path: Path, **params: object) -> Harness:
+    overrides = [Parameter('coefficients_file', value=str(path))]
+    overrides += [Parameter(k, value=v) for k, v in params.items()]
+    return Harness(context, CompensatorNode(context=context, parameter_overrides=overrides))
+
+
+@pytest.fixture()
+def harness(ros_context: object, tmp_path: Path) -> Iterator[Harness]:
+    h = start(ros_context, coeffs_file(tmp_path))
+    yield h
+    h.close()
+
+
+@pytest.mark.parametrize(
+    ('switch', 'bad'),
+    [
+        ('require_frame_id_match', Parameter('stale_policy', value='bogus')),
+        ('inflate_covariance', Parameter('coefficients_file', value='/nonexistent.yaml')),
+    ],
+)
+def test_a_refused_atomic_change_changes_nothing(
+    harness: Harness, switch: str, bad: Parameter
+) -> None:
+    node = harness.node
+    result = node.set_parameters_atomically([Parameter(switch, value=True), bad])
+    assert not result.successful
+    assert node.get_parameter(switch).value is False
+    assert (node._require_frame_match, node._inflate_covariance) == (False, False)
+    # a gyro of another frame_id is still corrected (with a warning), not passed through
+    harness.send_temperature(T0, 25.0)
+    out = harness.send_imu(T0 + 0.01, RATE, frame_id='other')
+    assert out is not None
+    assert_allclose(rate_of(out), RATE - expected(25.0), rtol=1e-12)
+    # the same switch alone, or with valid company, takes effect
+    good = node.set_parameters_atomically(
+        [Parameter(switch, value=True), Parameter('stale_policy', value='none')]
+    )
+    assert good.successful
+    assert (node._require_frame_match or node._inflate_covariance) is True
+    assert node.compensator.guard.stale_policy == 'none'
