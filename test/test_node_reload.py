@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 from rclpy.parameter import Parameter
-from rosharness import Harness, rate_of
+from rosharness import Harness, make_temperature, rate_of
 
 from fog_temp_comp.core.coefficients import Coefficients, save
 from fog_temp_comp.core.denoise import DenoiseSettings
@@ -92,3 +92,57 @@ def test_a_refused_atomic_change_changes_nothing(
     assert good.successful
     assert (node._require_frame_match or node._inflate_covariance) is True
     assert node.compensator.guard.stale_policy == 'none'
+
+
+def send_both(harness: Harness, stamp_s: float) -> None:
+    """SensA at 25 degC, then sensB at 30 degC half a second later, on one topic."""
+    readings = harness.node.temperature_frames.readings
+    for offset, value, frame in ((0.0, 25.0, 'sensA'), (0.5, 30.0, 'sensB')):
+        before = sum(readings.values())
+        harness.temp_pub.publish(make_temperature(stamp_s + offset, value, frame))
+        harness.spin_until(lambda before=before: sum(readings.values()) > before)
+
+
+def test_a_reload_keeps_the_new_files_temperature_sensor(
+    ros_context: object, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    a = coeffs_file(tmp_path, 'a.yaml', temperature_frame_id='sensA')
+    b = coeffs_file(tmp_path, 'b.yaml', temperature_frame_id='sensB')
+    harness = start(ros_context, a)
+    try:
+        node = harness.node
+        send_both(harness, T0)
+        assert node.temperature_frames.kept == 'sensA'
+        assert node.set_parameters([Parameter('coefficients_file', value=str(b))])[0].successful
+        assert 'the temperature of frame_id sensB is kept from now on' in capfd.readouterr().err
+        for k in range(1, 4):
+            send_both(harness, T0 + k)
+        assert node.temperature_frames.kept == 'sensB'
+        assert node.compensator.last_reading == (T0 + 3.5, 30.0)
+        out = harness.send_imu(T0 + 3.6, RATE)
+        assert out is not None
+        assert_allclose(rate_of(out), RATE - expected(30.0), rtol=1e-9)
+        # back to a file naming sensA: the lock follows again
+        assert node.set_parameters([Parameter('coefficients_file', value=str(a))])[0].successful
+        send_both(harness, T0 + 4)
+        assert node.temperature_frames.kept == 'sensA'
+    finally:
+        harness.close()
+
+
+def test_a_reload_keeps_the_temperature_frame_id_parameter(
+    ros_context: object, tmp_path: Path
+) -> None:
+    a = coeffs_file(tmp_path, 'a.yaml', temperature_frame_id='sensA')
+    b = coeffs_file(tmp_path, 'b.yaml', temperature_frame_id='sensB')
+    harness = start(ros_context, a, temperature_frame_id='sensA')
+    try:
+        node = harness.node
+        send_both(harness, T0)
+        assert node.set_parameters([Parameter('coefficients_file', value=str(b))])[0].successful
+        for k in range(1, 3):
+            send_both(harness, T0 + k)
+        assert node.temperature_frames.kept == 'sensA'
+        assert node.compensator.last_reading == (T0 + 2, 25.0)
+    finally:
+        harness.close()

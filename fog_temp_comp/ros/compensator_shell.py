@@ -324,6 +324,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             return
         counters = self.compensator.status.counters
         last_reading = self.compensator.last_reading
+        if self._follow_temperature_frame(config.coefficients):
+            last_reading = None  # another sensor's: the new one's next reading starts it
         self.compensator = Compensator(
             config.coefficients.model, config.settings, config.guard, config.rest
         )
@@ -333,6 +335,27 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self._load_learned_bias()
         self.reconfigurations += 1
         self._log_config(f'reconfigured ({", ".join(sorted(rebuild))})')
+
+    def _follow_temperature_frame(self, coeffs: Coefficients) -> bool:
+        """Keep new coefficients' temperature sensor (``temperature_frame_id`` parameter '').
+
+        The parameter, where set, stays; coefficients naming no frame_id keep the sensor kept.
+        Returns whether the readings now kept are another sensor's.
+        """
+        wanted = coeffs.temperature_frame_id
+        frames = self.temperature_frames
+        if self.get_parameter('temperature_frame_id').value or wanted in ('', frames.preferred):
+            return False
+        self.temperature_frames = FrameLock(wanted)
+        self._frames_logged = False
+        moved = frames.kept != wanted
+        if not moved:
+            self.temperature_frames.kept = wanted
+        self.get_logger().info(
+            f"the temperature of frame_id {wanted} is kept from now on (the new coefficients' "
+            f'temperature_frame_id; was {frames.kept or "none yet"})'
+        )
+        return moved
 
     def _reloaded_temperature_input(self, coeffs: Coefficients) -> TemperatureInput:
         """The temperature input of new coefficients; ValueError where its type changes.
