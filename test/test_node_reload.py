@@ -146,3 +146,37 @@ def test_a_reload_keeps_the_temperature_frame_id_parameter(
         assert node.compensator.last_reading == (T0 + 2, 25.0)
     finally:
         harness.close()
+
+
+@pytest.mark.parametrize('change', ['coefficients_file', 'iir_cutoff_hz'])
+def test_a_reload_while_the_temperature_is_stale_holds_the_correction(
+    ros_context: object, tmp_path: Path, change: str, capfd: pytest.CaptureFixture[str]
+) -> None:
+    path = coeffs_file(tmp_path)
+    harness = start(ros_context, path, temperature_timeout_s=2.0)
+    try:
+        node = harness.node
+        for k in range(5):
+            harness.send_temperature(T0 + k, 25.0)
+            harness.send_imu(T0 + k + 0.5, RATE)
+        for k in range(5, 8):  # the temperature stops: held
+            out = harness.send_imu(T0 + k + 0.5, RATE)
+        assert_allclose(rate_of(out), RATE - expected(25.0), rtol=1e-12)
+        counters = node.compensator.status.counters
+        held = counters.imu_held
+        assert held > 0 and counters.imu_uncorrected == 0
+        value = str(path) if change == 'coefficients_file' else 0.005
+        assert node.set_parameters([Parameter(change, value=value)])[0].successful
+        for k in range(5):
+            out = harness.send_imu(T0 + 8 + 0.1 * k, RATE)
+            assert out is not None
+            assert_allclose(rate_of(out), RATE - expected(25.0), rtol=1e-12)
+        counters = node.compensator.status.counters
+        assert (counters.imu_held, counters.imu_uncorrected) == (held + 5, 0)
+        assert 'no correction computed yet' not in capfd.readouterr().err
+        # the temperature comes back: corrected again
+        harness.send_temperature(T0 + 9, 25.0)
+        harness.send_imu(T0 + 9.1, RATE)
+        assert node.compensator.status.counters.imu_corrected > 0
+    finally:
+        harness.close()

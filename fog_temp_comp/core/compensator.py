@@ -194,6 +194,19 @@ class Compensator(_BlockCorrection, _TemperatureLeaps):
         if self.rest is not None:
             self.rest.reset()
 
+    def start_from(self, stamp_s: float, temperature_degC: float) -> bool:
+        """Start from a reading an earlier compensator took (a reload); return whether used.
+
+        The reading is fed as the first one and the correction at its stamp computed from it
+        (the T terms; the Tdot terms as the estimator's warm-up has them), so the gyro goes on
+        corrected, and a temperature already stale holds that correction rather than passing
+        the gyro through.
+        """
+        if not self.add_temperature(stamp_s, temperature_degC):
+            return False
+        self._update_correction(stamp_s)
+        return True
+
     # ------------------------------------------------------------------ temperature
     def add_temperature(self, stamp_s: float, temperature_degC: float) -> bool:
         """Feed one temperature sample (degC at ``stamp_s`` seconds); return whether it was used.

@@ -329,8 +329,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self.compensator = Compensator(
             config.coefficients.model, config.settings, config.guard, config.rest
         )
-        if last_reading is not None:  # the gyro goes on corrected, not waiting
-            self.compensator.add_temperature(*last_reading)
+        if last_reading is not None:  # the gyro goes on corrected (or held), not waiting
+            self.compensator.start_from(*last_reading)
         self.compensator.status.counters = counters
         self._load_learned_bias()
         self.reconfigurations += 1
