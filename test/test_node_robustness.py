@@ -966,3 +966,38 @@ def test_angular_velocity_covariance_passed_or_inflated(
         assert out.orientation_covariance[0] == -1.0  # unknown orientation stays unknown
     finally:
         h.close()
+
+
+def test_a_lone_temperature_stamped_far_ahead_is_undone_on_the_node(
+    ros_context: object,
+    tmp_path: Path,
+    coefficients: Coefficients,
+    capfd: pytest.CaptureFixture[str],
+) -> None:
+    """Out of order, no reset, no warm-up said (the filter's readiness was only put back)."""
+    import dataclasses
+
+    kalman = dataclasses.replace(coefficients, denoise=DenoiseSettings(method='kalman'))
+    path = tmp_path / 'kalman.yaml'
+    save(kalman, path)
+    h = Harness(ros_context, start(ros_context, path))
+    try:
+        for k in range(200):
+            h.send_temperature(T0 + k, 20.0 + 0.5 / 60 * k)
+            h.send_imu(T0 + k + 0.5, RATE)
+        counters = h.node.compensator.status.counters
+        assert h.node.compensator.status.estimator_ready
+        h.diagnose()
+        capfd.readouterr()
+        h.send_temperature(T0 + 200.0 + 365 * 86400.0, 21.7)  # a bad stamp
+        h.send_imu(T0 + 200.5, RATE)
+        for k in range(201, 205):
+            h.send_temperature(T0 + k, 20.0 + 0.5 / 60 * k)
+            assert h.send_imu(T0 + k + 0.5, RATE) is not None
+        assert (counters.temperature_out_of_order, counters.time_jumps) == (1, 0)
+        assert counters.temperature_gaps + counters.temperature_gaps_bridged == 0
+        assert h.node.compensator.status.estimator_ready
+        assert 'warmed up' not in capfd.readouterr().err
+        assert 'out-of-order temperature' in h.diagnose().message
+    finally:
+        h.close()

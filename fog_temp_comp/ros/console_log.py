@@ -52,10 +52,12 @@ class ConsoleLogMixin(ParametersMixin):
             if self._warm_up_start_s is None or was_ready:
                 self._warm_up_start_s = stamp_s
             return
-        if not was_ready and self._warm_up_start_s is not None:
+        start_s = self._warm_up_start_s
+        # ready again before its start: a reading stamped far ahead was undone, no warm-up
+        if not was_ready and start_s is not None and stamp_s >= start_s:
             self.get_logger().info(
                 f'Tdot estimator {self.config.settings.method} warmed up after '
-                f'{stamp_s - self._warm_up_start_s:.1f} s of temperature: full correction '
+                f'{stamp_s - start_s:.1f} s of temperature: full correction '
                 'from now on (Tdot terms included)'
             )
         self._warm_up_start_s = None
