@@ -207,6 +207,22 @@ def test_zero_stamp_gyro_gets_current_correction(
     assert 'without stamp' in harness.diagnose().message
 
 
+def test_a_gyro_never_stamped_is_passed_through_uncorrected_and_said(
+    harness: Harness,
+) -> None:
+    """No stamp to compute a correction at and none computed yet: raw out, counted, ERROR."""
+    harness.send_temperature(T0, 25.0)
+    for _ in range(3):
+        out = harness.send_imu(0.0, RATE)
+        assert out is not None
+        assert_array_equal(rate_of(out), RATE)  # not "corrected" by a correction of 0
+    counters = harness.node.compensator.status.counters
+    assert (counters.imu_uncorrected, counters.imu_corrected, counters.imu_zero_stamp) == (3, 0, 3)
+    status = harness.diagnose()
+    assert status.level == ERROR
+    assert 'gyro messages without stamp: passed through uncorrected' in status.message
+
+
 def test_gyro_time_jump_backwards_resets_and_reports(harness: Harness) -> None:
     for k in range(30):
         harness.send_temperature(T0 + k, 20.0 + k / 60.0)

@@ -245,7 +245,7 @@ class Compensator(_BlockCorrection, _TemperatureLeaps):
             self._forget_held()
             return False
         if stamp_s < last:  # far back: a time jump once the next reading is back there too
-            if leap is not None and stamp_s > leap.before_s:  # on from before a lone leap
+            if leap is not None and 0 < stamp_s - leap.before_s < last - stamp_s:  # on from before
                 self._undo_leap(leap)
                 return self.add_temperature(stamp_s, temperature_degC)
             if not self._temperature_jump_s < stamp_s:
@@ -452,6 +452,9 @@ class Compensator(_BlockCorrection, _TemperatureLeaps):
             status.temperature_stale = False
             if stamp_ok:
                 self._update_correction(stamp_s)
+            elif not self._correction_valid:  # no stamp to compute one at, and none yet
+                counters.imu_uncorrected += 1
+                return (x, y, z)
             counters.imu_corrected += 1
         cx, cy, cz = self._correction
         if self.rest is None:
@@ -472,7 +475,7 @@ class Compensator(_BlockCorrection, _TemperatureLeaps):
         ``time_jump_threshold_s`` or more back, as the message before was (and later than
         it): a time jump, the state is reset. One alone (a bad stamp, a message recorded late)
         or a smaller step back: out of order, corrected. Back from a lone stamp that leapt
-        that far ahead, and on from the stamp before that one: the leap was the bad stamp,
+        that far ahead, to nearer the stamp before it than to it: the leap was the bad stamp,
         counted out of order, and the stamps go on from this one (no reset).
         """
         counters = self.status.counters
@@ -480,7 +483,7 @@ class Compensator(_BlockCorrection, _TemperatureLeaps):
         before = self._imu_before_s
         if last_s - stamp_s < threshold:
             counters.imu_out_of_order += 1
-        elif stamp_s > before > -math.inf and last_s - before >= threshold:
+        elif before < stamp_s and stamp_s - before < last_s - stamp_s:
             counters.imu_out_of_order += 1  # the stamp far ahead, not this one
             self.status.last_imu_stamp_s = stamp_s
             self._last_rates = rates

@@ -145,7 +145,9 @@ class CompensatorCounters:
     """Message counts since start (for diagnostics); every input lands in exactly one group."""
 
     imu_corrected: int = 0
-    imu_uncorrected: int = 0  # no temperature for stale_after_s, or stale with policy 'none'
+    # no temperature for stale_after_s, stale with nothing to hold, or no stamp and no
+    # correction computed yet
+    imu_uncorrected: int = 0
     imu_held: int = 0  # corrected with a held correction (stale temperature, 'hold')
     imu_duplicate: int = 0  # dropped: same stamp and same rates as the previous gyro message
     imu_awaiting_temperature: int = 0  # dropped: no temperature yet, within stale_after_s of

@@ -13,7 +13,7 @@ from rclpy.subscription import Subscription
 
 from fog_temp_comp.core.compensator import STALE_SAMPLE_INTERVALS, Compensator
 from fog_temp_comp.core.stamp_offset import ArrivalOffsets
-from fog_temp_comp.ros.diagnostics import two_clocks_text
+from fog_temp_comp.ros.diagnostics import never_stamped_uncorrected, two_clocks_text
 from fog_temp_comp.ros.node_parameters import ParametersMixin
 
 
@@ -104,6 +104,12 @@ class ConsoleLogMixin(ParametersMixin):
             log.warning(
                 f'no temperature received on {topic}: gyro passed through uncorrected '
                 f'({counters.imu_uncorrected} messages so far)',
+                throttle_duration_sec=every,
+            )
+        elif never_stamped_uncorrected(status, previous):
+            log.error(
+                'gyro messages without stamp: passed through uncorrected, no correction '
+                'computed yet (time_source receive times them on arrival)',
                 throttle_duration_sec=every,
             )
         if counters.temperature_rejected > previous.temperature_rejected:

@@ -274,6 +274,14 @@ def _temperature_reasons(
         return reasons
     if status.temperature_stale:
         reasons.append(_stale_reason(counters, previous))
+    elif never_stamped_uncorrected(status, previous):
+        reasons.append(
+            (
+                ERROR,
+                'gyro messages without stamp: passed through uncorrected, no correction '
+                'computed yet (time_source receive times them on arrival)',
+            )
+        )
     if not status.estimator_ready:
         reasons.append((WARN, 'Tdot filter warming up'))
     if status.temperature_clamped:
@@ -350,6 +358,19 @@ def _rest_values(rest: RestStatus) -> list[tuple[str, str]]:
         ('rest_learned_temperature_degC', _num(rest.learned_temperature_degC)),
     ]
     return values
+
+
+def never_stamped_uncorrected(status: CompensatorStatus, previous: CompensatorCounters) -> bool:
+    """Whether gyro messages without stamp, none ever stamped, passed through since ``previous``.
+
+    No stamp to compute a correction at, and none computed yet.
+    """
+    counters = status.counters
+    return (
+        counters.imu_uncorrected > previous.imu_uncorrected
+        and counters.imu_zero_stamp > previous.imu_zero_stamp
+        and status.last_imu_stamp_s == -math.inf
+    )
 
 
 def _stale_reason(counters: CompensatorCounters, previous: CompensatorCounters) -> tuple[int, str]:
