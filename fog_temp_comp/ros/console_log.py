@@ -89,6 +89,22 @@ class ConsoleLogMixin(ParametersMixin):
                 throttle_duration_sec=self._throttle_s,
             )
 
+    def _log_uncorrected(self, counters: Any, previous: Any, topic: str) -> None:
+        """The throttled line of a gyro passed through for want of a temperature or a stamp."""
+        status = self.compensator.status
+        if counters.imu_uncorrected > previous.imu_uncorrected and not status.has_temperature:
+            self.get_logger().warning(
+                f'no temperature received on {topic}: gyro passed through uncorrected '
+                f'({counters.imu_uncorrected} messages so far)',
+                throttle_duration_sec=self._throttle_s,
+            )
+        elif never_stamped_uncorrected(status, previous):
+            self.get_logger().error(
+                'gyro messages without stamp: passed through uncorrected, no correction '
+                'computed yet (time_source receive times them on arrival)',
+                throttle_duration_sec=self._throttle_s,
+            )
+
     def _log_console(self, counters: Any, previous: Any) -> None:
         """Throttled console lines for what went wrong since the last report.
 
@@ -99,19 +115,7 @@ class ConsoleLogMixin(ParametersMixin):
         log = self.get_logger()
         every = self._throttle_s
         topic = self._temp_sub.topic_name
-        uncorrected = counters.imu_uncorrected - previous.imu_uncorrected
-        if uncorrected and not status.has_temperature:
-            log.warning(
-                f'no temperature received on {topic}: gyro passed through uncorrected '
-                f'({counters.imu_uncorrected} messages so far)',
-                throttle_duration_sec=every,
-            )
-        elif never_stamped_uncorrected(status, previous):
-            log.error(
-                'gyro messages without stamp: passed through uncorrected, no correction '
-                'computed yet (time_source receive times them on arrival)',
-                throttle_duration_sec=every,
-            )
+        self._log_uncorrected(counters, previous, topic)
         if counters.temperature_rejected > previous.temperature_rejected:
             log.warning(
                 f'non-finite temperature on {topic}: samples rejected '
