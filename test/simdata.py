@@ -6,6 +6,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from numpy.testing import assert_allclose
 
 from fog_temp_comp.bag.bagio import (
@@ -17,10 +18,30 @@ from fog_temp_comp.bag.bagio import (
     write_chamber_bag,
 )
 from fog_temp_comp.core.calibration import CalibrationResult, calibrate_detailed
-from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
-from fog_temp_comp.core.model import PAPER_TERMS
+from fog_temp_comp.core.coefficients import Coefficients
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS, DenoiseSettings
+from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig
+
+
+def example_coefficients(**fields: Any) -> Coefficients:
+    """The paper's model with Table 1-like coefficients, IIR Tdot, frame ``imu_link``."""
+    model = DriftModel(
+        PAPER_TERMS,
+        np.array([[-12.5, 3.2, -0.85], [-8.7e-4, 2.4e-3, -1.6e-3], [0.93, -0.62, 0.45]]),
+        Range(-40.0, 60.0),
+        Range(-0.5, 0.5),
+    )
+    return Coefficients(
+        model=model,
+        denoise=DenoiseSettings(method='iir'),
+        frame_id='imu_link',
+        fit={axis: {'residual_std_deg_h': 0.02} for axis in 'xyz'},
+        provenance={'created_utc': '2026-01-01T00:00:00Z', 'bags': ['chamber_run']},
+        **fields,
+    )
+
 
 #: a short chamber: 10..30 degC cycles with 10 min soaks, 1 Hz gyro and temperature
 SHORT_CHAMBER = SimulationConfig(

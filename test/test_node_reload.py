@@ -16,30 +16,17 @@ from rclpy.parameter import Parameter
 from rosharness import Harness, make_temperature, rate_of
 
 from fog_temp_comp.core.coefficients import Coefficients, save
-from fog_temp_comp.core.denoise import DenoiseSettings
-from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H
 from fog_temp_comp.ros.node import CompensatorNode
+
+from simdata import example_coefficients
 
 T0 = 1_700_000_000.0
 RATE = np.array([1e-4, -2e-4, 3e-4])  # rad/s
 
 
 def coefficients(**fields: str) -> Coefficients:
-    model = DriftModel(
-        PAPER_TERMS,
-        np.array([[-12.5, 3.2, -0.85], [-8.7e-4, 2.4e-3, -1.6e-3], [0.93, -0.62, 0.45]]),
-        Range(-40.0, 60.0),
-        Range(-0.5, 0.5),
-    )
-    return Coefficients(
-        model=model,
-        denoise=DenoiseSettings(method='iir'),
-        frame_id='imu_link',
-        fit={axis: {'residual_std_deg_h': 0.02} for axis in 'xyz'},
-        provenance={'created_utc': '2026-01-01T00:00:00Z', 'bags': ['chamber_run']},
-        **fields,
-    )
+    return example_coefficients(**fields)
 
 
 def coeffs_file(tmp_path: Path, name: str = 'coeffs.yaml', **fields: str) -> Path:
