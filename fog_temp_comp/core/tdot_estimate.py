@@ -117,7 +117,7 @@ class PerSampleEstimator:
 
     @property
     def ready(self) -> bool:
-        """True once the Tdot variance has converged (changes < 0.1 % per sample)."""
+        """True once the Tdot variance has converged (:mod:`~fog_temp_comp.core.warm_up`)."""
         return self._ready
 
 

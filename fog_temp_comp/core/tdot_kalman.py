@@ -16,22 +16,15 @@ from fog_temp_comp.core.reading_hysteresis import ReadingHysteresis, hysteresis_
 from fog_temp_comp.core.reading_repeat import RepeatedReadings, repeat_factors
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
 from fog_temp_comp.core.units import S_PER_MIN
+from fog_temp_comp.core.warm_up import (
+    INDEPENDENT_AFTER_S,
+    WarmUp,
+    ready_tolerance,
+    start_warm_up,
+    warm_up_step,
+)
 
 __all__ = ['INDEPENDENT_AFTER_S', 'KalmanTdotEstimator', 'predict_covariance', 'ready_tolerance']
-
-#: readings closer than this (s) count as one (their measurement variance grows)
-INDEPENDENT_AFTER_S = 1.0
-
-
-def ready_tolerance(dt_s: float) -> float:
-    """Relative change of the Tdot variance below which a step ``dt_s`` s long counts as settled.
-
-    0.1 % per reading of full weight; a reading closer than :data:`INDEPENDENT_AFTER_S` carries
-    that fraction of one's information, so its step must change the variance that much less
-    (else a 10 Hz sensor would count as warmed up after two readings).
-    """
-    return 1e-3 * min(1.0, dt_s / INDEPENDENT_AFTER_S)
-
 
 #: covariance ``(p00, p01, p11)`` of (T degC, Tdot degC/s)
 Cov2 = tuple[float, float, float]
@@ -58,10 +51,13 @@ def _covariance_step(p: Cov2, dt: float, q: float, r: float) -> tuple[Cov2, floa
     return (a00 - k0 * a00, a01 - k0 * a01, a11 - k1 * a01), k0, k1
 
 
-def _warm_up(p: Cov2, dt: float, q: float, r: float) -> tuple[Cov2, bool]:
-    """One step of the warm-up covariance (every reading of variance ``r``), and if it settled."""
-    posterior = _covariance_step(p, dt, q, r)[0]
-    return posterior, abs(posterior[2] - p[2]) <= ready_tolerance(dt) * posterior[2]
+def _warm_up(warm: WarmUp[Cov2], dt: float, q: float, r: float) -> tuple[WarmUp[Cov2], bool]:
+    """One step of the warm-up covariances (every reading of variance ``r``), and if settled."""
+
+    def step(p: Cov2) -> Cov2:
+        return _covariance_step(p, dt, q, r)[0]
+
+    return warm_up_step(warm, dt, step, 2)
 
 
 class KalmanTdotEstimator(PerSampleEstimator):
@@ -91,8 +87,10 @@ class KalmanTdotEstimator(PerSampleEstimator):
     Notes
     -----
     The first sample sets ``T``, with ``Tdot = 0`` and a prior standard deviation of 1 degC/min.
-    Ready once the Tdot variance changes by < 0.1 % per reading, as it would if every reading
-    weighed ``R`` (repeated readings make the variance rise and fall, not converge).
+    Ready once the Tdot variance has forgotten the prior (:mod:`~fog_temp_comp.core.warm_up`:
+    at a regular interval, once it changes by < 0.1 % per reading; at any intervals, a sensor
+    losing every third reading included), as it would if every reading weighed ``R``
+    (repeated readings make the variance rise and fall, not converge).
     In steady state the filter is an alpha-beta filter; its Tdot bandwidth is about
     ``(q / R)^(1/4)`` rad/s, i.e. it averages over roughly ``(R / q)^(1/4)`` seconds.
 
@@ -113,7 +111,7 @@ class KalmanTdotEstimator(PerSampleEstimator):
         self._t = 0.0
         self._v = 0.0  # degC/s
         self._p00 = self._p01 = self._p11 = 0.0
-        self._warm: Cov2 = (0.0, 0.0, 0.0)  # the covariance were no reading repeated
+        self._warm: WarmUp[Cov2] = start_warm_up((0.0, 0.0, 0.0))  # were no reading repeated
         self._ready = False
         self._estimate: TdotEstimate | None = None
         self._averager = ReadingAverager()
@@ -143,7 +141,7 @@ class KalmanTdotEstimator(PerSampleEstimator):
             self._t, self._v = z, 0.0
             self._p00, self._p01 = self.r, 0.0
             self._p11 = (self.PRIOR_TDOT_DEGC_PER_MIN / S_PER_MIN) ** 2
-            self._warm = (self._p00, self._p01, self._p11)
+            self._warm = start_warm_up((self._p00, self._p01, self._p11))
             self._estimate = TdotEstimate(
                 stamp_s, z, 0.0, tdot_std_degC_per_min=self.PRIOR_TDOT_DEGC_PER_MIN, ready=False
             )

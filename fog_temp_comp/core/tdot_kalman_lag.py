@@ -19,8 +19,8 @@ from fog_temp_comp.core.reading_average import ReadingAverager, average_readings
 from fog_temp_comp.core.reading_hysteresis import ReadingHysteresis, hysteresis_series
 from fog_temp_comp.core.reading_repeat import RepeatedReadings, repeat_factors
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
-from fog_temp_comp.core.tdot_kalman import INDEPENDENT_AFTER_S, ready_tolerance
 from fog_temp_comp.core.units import S_PER_MIN
+from fog_temp_comp.core.warm_up import INDEPENDENT_AFTER_S, WarmUp, start_warm_up, warm_up_step
 
 __all__ = [
     'SensorLagKalmanTdotEstimator',
@@ -149,11 +149,14 @@ def _step(
 
 
 def _warm_up(
-    p: Cov, dt: float, transition: tuple[tuple[float, float, float], Cov], r: float
-) -> tuple[Cov, bool]:
-    """One step of the warm-up covariance (every reading of variance ``r``), and if it settled."""
-    posterior = _step(p, dt, transition, r)[2]
-    return posterior, abs(posterior[3] - p[3]) <= ready_tolerance(dt) * posterior[3]
+    warm: WarmUp[Cov], dt: float, transition: tuple[tuple[float, float, float], Cov], r: float
+) -> tuple[WarmUp[Cov], bool]:
+    """One step of the warm-up covariances (every reading of variance ``r``), and if settled."""
+
+    def step(p: Cov) -> Cov:
+        return _step(p, dt, transition, r)[2]
+
+    return warm_up_step(warm, dt, step, 3)
 
 
 class SensorLagKalmanTdotEstimator(PerSampleEstimator):
@@ -178,8 +181,10 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
     -----
     The first sample sets both temperatures; Tdot starts at 0 with a prior standard deviation
     of 1 degC/min, and the coil may lead the sensor by that rate times the lag (the prior
-    correlates them so). Ready once the Tdot variance changes by < 0.1 % per sample, as it
-    would if every reading weighed ``R`` (repeated readings make it rise and fall).
+    correlates them so). Ready once the Tdot variance has forgotten the prior
+    (:mod:`~fog_temp_comp.core.warm_up`: at a regular interval, once it changes by < 0.1 % per
+    sample), as it would if every reading weighed ``R`` (repeated readings make it rise and
+    fall).
 
     """
 
@@ -200,7 +205,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         self._stamp = math.nan
         self._x = (0.0, 0.0, 0.0)  # coil degC, coil degC/s, sensor degC
         self._p: Cov = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        self._warm: Cov = self._p  # the covariance were no reading repeated
+        self._warm: WarmUp[Cov] = start_warm_up(self._p)  # were no reading repeated
         self._ready = False
         self._estimate: TdotEstimate | None = None
         self._transitions: dict[float, tuple[tuple[float, float, float], Cov]] = {}
@@ -219,7 +224,7 @@ class SensorLagKalmanTdotEstimator(PerSampleEstimator):
         self._stamp = stamp_s
         self._x = (z, 0.0, z)
         self._p = (r + tau * tau * v0, tau * v0, r, v0, 0.0, r)
-        self._warm = self._p
+        self._warm = start_warm_up(self._p)
         self._estimate = TdotEstimate(
             stamp_s, z, 0.0, tdot_std_degC_per_min=self.PRIOR_TDOT_DEGC_PER_MIN, ready=False
         )

@@ -24,13 +24,13 @@ from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.quantized_likelihood import quantized_update
 from fog_temp_comp.core.reading_repeat import RepeatedReadings
 from fog_temp_comp.core.tdot_estimate import EstimateSeries, PerSampleEstimator, TdotEstimate
-from fog_temp_comp.core.tdot_kalman import INDEPENDENT_AFTER_S
 from fog_temp_comp.core.tdot_kalman import _warm_up as _warm_up_plain
 from fog_temp_comp.core.tdot_kalman import predict_covariance as predict_plain
 from fog_temp_comp.core.tdot_kalman_lag import _DT_SCALE, _round_dt, cached_transition
 from fog_temp_comp.core.tdot_kalman_lag import _warm_up as _warm_up_lag
 from fog_temp_comp.core.tdot_kalman_lag import predict_covariance as predict_lag
 from fog_temp_comp.core.units import S_PER_MIN
+from fog_temp_comp.core.warm_up import INDEPENDENT_AFTER_S, start_warm_up
 
 __all__ = ['QuantizedKalmanTdotEstimator']
 
@@ -96,7 +96,7 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         self._stamp = math.nan
         self._x: list[float] = []
         self._p: Any = []  # covariance: 3 floats (plain) or 6 (sensor lag)
-        self._warm: Any = ()  # the Gaussian filter's covariance: 3 or 6 floats
+        self._warm: Any = ()  # the Gaussian filter's warm-up covariances: 3 or 6 floats
         self._ready = False
         self._estimate: TdotEstimate | None = None
         self._transitions: dict[float, Any] = {}
@@ -114,7 +114,7 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
             self._p = [r + tau * tau * v0, tau * v0, r, v0, 0.0, r]
         else:
             self._x, self._p = [z, 0.0], [r, 0.0, v0]
-        self._warm = tuple(self._p)
+        self._warm = start_warm_up(tuple(self._p))
 
     def _transition_for(self, dt: float) -> Any:
         return cached_transition(self._transitions, dt, self.tau, self.q)
