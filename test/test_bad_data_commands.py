@@ -220,3 +220,34 @@ def test_compensate_says_when_every_temperature_reading_has_the_same_stamp(
          str(tmp_path / 'out2')], capsys
     )  # fmt: skip
     assert code == 0 and 'WARNING' not in err, err
+
+
+def test_held_out_bags_get_the_checks_of_training_ones(
+    base: tuple[Arrays, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """NaN readings dropped with a warning (scored, the sensor still warms up), or refused.
+
+    With every 7th temperature NaN in the held-out bag, the quantized filter scored 1.01
+    (no correction: its warm-up never ended on the readings left) and was not used.
+    """
+    arrays, _ = base
+    train = bag(tmp_path / 'train', arrays)
+    temps = arrays['temperature_degC'].copy()
+    temps[::7] = np.nan
+    heldout = bag(tmp_path / 'held', arrays, temperature_degC=temps)
+    output = tmp_path / 'c.yaml'
+    argv = ['calibrate', str(train), '--heldout', str(heldout), '-o', str(output), '--quiet']
+    code, _, err = run_cli(argv, capsys)
+    assert code == 0, err
+    (line,) = [x for x in err.splitlines() if 'not finite' in x]
+    assert line.startswith(f'WARNING: {heldout}: dropped 0 of') and 'temperature readings' in line
+    selection = yaml.safe_load(output.read_text())['provenance']['selection']
+    quantized = selection['quantized_likelihood']
+    assert quantized['used'] and quantized['criterion'] < 1.05 * quantized['criterion_gaussian']
+    temps[:] = np.nan
+    heldout = bag(tmp_path / 'nan', arrays, temperature_degC=temps)
+    argv = ['calibrate', str(train), '--heldout', str(heldout), '-o', str(tmp_path / 'n.yaml')]
+    code, _, err = run_cli(argv, capsys)
+    assert code == 1 and not (tmp_path / 'n.yaml').exists()
+    (line,) = [x for x in err.splitlines() if x.startswith('ERROR: ')]
+    assert line.startswith(f'ERROR: {heldout}: no finite temperature reading'), err

@@ -249,7 +249,12 @@ def _attempt(
         drop = opt.drop_unidentifiable
         terms = identifiable_terms(records, opt.terms, drop=drop, stderr=err or sys.stderr)
         opt = dataclasses.replace(opt, terms=terms)
-    heldout = [earth(on_one_clock(read_record, b, **args)) for b in opt.heldout]
+    # held-out bags as the training ones: non-finite samples dropped, split at pauses
+    heldout = [
+        earth(piece)
+        for b in opt.heldout
+        for piece in salvaged.split(on_one_clock(read_record, b, **args))
+    ]
     result, chosen = _fit(opt, records, heldout, {**provenance, **salvaged.provenance()}, out)
     return Attempt(records, result, chosen, extra=(opt, args))
 
