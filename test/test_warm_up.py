@@ -63,7 +63,8 @@ def ready_after_s(name: str, every_third_lost: bool, series: bool) -> float:
         out = est.add_series(stamps, temps)
         ready_stamps = out.stamp_s[out.ready]
     else:
-        ready_stamps = np.array([s for s, z in zip(stamps, temps) if est.add(s, z) and est.ready])
+        pairs = zip(stamps, temps, strict=True)
+        ready_stamps = np.array([s for s, z in pairs if est.add(s, z) and est.ready])
     return float(ready_stamps[0] - stamps[0]) if ready_stamps.size else np.inf
 
 
