@@ -1,7 +1,8 @@
 """Parameter changes on the running node: a refused one changes nothing; a reload keeps on.
 
-A reload (coefficients file, filter parameter) keeps the new file's temperature sensor and,
-while the temperature is out, the held correction.
+A reload (coefficients file, filter parameter) keeps the new file's temperature sensor (from
+its latest reading, where one came: the gyro does not wait for its next) and, while the
+temperature is out, the held correction.
 """
 
 from __future__ import annotations
@@ -102,6 +103,10 @@ def test_a_reload_keeps_the_new_files_temperature_sensor(
         assert node.temperature_frames.kept == 'sensA'
         assert node.set_parameters([Parameter('coefficients_file', value=str(b))])[0].successful
         assert 'the temperature of frame_id sensB is kept from now on' in capfd.readouterr().err
+        # the gyro goes on, corrected from sensB's latest reading (it came before the reload)
+        out = harness.send_imu(T0 + 0.6, RATE)
+        assert out is not None
+        assert_allclose(rate_of(out), RATE - expected(30.0), rtol=1e-9)
         for k in range(1, 4):
             send_both(harness, T0 + k)
         assert node.temperature_frames.kept == 'sensB'

@@ -64,6 +64,8 @@ IMU_INPUT_QOS = QoSProfile(
     reliability=qos_profile_sensor_data.reliability,
     durability=qos_profile_sensor_data.durability,
 )
+#: other temperature frame_ids whose latest reading is kept for a reload (bounded memory)
+MAX_OTHER_FRAMES = 16
 
 
 class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
@@ -158,6 +160,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             or self.config.coefficients.temperature_frame_id
         )
         self._frames_logged = False
+        #: the latest reading (stamp s, degC) of each frame_id not kept, for a reload to it
+        self._other_frames_latest: dict[str, tuple[float, float]] = {}
         #: temperature stamps against the gyro's latest on arrival: two clocks, seen live
         self._arrival = ArrivalOffsets()
         self._imu_total_at_temperature = 0
@@ -324,8 +328,13 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             return
         counters = self.compensator.status.counters
         last_reading = self.compensator.last_reading
+        kept = self.temperature_frames.kept
         if self._follow_temperature_frame(config.coefficients):
-            last_reading = None  # another sensor's: the new one's next reading starts it
+            # another sensor: its latest reading where one came (else its next starts it)
+            if kept is not None and last_reading is not None:
+                self._other_frames_latest[kept] = last_reading
+            new_frame = config.coefficients.temperature_frame_id
+            last_reading = self._other_frames_latest.pop(new_frame, None)
         self.compensator = Compensator(
             config.coefficients.model, config.settings, config.guard, config.rest
         )
@@ -390,6 +399,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
     def _on_temperature(self, msg: Any) -> None:
         temperature = self._temperature
         if temperature.stamped and not self.temperature_frames.keep(msg.header.frame_id):
+            self._note_other_frame(msg)
             if self.temperature_frames.kept is not None and not self._frames_logged:
                 self._log_other_frames()
             return
@@ -415,6 +425,17 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
                 if arrival.two_clocks and abs(arrival.offset_s) > GROSS_CLOCK_MISMATCH_S:
                     self._time_on_arrival()
             self._imu_total_at_temperature = imu_total
+
+    def _note_other_frame(self, msg: Any) -> None:
+        """Keep another sensor's latest reading: a reload that moves to it starts from it."""
+        frame_id, latest = msg.header.frame_id, self._other_frames_latest
+        if frame_id not in latest and len(latest) >= MAX_OTHER_FRAMES:
+            return
+        stamp = msg.header.stamp
+        stamp_s = self._now_s() if self._by_receive else stamp.sec + stamp.nanosec * 1e-9
+        value = self._temperature.degC(msg)
+        if stamp_s > 0.0 and math.isfinite(value):
+            latest[frame_id] = (stamp_s, value)
 
     def _log_other_frames(self) -> None:
         """Say once that the temperature topic carries several sensors' readings."""
