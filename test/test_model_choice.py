@@ -439,6 +439,41 @@ def test_reading_interval_is_the_sensor_rate_not_its_jitter_or_a_lost_reading() 
     assert reading_interval_s([one]) == 0.0
 
 
+@pytest.mark.parametrize('lost', [0.0, 0.33, 0.5, 0.6, 0.8, 'every third'])
+def test_reading_interval_is_the_sensor_rate_whatever_share_of_readings_is_lost(
+    lost: float | str,
+) -> None:
+    """Jittered stamps, readings lost at random or every third: one period, 3.1 s.
+
+    The median alone gave two periods with over half the readings lost (a stale time twice
+    too long for a slow sensor), 1.5 with every third lost.
+    """
+    from fog_temp_comp.core.sensor_noise import reading_interval_s
+
+    rng = np.random.default_rng(1)
+    n = 20000
+    stamps = 1.7e9 + 3.1 * np.arange(n) + rng.normal(0.0, 0.02, n)  # jittered by 20 ms
+    keep = np.arange(n) % 3 != 2 if lost == 'every third' else rng.random(n) >= lost
+    record = dataclasses.replace(
+        cycle(CHAMBER).as_record(),
+        temp_stamps_s=stamps[keep],
+        temperature_degC=np.full(int(keep.sum()), 20.0),
+    )
+    assert reading_interval_s([record]) == pytest.approx(3.1, abs=0.02)
+
+
+def test_reading_interval_of_a_sensor_with_much_jitter_is_its_rate() -> None:
+    """Stamps +-40 % of the interval off (a driver that stamps on receipt): the median."""
+    from fog_temp_comp.core.sensor_noise import reading_interval_s
+
+    rng = np.random.default_rng(2)
+    stamps = np.sort(1.7e9 + 5.0 * np.arange(5000) + rng.uniform(-2.0, 2.0, 5000))
+    record = dataclasses.replace(
+        cycle(CHAMBER).as_record(), temp_stamps_s=stamps, temperature_degC=np.full(5000, 20.0)
+    )
+    assert reading_interval_s([record]) == pytest.approx(5.0, abs=0.1)
+
+
 def test_calibrate_records_the_temperature_sensor_interval() -> None:
     """The YAML carries the interval, so the node's staleness rule fits a slow sensor."""
     cfg = dataclasses.replace(CHAMBER, temp_hz=0.05, temp_quantum_degC=0.05, temp_noise_degC=0.01)

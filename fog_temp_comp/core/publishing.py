@@ -25,7 +25,7 @@ import numpy as np
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.held_readings import expand_held, held_margin_s
 from fog_temp_comp.core.record import ChamberRecord
-from fog_temp_comp.core.sensor_noise import reading_interval_s, sensor_noise
+from fog_temp_comp.core.sensor_noise import reading_interval_s, sensor_noise, shortest_interval_s
 
 __all__ = [
     'HOLD_FACTOR',
@@ -99,10 +99,7 @@ def conversion_interval_s(records: Sequence[ChamberRecord]) -> float:
     """
     gaps = np.concatenate([np.diff(r.temp_stamps_s) for r in records] or [np.empty(0)])
     gaps = gaps[gaps > 0]
-    if not gaps.size:
-        return 0.0
-    short = gaps[gaps <= 1.5 * np.percentile(gaps, 5.0)]
-    return round(float(np.median(short)), 3)
+    return round(shortest_interval_s(gaps), 3) if gaps.size else 0.0
 
 
 def with_reading_timing(

@@ -18,7 +18,7 @@ import numpy as np
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.record import ChamberRecord
 
-__all__ = ['SensorNoise', 'reading_interval_s', 'sensor_noise']
+__all__ = ['SensorNoise', 'reading_interval_s', 'sensor_noise', 'shortest_interval_s']
 
 
 @dataclass(frozen=True)
@@ -73,12 +73,36 @@ def sensor_noise(records: Sequence[ChamberRecord]) -> SensorNoise:
     return SensorNoise(quantum, noise)
 
 
+#: the share of intervals within 25 % of their median below which the median is not the
+#: sensor's interval (over half the readings lost: most intervals are two or more of them)
+MEDIAN_CLUSTER_SHARE = 1.0 / 3.0
+
+
 def reading_interval_s(records: Sequence[ChamberRecord]) -> float:
     """The temperature sensor's nominal interval between readings, s (0: fewer than two).
 
-    The median over the records of the intervals between successive readings, repeated
-    stamps left out, to the millisecond: a sensor's rate, not its jitter or a lost reading.
+    The median over the records of the intervals between successive readings within 25 % of
+    their median, repeated stamps left out, to the millisecond: a sensor's rate, not its
+    jitter or a lost reading (every third lost: intervals of one and two periods, half each).
+    Where fewer than :data:`MEDIAN_CLUSTER_SHARE` of the intervals are that near the median
+    (half the readings lost or more: most intervals are two periods or more), the median of
+    the shortest ones (:func:`shortest_interval_s`).
     """
     intervals = np.concatenate([np.diff(r.temp_stamps_s) for r in records] or [np.empty(0)])
     intervals = intervals[intervals > 0]
-    return round(float(np.median(intervals)), 3) if intervals.size else 0.0
+    if not intervals.size:
+        return 0.0
+    median = float(np.median(intervals))
+    near = intervals[np.abs(intervals - median) <= 0.25 * median]
+    if near.size < MEDIAN_CLUSTER_SHARE * intervals.size:
+        return round(shortest_interval_s(intervals), 3)
+    return round(float(np.median(near)), 3)
+
+
+def shortest_interval_s(intervals_s: np.ndarray) -> float:
+    """The median of the intervals (s, > 0) up to 1.5 times their 5th percentile.
+
+    One period of a sensor whatever share of its readings is lost, or published only on
+    change (:func:`~fog_temp_comp.core.publishing.conversion_interval_s`).
+    """
+    return float(np.median(intervals_s[intervals_s <= 1.5 * np.percentile(intervals_s, 5.0)]))
