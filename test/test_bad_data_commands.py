@@ -251,3 +251,32 @@ def test_held_out_bags_get_the_checks_of_training_ones(
     assert code == 1 and not (tmp_path / 'n.yaml').exists()
     (line,) = [x for x in err.splitlines() if x.startswith('ERROR: ')]
     assert line.startswith(f'ERROR: {heldout}: no finite temperature reading'), err
+
+
+def test_evaluate_scores_a_run_with_a_clock_jump_as_the_run_without_it(
+    base: tuple[Arrays, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Stamps 1e8 s later from the middle on: the replay restarts there as the node would.
+
+    No split is needed: the 10 s rows are the clean run's within 1 %, not a 1e8 s run.
+    """
+    arrays, coeffs = base
+    middle = arrays['imu_stamps_s'][arrays['imu_stamps_s'].size // 2]
+    changes = {
+        k: np.where(arrays[k] > middle, arrays[k] + 1e8, arrays[k])
+        for k in ('imu_stamps_s', 'temp_stamps_s')
+    }
+    rows = {}
+    for name, bag_path in (
+        ('jump', bag(tmp_path, arrays, **changes)),
+        ('clean', bag(tmp_path / 'c', arrays)),
+    ):
+        code, out, err = run_cli(['evaluate', str(bag_path), '--coeffs', str(coeffs)], capsys)
+        assert code == 0, err
+        rows[name] = np.array(
+            [[float(v) for v in line.split()[3:]] for line in out.splitlines()
+             if line.startswith('bad ') and line.split()[2] == '10']
+        )  # fmt: skip
+    assert rows['jump'].shape == rows['clean'].shape == (3, 6)
+    values = [0, 1, 3, 4]  # stability and range before and after (the ratios are rounded)
+    np.testing.assert_allclose(rows['jump'][:, values], rows['clean'][:, values], rtol=0.01)
