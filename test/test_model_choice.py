@@ -245,6 +245,23 @@ def test_choose_keeps_the_simplest_within_the_tolerance() -> None:
         choose([failed])
 
 
+def test_choose_breaks_a_tie_by_the_smallest_shrinkage_not_by_noise() -> None:
+    from fog_temp_comp.core.model_choice import TIE, StructureScore
+
+    def score(shrink: float, criterion: float) -> StructureScore:
+        return StructureScore(Structure(PAPER_TERMS, 0.001, shrink, sensor_lag_s=480.0), criterion)
+
+    gentle = score(0.5, 0.31837)
+    assert choose([score(1.0, 0.31836), gentle]) is gentle  # 3e-5 apart: a tie
+    assert choose([score(1.0, 0.31837 * (1 - 0.5 * TIE)), gentle]) is gentle
+    better = score(1.0, 0.31837 * (1 - 2 * TIE))
+    assert choose([better, gentle]) is better  # a real difference wins
+    # a tie among the simplest only: a richer structure's score does not widen it
+    terms = (*PAPER_TERMS, 'T2', 'T_Tdot')
+    richer = StructureScore(Structure(terms, 0.001, 0.5, sensor_lag_s=480.0), criterion=0.31836)
+    assert choose([score(1.0, 0.31836), richer]).structure.shrink_sigmas == 1.0
+
+
 def test_a_shrinkage_that_would_bend_the_calibrated_range_is_not_a_candidate() -> None:
     """A garrote threshold comparable to the training Tdot is refused, with the reason."""
     train = cycle(CHAMBER).as_record()
