@@ -479,6 +479,25 @@ def test_reading_interval_is_the_sensor_rate_whatever_share_of_readings_is_lost(
     assert reading_interval_s([record]) == pytest.approx(3.1, abs=0.02)
 
 
+@pytest.mark.parametrize('poll_s', [5.0, 30.0])
+def test_reading_interval_of_readings_delivered_together_is_the_polls(poll_s: float) -> None:
+    """A driver polling a 1.22 Hz sensor's buffer, stamping on receipt 1 ms apart.
+
+    The temperature is as old as the last poll: the interval is the poll's (stale after three
+    of them), not the 1 ms inside one (it was 0.001 s: stale after the 10 s timeout, a 30 s
+    poll held the correction two thirds of the time).
+    """
+    from fog_temp_comp.core.sensor_noise import reading_interval_s
+
+    t = np.arange(0.0, 3600.0, 1 / 1.2237)
+    poll = np.ceil(t / poll_s) * poll_s
+    stamps = 1.7e9 + poll + 1e-3 * (np.arange(t.size) - np.searchsorted(poll, poll))
+    record = dataclasses.replace(
+        cycle(CHAMBER).as_record(), temp_stamps_s=stamps, temperature_degC=np.full(t.size, 20.0)
+    )
+    assert reading_interval_s([record]) == pytest.approx(poll_s, rel=0.01)
+
+
 def test_reading_interval_of_a_sensor_with_much_jitter_is_its_rate() -> None:
     """Stamps +-40 % of the interval off (a driver that stamps on receipt): the median."""
     from fog_temp_comp.core.sensor_noise import reading_interval_s

@@ -86,10 +86,13 @@ def reading_interval_s(records: Sequence[ChamberRecord]) -> float:
     jitter or a lost reading (every third lost: intervals of one and two periods, half each).
     Where fewer than :data:`MEDIAN_CLUSTER_SHARE` of the intervals are that near the median
     (half the readings lost or more: most intervals are two periods or more), the median of
-    the shortest ones (:func:`shortest_interval_s`).
+    the shortest ones (:func:`shortest_interval_s`). Readings delivered together, far closer
+    than the record's mean interval, count as one delivery (:func:`_delivery_intervals_s`):
+    a driver polling every 5 s has an interval of 5 s, not of 1 ms.
     """
-    intervals = np.concatenate([np.diff(r.temp_stamps_s) for r in records] or [np.empty(0)])
-    intervals = intervals[intervals > 0]
+    intervals = np.concatenate(
+        [_delivery_intervals_s(r.temp_stamps_s) for r in records] or [np.empty(0)]
+    )
     if not intervals.size:
         return 0.0
     median = float(np.median(intervals))
@@ -97,6 +100,25 @@ def reading_interval_s(records: Sequence[ChamberRecord]) -> float:
     if near.size < MEDIAN_CLUSTER_SHARE * intervals.size:
         return round(shortest_interval_s(intervals), 3)
     return round(float(np.median(near)), 3)
+
+
+#: intervals shorter than this fraction of a record's mean interval are inside one delivery
+BURST_FRACTION = 0.1
+
+
+def _delivery_intervals_s(stamps_s: np.ndarray) -> np.ndarray:
+    """The intervals (s) between deliveries of readings, shape (k,).
+
+    Readings closer than :data:`BURST_FRACTION` of the mean interval came in one delivery (a
+    driver that polls a buffer every 5 s and stamps its readings on receipt, 1 ms apart): the
+    interval that matters (the staleness of the temperature) is between deliveries.
+    """
+    intervals = np.diff(stamps_s)
+    intervals = intervals[intervals > 0]
+    if stamps_s.size > 1:
+        mean = (float(np.max(stamps_s)) - float(np.min(stamps_s))) / (stamps_s.size - 1)
+        intervals = intervals[intervals >= BURST_FRACTION * mean]
+    return intervals
 
 
 def shortest_interval_s(intervals_s: np.ndarray) -> float:

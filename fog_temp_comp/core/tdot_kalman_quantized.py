@@ -34,11 +34,18 @@ from fog_temp_comp.core.warm_up import INDEPENDENT_AFTER_S, start_warm_up
 
 __all__ = ['QuantizedKalmanTdotEstimator']
 
-#: readings closer than this to the last one used are skipped, s: at most about 11 readings a
-#: second are used, so a sensor that reports with every IMU sample (100-1000 Hz) costs what a
-#: 10 Hz one does (the study's fastest, whose every reading counts), in the node and in
-#: calibration alike; a skipped reading changes nothing
+#: readings are used at most one per this interval on average, s: about 11 a second, so a
+#: sensor that reports with every IMU sample (100-1000 Hz) costs what a 10 Hz one does (the
+#: study's fastest, whose every reading counts), in the node and in calibration alike; a
+#: skipped reading changes nothing. An average (a token bucket of :data:`BURST_READINGS`), not
+#: a least interval: a driver that delivers a poll's readings at once, or stamps them on
+#: receipt with jitter, has every reading used (a least interval kept one per 5 s poll and
+#: made the 100 s stability 26-52 % worse: ``benchmarks/timing_quirks.py``)
 MIN_INTERVAL_S = 0.09
+
+#: readings that may come closer than :data:`MIN_INTERVAL_S` in a burst (36 s of them: a
+#: 30 s poll of a 10 Hz sensor)
+BURST_READINGS = 400.0
 
 #: the log probability below which a reading counts as an outlier in :attr:`log_likelihood`:
 #: a glitch, or a reading just after a sudden change of rate that a slow filter cannot
@@ -63,8 +70,8 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
     of 1 degC/min, as the Gaussian filters do. Ready when the Gaussian filter on the same
     readings would be (its covariance, every reading of variance ``sigma^2 + q^2 / 12``, less
     for readings under 1 s apart, settles), so start-up is as cautious as it is there.
-    Readings that are not finite, or less than :data:`MIN_INTERVAL_S` after the last one used,
-    are skipped.
+    Readings that are not finite, or beyond the rate :data:`MIN_INTERVAL_S` allows (on
+    average, bursts of :data:`BURST_READINGS` allowed), are skipped.
     :attr:`log_likelihood` sums the log probability of every reading used under the filter's
     prediction (the score of ``sigma`` in :mod:`~fog_temp_comp.core.quantized_noise_fit`).
 
@@ -94,6 +101,7 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
     def reset(self) -> None:
         """Forget all samples."""
         self._stamp = math.nan
+        self._tokens = 0.0  # readings that may be used now (MIN_INTERVAL_S, BURST_READINGS)
         self._x: list[float] = []
         self._p: Any = []  # covariance: 3 floats (plain) or 6 (sensor lag)
         self._warm: Any = ()  # the Gaussian filter's warm-up covariances: 3 or 6 floats
@@ -144,8 +152,12 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
             self._start(stamp_s, temperature_degC)
             return True
         dt = _round_dt(stamp_s - self._stamp)
-        if not dt >= MIN_INTERVAL_S:  # also a stamp not after the last one used
+        if not dt > 0.0:  # a stamp not after the last one used
             return False
+        tokens = min(BURST_READINGS, self._tokens + dt / MIN_INTERVAL_S)
+        if tokens < 1.0:
+            return False  # tokens accrue from the last reading used: left as they were
+        self._tokens = tokens - 1.0
         repeat = self._repeated.factor(stamp_s, temperature_degC)
         if self.tau > 0.0:
             self._step_lag(dt, temperature_degC, 1.0 / repeat)
@@ -250,14 +262,19 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         isfinite, factor = math.isfinite, self._repeated.factor
         q, quantum, noise_var, log_floor = self.q, self.quantum, self.noise_var, self._log_floor
         stamp, (x0, x1), (p00, p01, p11) = self._stamp, self._x, self._p
+        tokens = self._tokens
         log_likelihood = self.log_likelihood
         add_t, add_x, add_v, add_s = (column.append for column in out)
         for stamp_s, y in zip(t_in, z_in, strict=True):
             if not (isfinite(stamp_s) and isfinite(y)):
                 continue
             dt = round((stamp_s - stamp) * _DT_SCALE) / _DT_SCALE  # as _round_dt
-            if not dt >= MIN_INTERVAL_S:  # also a stamp not after the last one used
+            if not dt > 0.0:  # a stamp not after the last one used
                 continue
+            budget = min(BURST_READINGS, tokens + dt / MIN_INTERVAL_S)  # as _advance
+            if budget < 1.0:
+                continue
+            tokens = budget - 1.0
             damp = 1.0 / factor(stamp_s, y)
             a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
             a01 = p01 + dt * p11 + q * dt * dt / 2.0
@@ -274,6 +291,7 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
             add_v(x1)
             add_s(p11)
         self._stamp, self._x, self._p = stamp, [x0, x1], [p00, p01, p11]
+        self._tokens = tokens
         self.log_likelihood = log_likelihood
 
     def feed(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> int:
