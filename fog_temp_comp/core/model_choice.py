@@ -91,6 +91,7 @@ from fog_temp_comp.core.quantized_noise_fit import noise_before_quantization
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.record_cleaning import without_outliers
 from fog_temp_comp.core.sensor_noise import SensorNoise, sensor_noise
+from fog_temp_comp.core.structure_choice import TIE, TOLERANCE, choose
 
 __all__ = [
     'BLOCKS_PER_RUN',
@@ -100,6 +101,8 @@ __all__ = [
     'SCORE_TAUS_S',
     'SHRINK_SIGMAS',
     'TDOT_LAGS_S',
+    'TIE',
+    'TOLERANCE',
     'SensorNoise',
     'Structure',
     'StructureScore',
@@ -116,40 +119,6 @@ __all__ = [
     'quantized_rivals',
     'sensor_noise',
 ]
-
-#: default tolerance: the simplest structure within this fraction of the best score wins
-TOLERANCE = 0.02
-
-#: scores of equally simple structures this close (a fraction) are a tie, which the smallest
-#: Tdot shrinkage wins: a chamber bag that lost 5 % of its readings flipped plant 900's choice
-#: from shrinkage 0.5 to 1 on scores 3e-5 apart, 2 % worse on the replayed cycles
-#: (``benchmarks/message_loss.py``); the study's choices are unchanged (all 0.5)
-TIE = 1e-3
-
-
-def choose(scores: Sequence[StructureScore], tolerance: float = TOLERANCE) -> StructureScore:
-    """The simplest structure within ``tolerance`` of the best score (best settings for it).
-
-    Of the simplest, the best score; of those within :data:`TIE` of it, the smallest Tdot
-    shrinkage (the least the estimate is bent), so a choice does not turn on noise.
-
-    Raises
-    ------
-    CalibrationError
-        If no structure could be scored.
-
-    """
-    ok = [s for s in scores if math.isfinite(s.criterion)]
-    if not ok:
-        errors = sorted({s.error for s in scores if s.error})
-        raise CalibrationError('no candidate model could be cross-validated: ' + '; '.join(errors))
-    best = min(s.criterion for s in ok)
-    within = [s for s in ok if s.criterion <= best * (1.0 + tolerance)]
-    simplest = min(s.structure.complexity for s in within)
-    level = [s for s in within if s.structure.complexity == simplest]
-    top = min(s.criterion for s in level)
-    tied = [s for s in level if s.criterion <= top * (1.0 + TIE)]
-    return min(tied, key=lambda s: (s.structure.shrink_sigmas, s.criterion))
 
 
 #: cross-validations of the time constant's refinement, each one filter run over every record
