@@ -113,6 +113,7 @@ def _delivery_intervals_s(stamps_s: np.ndarray) -> np.ndarray:
     driver that polls a buffer every 5 s and stamps its readings on receipt, 1 ms apart): the
     interval that matters (the staleness of the temperature) is between deliveries.
     """
+    stamps_s = stamps_s[np.isfinite(stamps_s)]
     intervals = np.diff(stamps_s)
     intervals = intervals[intervals > 0]
     if stamps_s.size > 1:
