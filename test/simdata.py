@@ -24,23 +24,25 @@ from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.tools.simulate import SimulatedRun, SimulationConfig
 
+#: the paper's model with Table 1-like coefficients (deg/h), T over -40..60 degC
+EXAMPLE_MODEL = DriftModel(
+    PAPER_TERMS,
+    np.array([[-12.5, 3.2, -0.85], [-8.7e-4, 2.4e-3, -1.6e-3], [0.93, -0.62, 0.45]]),
+    Range(-40.0, 60.0),
+    Range(-0.5, 0.5),
+)
+
 
 def example_coefficients(**fields: Any) -> Coefficients:
-    """The paper's model with Table 1-like coefficients, IIR Tdot, frame ``imu_link``."""
-    model = DriftModel(
-        PAPER_TERMS,
-        np.array([[-12.5, 3.2, -0.85], [-8.7e-4, 2.4e-3, -1.6e-3], [0.93, -0.62, 0.45]]),
-        Range(-40.0, 60.0),
-        Range(-0.5, 0.5),
-    )
-    return Coefficients(
-        model=model,
-        denoise=DenoiseSettings(method='iir'),
-        frame_id='imu_link',
-        fit={axis: {'residual_std_deg_h': 0.02} for axis in 'xyz'},
-        provenance={'created_utc': '2026-01-01T00:00:00Z', 'bags': ['chamber_run']},
-        **fields,
-    )
+    """:data:`EXAMPLE_MODEL`, IIR Tdot, frame ``imu_link``; ``fields`` replace any of them."""
+    defaults: dict[str, Any] = {
+        'model': EXAMPLE_MODEL,
+        'denoise': DenoiseSettings(method='iir'),
+        'frame_id': 'imu_link',
+        'fit': {axis: {'residual_std_deg_h': 0.02} for axis in 'xyz'},
+        'provenance': {'created_utc': '2026-01-01T00:00:00Z', 'bags': ['chamber_run']},
+    }
+    return Coefficients(**{**defaults, **fields})
 
 
 #: a short chamber: 10..30 degC cycles with 10 min soaks, 1 Hz gyro and temperature

@@ -24,19 +24,14 @@ from fog_temp_comp.core.coefficients import Coefficients, save
 from fog_temp_comp.core.compensator import Compensator
 from fog_temp_comp.core.compensator_types import GuardSettings
 from fog_temp_comp.core.denoise import DenoiseSettings
-from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H
 from fog_temp_comp.ros.node import CompensatorNode
+
+from simdata import EXAMPLE_MODEL
 
 T0 = 1_700_000_000.0  # UTC stamps of the gyro, s
 RATE = np.array([1e-4, -2e-4, 3e-4])  # rad/s
 WARN = b'\x01'
-MODEL = DriftModel(
-    PAPER_TERMS,
-    np.array([[-12.5, 3.2, -0.85], [-8.7e-4, 2.4e-3, -1.6e-3], [0.93, -0.62, 0.45]]),
-    Range(-40.0, 60.0),
-    Range(-0.5, 0.5),
-)
 
 
 def first_temperature_far_behind(compensator: Compensator, n: int) -> np.ndarray:
@@ -53,14 +48,14 @@ def first_temperature_far_behind(compensator: Compensator, n: int) -> np.ndarray
 def test_nothing_to_hold_passes_through_uncorrected(policy: str) -> None:
     """Stale from the first temperature: raw out, counted uncorrected; blocks give the same."""
     guard = GuardSettings(stale_policy=policy)
-    one = Compensator(MODEL, DenoiseSettings(method='kalman'), guard)
+    one = Compensator(EXAMPLE_MODEL, DenoiseSettings(method='kalman'), guard)
     each = first_temperature_far_behind(one, 200)
     assert_array_equal(each, np.tile(RATE, (200, 1)))
     counters = one.status.counters
     assert (counters.imu_corrected, counters.imu_held, counters.imu_uncorrected) == (0, 0, 200)
     assert one.status.temperature_stale
     # the block path, which the start-up's first message leaves one at a time
-    blocks = Compensator(MODEL, DenoiseSettings(method='kalman'), guard)
+    blocks = Compensator(EXAMPLE_MODEL, DenoiseSettings(method='kalman'), guard)
     t = T0 + np.arange(200) / 10
     got, kept = blocks.correct_interleaved(
         t,
@@ -76,7 +71,7 @@ def test_nothing_to_hold_passes_through_uncorrected(policy: str) -> None:
 
 def test_a_temperature_clock_restart_holds_the_last_correction() -> None:
     """The temperature restarts with stamps from 100 s: the gyro keeps the last correction."""
-    compensator = Compensator(MODEL, DenoiseSettings(method='kalman'))
+    compensator = Compensator(EXAMPLE_MODEL, DenoiseSettings(method='kalman'))
     for k in range(600):  # 60 s at 10 Hz, temperature at 1 Hz warming 1 degC/min
         if k % 10 == 0:
             compensator.add_temperature(T0 + k / 10, 20.0 + k / 600)
@@ -102,7 +97,7 @@ def test_a_temperature_clock_restart_holds_the_last_correction() -> None:
 @pytest.fixture()
 def harness(ros_context: object, tmp_path: Path) -> Iterator[Harness]:
     coefficients = Coefficients(
-        model=MODEL,
+        model=EXAMPLE_MODEL,
         denoise=DenoiseSettings(method='kalman'),
         frame_id='imu_link',
         fit={axis: {'residual_std_deg_h': 0.02} for axis in 'xyz'},

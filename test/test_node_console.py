@@ -21,8 +21,9 @@ from rosharness import Harness
 
 from fog_temp_comp.core.coefficients import Coefficients, save
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS, DenoiseSettings
-from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
 from fog_temp_comp.ros.node import CompensatorNode
+
+from simdata import EXAMPLE_MODEL
 
 T0 = 1_700_000_000.0
 RATE = np.array([1e-4, -2e-4, 3e-4])  # rad/s
@@ -31,13 +32,7 @@ LINE = re.compile(r'^\[(DEBUG|INFO|WARN|ERROR|FATAL)\] \[[0-9.]+\] \[([^\]]+)\]:
 
 
 def coefficients(denoise: DenoiseSettings) -> Coefficients:
-    model = DriftModel(
-        PAPER_TERMS,
-        np.array([[-12.5, 3.2, -0.85], [-8.7e-4, 2.4e-3, -1.6e-3], [0.93, -0.62, 0.45]]),
-        Range(-40.0, 60.0),
-        Range(-0.5, 0.5),
-    )
-    return Coefficients(model=model, denoise=denoise, frame_id='imu_link')
+    return Coefficients(model=EXAMPLE_MODEL, denoise=denoise, frame_id='imu_link')
 
 
 def start(context: object, tmp_path: Path, denoise: DenoiseSettings, **params: object) -> Harness:

@@ -13,15 +13,15 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, save
 from fog_temp_comp.core.denoise import DenoiseSettings
-from fog_temp_comp.core.model import PAPER_TERMS, DriftModel, Range
 from fog_temp_comp.ros.node import CompensatorNode, resolve_path
 from fog_temp_comp.ros.params import params_files, section_matches
+
+from simdata import EXAMPLE_MODEL
 
 NODE = 'fog_temp_compensator'
 #: one process runs main() on each params file in turn (one start-up for the whole table)
@@ -157,14 +157,11 @@ WARNING = [
 
 
 def coefficients_file(tmp_path: Path) -> Path:
-    model = DriftModel(
-        PAPER_TERMS,
-        np.array([[-12.5, 3.2, -0.85], [-8.7e-4, 2.4e-3, -1.6e-3], [0.93, -0.62, 0.45]]),
-        Range(-40.0, 60.0),
-        Range(-0.5, 0.5),
-    )
     path = tmp_path / 'coeffs.yaml'
-    save(Coefficients(model=model, denoise=DenoiseSettings('iir'), frame_id='imu_link'), path)
+    save(
+        Coefficients(model=EXAMPLE_MODEL, denoise=DenoiseSettings('iir'), frame_id='imu_link'),
+        path,
+    )
     return path
 
 

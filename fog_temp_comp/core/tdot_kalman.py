@@ -19,12 +19,11 @@ from fog_temp_comp.core.units import S_PER_MIN
 from fog_temp_comp.core.warm_up import (
     INDEPENDENT_AFTER_S,
     WarmUp,
-    ready_tolerance,
     start_warm_up,
     warm_up_step,
 )
 
-__all__ = ['INDEPENDENT_AFTER_S', 'KalmanTdotEstimator', 'predict_covariance', 'ready_tolerance']
+__all__ = ['KalmanTdotEstimator', 'predict_covariance']
 
 #: covariance ``(p00, p01, p11)`` of (T degC, Tdot degC/s)
 Cov2 = tuple[float, float, float]
