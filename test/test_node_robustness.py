@@ -20,6 +20,7 @@ from rosharness import Harness, make_imu, rate_of, stamp_of
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load, save, to_dict
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H
+from fog_temp_comp.ros.diagnostics import ON_CHANGE_TEXT
 from fog_temp_comp.ros.node import CompensatorNode
 
 from simdata import example_coefficients
@@ -459,6 +460,27 @@ def test_a_temperature_published_on_change_holds_on_the_node(
         assert diag_values(status)['temperature_held'] == str(counters.temperature_held)
     finally:
         h.close()
+
+
+def test_a_temperature_published_on_change_untold_is_said_when_it_goes_stale(
+    harness: Harness,
+) -> None:
+    """No ``temperature_hold_s`` in the file: a silence after readings on change says why.
+
+    Readings that never repeat, on 1/16 degC steps, 1-8 s apart, then a minute without one.
+    """
+    h = harness
+    stamp = T0
+    for k in range(130):
+        stamp += (1.0, 3.0, 8.0)[k % 3]
+        h.send_temperature(stamp, 20.0 + k / 16)
+        assert h.send_imu(stamp + 0.5, RATE) is not None
+    status = h.diagnose()
+    assert 'stale' not in status.message and ON_CHANGE_TEXT not in status.message
+    assert h.send_imu(stamp + 60.0, RATE) is not None  # the last correction held
+    status = h.diagnose()
+    assert 'temperature stale' in status.message and ON_CHANGE_TEXT in status.message
+    assert status.level == WARN
 
 
 @pytest.mark.parametrize('bridge_s', [None, 0.0])

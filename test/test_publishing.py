@@ -17,9 +17,11 @@ from test_model_choice import CHAMBER as MODEL_CHOICE_CHAMBER
 
 from fog_temp_comp.bag.bagio import BagWriter, make_imu, make_temperature, s_to_stamp_ns
 from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.core.compensator import Compensator
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.held_readings import expand_held
 from fog_temp_comp.core.model_choice import choose_and_calibrate
+from fog_temp_comp.core.on_change_watch import WATCH_READINGS, OnChangeWatch
 from fog_temp_comp.core.publishing import (
     HOLD_FACTOR,
     HOLD_MIN_S,
@@ -82,6 +84,72 @@ def test_a_float_sensor_or_a_few_readings_are_not_taken_for_on_change(
         few, temp_stamps_s=few.temp_stamps_s[:50], temperature_degC=few.temperature_degC[:50]
     )
     assert not published_on_change([few])
+
+
+def test_the_online_watch_judges_the_last_readings_as_calibrate_judges_a_record(
+    periodic: ChamberRecord,
+) -> None:
+    """Fed reading by reading, the watch gives what the test gives on its last readings."""
+    changed = on_change(periodic)
+    for record, expected in ((periodic, False), (changed, True)):
+        watch = OnChangeWatch()
+        for k, (stamp, value) in enumerate(
+            zip(record.temp_stamps_s, record.temperature_degC, strict=True)
+        ):
+            watch.add(float(stamp), float(value))
+            if k in (50, 99, 300):  # too few; then a window that wrapped round
+                last = slice(max(k + 1 - WATCH_READINGS, 0), k + 1)
+                window = dataclasses.replace(
+                    record,
+                    temp_stamps_s=record.temp_stamps_s[last],
+                    temperature_degC=record.temperature_degC[last],
+                )
+                assert watch.looks_on_change() == published_on_change([window])
+        assert watch.looks_on_change() == expected
+    # periodic readings after readings on change: judged by the last ones only
+    watch = OnChangeWatch()
+    for record in (changed, periodic):
+        for stamp, value in zip(
+            record.temp_stamps_s[:400], record.temperature_degC[:400], strict=True
+        ):
+            watch.add(float(stamp), float(value))
+        assert watch.looks_on_change() == (record is changed)
+
+
+def test_the_compensator_says_a_silence_looks_like_readings_published_on_change(
+    periodic: ChamberRecord,
+) -> None:
+    """Told no hold, a soak's silences are gaps: each one after readings on change is counted.
+
+    A sensor published at its rate that stops is stale too, and not taken for one; told the
+    hold, the silences are neither stale nor counted.
+    """
+    fit = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)[0].coefficients
+    changed = on_change(periodic)
+    for record, expected in ((changed, True), (periodic, False)):
+        comp = Compensator(fit.model, fit.denoise)
+        stamps, values = record.temp_stamps_s[:600], record.temperature_degC[:600]
+        silent = (stamps > stamps[400]) & (stamps < stamps[400] + 60.0)  # a silence of 60 s
+        for k in np.flatnonzero(~silent).tolist():
+            comp.add_temperature(float(stamps[k]), float(values[k]))
+            comp.correct_xyz(float(stamps[k]) + 0.5, 1e-4, 0.0, 0.0)
+            if k == 400:
+                comp.correct_xyz(float(stamps[k]) + 59.0, 1e-4, 0.0, 0.0)
+                assert comp.status.temperature_stale
+                assert comp.readings_look_on_change == expected
+        counters = comp.status.counters
+        gaps = counters.temperature_gaps + counters.temperature_gaps_bridged
+        silences = counters.temperature_silences_on_change
+        if expected:  # every gap after the first 100 readings or so
+            assert 100 < silences <= gaps, (silences, gaps)
+        else:  # the one gap, its silence
+            assert (gaps, silences) == (1, 0)
+    told = Compensator(fit.model, dataclasses.replace(fit.denoise, temperature_hold_s=900.0))
+    for k in range(400):
+        told.add_temperature(float(changed.temp_stamps_s[k]), float(changed.temperature_degC[k]))
+    told.correct_xyz(float(changed.temp_stamps_s[399]) + 60.0, 1e-4, 0.0, 0.0)
+    assert not told.status.temperature_stale and not told.readings_look_on_change
+    assert told.status.counters.temperature_silences_on_change == 0
 
 
 def test_a_short_hold_is_at_least_a_minute(periodic: ChamberRecord) -> None:
@@ -162,7 +230,16 @@ def test_calibrate_and_compensate_a_bag_published_on_change(
         out = tmp_path / f'{label} out'
         assert cli.main(['compensate', str(bag), '--coeffs', str(coeffs), '-o', str(out)]) == 0
         corrected[label] = read_record(out, gyro_topic='/imu/data', temp_topic=TEMP_TOPIC)
-    capsys.readouterr()
+    assert 'publishes only on change' not in capsys.readouterr().err
+    # the periodic sensor's coefficients (no hold) on the bag published on change: said
+    out = tmp_path / 'untold out'
+    coeffs = tmp_path / 'periodic.yaml'
+    assert (
+        cli.main(['compensate', str(bags['on change']), '--coeffs', str(coeffs), '-o', str(out)])
+        == 0
+    )
+    err = capsys.readouterr().err
+    assert 'as from a driver that publishes only on change' in err, err
     a, b = corrected['on change'], corrected['periodic']
     np.testing.assert_array_equal(a.imu_stamps_s, b.imu_stamps_s)  # every gyro sample
     correction = periodic.rates_rad_s[-b.imu_stamps_s.size :] - b.rates_rad_s

@@ -16,7 +16,7 @@ and :class:`GuardSettings`, :class:`CompensatorCounters` and :class:`Compensator
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -33,6 +33,7 @@ from fog_temp_comp.core.compensator_types import (
 )
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.held_readings import HeldReadings
+from fog_temp_comp.core.lost_spans import _LostSpans
 from fog_temp_comp.core.model import DriftModel, scalar_term_function
 from fog_temp_comp.core.rest import RestLearner, RestSettings
 from fog_temp_comp.core.tdot import make_estimator
@@ -51,7 +52,7 @@ __all__ = [
 ]
 
 
-class Compensator(_BlockCorrection, _TemperatureLeaps):
+class Compensator(_BlockCorrection, _TemperatureLeaps, _LostSpans):
     """Online temperature-drift compensation for a 3-axis gyro.
 
     Parameters
@@ -110,28 +111,7 @@ class Compensator(_BlockCorrection, _TemperatureLeaps):
         # a sensor published only on change: its held value put back at its interval
         self._held = HeldReadings(denoise.temperature_period_s, denoise.temperature_hold_s)
         self._held_due_s = math.inf  # a gyro stamp past this puts back held readings
-        self._holes: list[float] = []  # midpoints (s) of spans known lost, not yet passed
-        self._next_hole = math.inf
-
-    def mark_holes(self, spans_s: Sequence[tuple[float, float]]) -> None:
-        """Spans (start, end in s) where input is known lost (a skipped chunk of a bag).
-
-        The first temperature at or after a span's midpoint, when the previous one came before
-        it, is taken as after a temperature gap, however short: the Kalman filter bridges it
-        (``temperature_bridge_s``, counted in ``temperature_gaps_bridged``), another estimator
-        restarts (``temperature_gaps``), so that no grid bin straddles the hole.
-        """
-        self._holes = sorted((a + b) / 2 for a, b in spans_s)
-        self._next_hole = self._holes[0] if self._holes else math.inf
-
-    def _crosses_hole(self, stamp_s: float) -> bool:
-        """Whether a temperature at ``stamp_s`` lies past a hole the previous one was before."""
-        last = self.status.last_temperature_stamp_s
-        crossed = False
-        while self._holes and self._holes[0] <= stamp_s:
-            crossed = crossed or last < self._holes.pop(0)
-        self._next_hole = self._holes[0] if self._holes else math.inf
-        return crossed
+        self._no_holes()
 
     @property
     def guard(self) -> GuardSettings:
@@ -174,6 +154,16 @@ class Compensator(_BlockCorrection, _TemperatureLeaps):
         stale until the hold is over.
         """
         return self._stale_after_s
+
+    @property
+    def readings_look_on_change(self) -> bool:
+        """Whether the last readings look published only on change, with no hold told.
+
+        With ``denoise.temperature_hold_s`` 0 (:mod:`~fog_temp_comp.core.on_change_watch`):
+        such a sensor's silences are stale and gaps (counted at each gap in
+        ``temperature_silences_on_change``).
+        """
+        return self._held.watch.looks_on_change()
 
     def reset(self) -> None:
         """Forget the temperature history (keeps the counters and the last correction).
@@ -261,6 +251,7 @@ class Compensator(_BlockCorrection, _TemperatureLeaps):
         ):
             if stamp_s - last >= max(guard.time_jump_threshold_s, self._stale_after_s):
                 self._save_leap()  # undone if the next reading goes on from before it
+            counters.temperature_silences_on_change += self.readings_look_on_change
             self._after_gap(stamp_s - last)
         elif not self._plausible(stamp_s, temperature_degC):
             return False

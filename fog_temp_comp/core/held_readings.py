@@ -24,6 +24,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from fog_temp_comp.core.on_change_watch import OnChangeWatch
+
 FloatArray = NDArray[np.float64]
 
 __all__ = ['HELD_MARGIN_S', 'HeldReadings', 'expand_held', 'held_margin_s']
@@ -52,6 +54,8 @@ class HeldReadings:
         self._j = 1
         #: stamp of the next held reading (inf: none due, ever, until a real reading)
         self.next_s = math.inf
+        #: while off, the readings: do they look published on change all the same?
+        self.watch = OnChangeWatch()
 
     @property
     def real_s(self) -> float:
@@ -59,8 +63,9 @@ class HeldReadings:
         return self._real_s
 
     def real(self, stamp_s: float, temperature_degC: float) -> None:
-        """A real reading was used: its value holds from ``stamp_s`` on."""
+        """A real reading was used: its value holds from ``stamp_s`` on (off: watched)."""
         if not self.period_s:
+            self.watch.add(stamp_s, temperature_degC)
             return
         self.value_degC = temperature_degC
         self._real_s = stamp_s

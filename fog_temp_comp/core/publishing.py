@@ -24,8 +24,9 @@ import numpy as np
 
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.held_readings import expand_held, held_margin_s
+from fog_temp_comp.core.on_change_watch import looks_published_on_change
 from fog_temp_comp.core.record import ChamberRecord
-from fog_temp_comp.core.sensor_noise import reading_interval_s, sensor_noise, shortest_interval_s
+from fog_temp_comp.core.sensor_noise import reading_interval_s, shortest_interval_s
 
 __all__ = [
     'HOLD_FACTOR',
@@ -38,14 +39,6 @@ __all__ = [
     'with_reading_timing',
 ]
 
-#: at most this fraction of successive readings repeat on a sensor published on change (none
-#: do; a few may where a driver re-sends)
-MAX_REPEAT_FRACTION = 0.01
-#: fewer readings than this tell nothing
-MIN_READINGS = 100
-#: on change, the intervals are uneven: the 95th percentile at least this many times the 5th
-#: (a sensor whose noise changes every reading is as good as periodic, and not flagged)
-MIN_INTERVAL_SPREAD = 3.0
 #: a reading published on change holds at most this many times the longest interval seen in
 #: the calibration bags, and at least :data:`HOLD_MIN_S`
 HOLD_FACTOR = 2.0
@@ -55,25 +48,9 @@ HOLD_MIN_S = 60.0
 def published_on_change(records: Sequence[ChamberRecord]) -> bool:
     """Whether the records' temperature readings were published only when they changed.
 
-    They are when they are quantized (:func:`~fog_temp_comp.core.sensor_noise.sensor_noise`
-    finds a step: a float sensor's readings never repeat either), at most
-    :data:`MAX_REPEAT_FRACTION` of successive readings repeat, and the intervals are uneven.
+    :func:`~fog_temp_comp.core.on_change_watch.looks_published_on_change` of their readings.
     """
-    repeats, pairs = 0, 0
-    intervals = []
-    for record in records:
-        stamps, values = record.temp_stamps_s, record.temperature_degC
-        finite = np.isfinite(values) & np.isfinite(stamps)
-        stamps, values = stamps[finite], values[finite]
-        dt = np.diff(stamps)
-        later = dt > 0
-        repeats += int(np.count_nonzero(values[1:][later] == values[:-1][later]))
-        pairs += int(np.count_nonzero(later))
-        intervals.append(dt[later])
-    if pairs < MIN_READINGS or repeats > MAX_REPEAT_FRACTION * pairs:
-        return False
-    low, high = np.percentile(np.concatenate(intervals), [5.0, 95.0])
-    return bool(high >= MIN_INTERVAL_SPREAD * low and sensor_noise(records).quantum_degC > 0)
+    return looks_published_on_change([(r.temp_stamps_s, r.temperature_degC) for r in records])
 
 
 def hold_interval_s(records: Sequence[ChamberRecord]) -> float:

@@ -18,7 +18,13 @@ import numpy as np
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.record import ChamberRecord
 
-__all__ = ['SensorNoise', 'reading_interval_s', 'sensor_noise', 'shortest_interval_s']
+__all__ = [
+    'SensorNoise',
+    'quantum_degC',
+    'reading_interval_s',
+    'sensor_noise',
+    'shortest_interval_s',
+]
 
 
 @dataclass(frozen=True)
@@ -55,22 +61,30 @@ def sensor_noise(records: Sequence[ChamberRecord]) -> SensorNoise:
     SensorNoise
 
     """
-    values = np.concatenate([r.temperature_degC for r in records])
-    levels = np.unique(values)
-    diffs = np.diff(levels)
-    diffs = diffs[diffs > 1e-9]
-    quantum = 0.0
-    if diffs.size:
-        step = float(diffs.min())
-        multiples = diffs / step
-        if step >= 1e-4 and np.mean(np.abs(multiples - np.round(multiples)) < 0.01) > 0.9:
-            quantum = step
+    quantum = quantum_degC(np.concatenate([r.temperature_degC for r in records]))
     second = np.concatenate([np.diff(r.temperature_degC, 2) for r in records])
     total = float(np.mean(second * second) / 6.0) if second.size else 0.0
     noise = math.sqrt(max(total - quantum * quantum / 12.0, 0.0))
     if quantum == 0.0:
         noise = max(noise, 1e-4)  # a model needs some measurement noise
     return SensorNoise(quantum, noise)
+
+
+def quantum_degC(values_degC: np.ndarray) -> float:
+    """The quantization step of readings shape (n,), degC (0: not quantized).
+
+    The smallest difference between distinct readings when most differences between them are
+    whole multiples of it.
+    """
+    levels = np.unique(values_degC)
+    diffs = np.diff(levels)
+    diffs = diffs[diffs > 1e-9]
+    if diffs.size:
+        step = float(diffs.min())
+        multiples = diffs / step
+        if step >= 1e-4 and np.mean(np.abs(multiples - np.round(multiples)) < 0.01) > 0.9:
+            return step
+    return 0.0
 
 
 #: the share of intervals within 25 % of their median below which the median is not the

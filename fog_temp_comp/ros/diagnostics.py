@@ -17,6 +17,14 @@ from fog_temp_comp.ros.input_types import TypeMismatch
 
 OK, WARN, ERROR = 0, 1, 2
 
+#: the residual learned at rest is too large to be a bias
+REST_OVER_LIMIT_TEXT = 'rest residual above rest_residual_limit_deg_h: not applied (moving?)'
+#: why a temperature published only on change goes stale, and what to do
+ON_CHANGE_TEXT = (
+    'temperature readings never repeat and come at uneven intervals, as from a driver that '
+    'publishes only on change: set temperature_hold_s, or calibrate on bags from this driver '
+    '(it writes denoise.temperature_hold_s)'
+)
 #: counters whose increase since the previous report is a warning
 _WARN_COUNTERS = {
     'imu_duplicate': 'duplicate gyro messages dropped',
@@ -80,6 +88,7 @@ def build_report(
     frames: FrameLock | None = None,
     plausible_degC: tuple[float, float] = (-math.inf, math.inf),
     type_mismatches: Sequence[TypeMismatch] = (),
+    readings_on_change: bool = False,
 ) -> Report:
     """Summarise ``status``; ``previous`` are the counters at the last report (for deltas).
 
@@ -89,22 +98,21 @@ def build_report(
     :class:`~fog_temp_comp.core.stamp_offset.ArrivalOffsets`; ``clocks_apart_s``: header
     clocks hours apart that made the node time both on arrival (nan: it did not). ``frames``:
     the temperature frame_id kept; ``frame_mismatches``: gyro messages of another frame_id,
-    in all and since the last report; ``type_mismatches``: inputs published as other types.
+    in all and since the last report; ``type_mismatches``: inputs published as other types;
+    ``readings_on_change``: the readings look published only on change, with no hold told.
     ``imu_rate_hz``: gyro messages received, any frame_id; ``gyro_stopped``: none since the
     last report after some came; ``inactive``: a lifecycle node's output is off, (gyro
     messages ignored in all, since the last report).
     """
     counters = status.counters
     reasons = _input_reasons(gyro_stopped, inactive)
-    reasons += _temperature_reasons(status, previous, plausible_degC)
+    reasons += _temperature_reasons(status, previous, plausible_degC, readings_on_change)
     reasons += _counter_reasons(counters, previous, frame_mismatches[1], require_frame_match)
     reasons += _clock_reasons(temperature_stamp_offset_s, two_clocks, clocks_apart_s, unstamped)
     frame_reasons, frame_values = _temperature_frames(frames)
     reasons += frame_reasons + [(ERROR, m.text()) for m in type_mismatches]
     if rest is not None and rest.residual_over_limit:
-        reasons.append(
-            (WARN, 'rest residual above rest_residual_limit_deg_h: not applied (moving?)')
-        )
+        reasons.append((WARN, REST_OVER_LIMIT_TEXT))
     level = max((lvl for lvl, _ in reasons), default=OK)
     message = '; '.join(text for _, text in reasons) or 'compensating'
     values = _estimate_values(status)
@@ -258,6 +266,7 @@ def _temperature_reasons(
     status: CompensatorStatus,
     previous: CompensatorCounters,
     plausible_degC: tuple[float, float] = (-math.inf, math.inf),
+    readings_on_change: bool = False,
 ) -> list[tuple[int, str]]:
     """(level, text) of the temperature input: faulty, missing, stale, warming up, clamped."""
     counters = status.counters
@@ -274,6 +283,8 @@ def _temperature_reasons(
         return reasons
     if status.temperature_stale:
         reasons.append(_stale_reason(counters, previous))
+        if readings_on_change:
+            reasons.append((WARN, ON_CHANGE_TEXT))
     elif never_stamped_uncorrected(status, previous):
         reasons.append(
             (

@@ -14,6 +14,7 @@ __all__ = [
     'report_gaps',
     'report_input',
     'report_nonfinite_gyro',
+    'report_on_change',
 ]
 
 
@@ -21,6 +22,7 @@ def report_input(in_bag: Path, compensator: Compensator) -> None:
     """The warnings on the input the replay found: sensor faults, gaps, NaN gyro rates."""
     report_faults(in_bag, compensator)
     report_gaps(in_bag, compensator.status.counters)
+    report_on_change(in_bag, compensator.status.counters)
     report_dropped_temperature(in_bag, compensator.status.counters)
     report_nonfinite_gyro(in_bag, compensator.status.counters)
 
@@ -73,6 +75,23 @@ def report_gaps(in_bag: Path, counters: CompensatorCounters) -> None:
         'in all got the last correction held while the temperature was stale',
         file=sys.stderr,
     )
+
+
+def report_on_change(in_bag: Path, counters: CompensatorCounters) -> None:
+    """A ``WARNING`` line where readings published only on change went stale, untold.
+
+    Told: the coefficients' ``denoise.temperature_hold_s`` (0 here), which puts them back.
+    """
+    silences = counters.temperature_silences_on_change
+    if silences:
+        print(
+            f'WARNING: {in_bag}: the temperature went stale {silences} times after readings '
+            'that never repeat and come at uneven intervals, as from a driver that publishes '
+            'only on change, and the coefficients have no denoise.temperature_hold_s: '
+            'calibrate on bags from this driver (it measures the hold), or set it in the '
+            'coefficients file',
+            file=sys.stderr,
+        )
 
 
 def report_dropped_temperature(in_bag: Path, counters: CompensatorCounters) -> None:

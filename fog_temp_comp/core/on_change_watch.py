@@ -1,0 +1,100 @@
+"""Whether temperature readings look published only on change: the test, and an online watch.
+
+A driver that publishes a quantized temperature only when it changes
+(:mod:`fog_temp_comp.core.publishing`) sends readings that never repeat, at intervals from one
+conversion to minutes. :func:`looks_published_on_change` tells such readings from readings
+published at the sensor's rate (which repeat, a quantized sensor's for minutes at a soak) and
+from a float sensor's (never repeating, but not quantized). ``calibrate`` asks it of the
+training bags; :class:`OnChangeWatch` asks it of the node's last readings when the temperature
+falls silent, so that a node told no ``denoise.temperature_hold_s`` can say why its
+temperature keeps going stale. Stamps in s, temperatures in degC.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fog_temp_comp.core.sensor_noise import quantum_degC
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    'MAX_REPEAT_FRACTION',
+    'MIN_INTERVAL_SPREAD',
+    'MIN_READINGS',
+    'WATCH_READINGS',
+    'OnChangeWatch',
+    'looks_published_on_change',
+]
+
+#: at most this fraction of successive readings repeat on a sensor published on change (none
+#: do; a few may where a driver re-sends)
+MAX_REPEAT_FRACTION = 0.01
+#: fewer readings than this tell nothing
+MIN_READINGS = 100
+#: on change, the intervals are uneven: the 95th percentile at least this many times the 5th
+#: (a sensor whose noise changes every reading is as good as periodic, and not flagged)
+MIN_INTERVAL_SPREAD = 3.0
+#: the online watch keeps this many of the last readings
+WATCH_READINGS = 256
+
+
+def looks_published_on_change(runs: Sequence[tuple[FloatArray, FloatArray]]) -> bool:
+    """Whether readings (per run: stamps s, degC, shape (n,) each) were published on change.
+
+    They were when they are quantized (:func:`~fog_temp_comp.core.sensor_noise.quantum_degC`
+    finds a step: a float sensor's readings never repeat either), at most
+    :data:`MAX_REPEAT_FRACTION` of successive readings repeat, and the intervals are uneven.
+    Non-finite readings and pairs not in time order are left out.
+    """
+    repeats, pairs = 0, 0
+    intervals, kept = [], []
+    for stamps, values in runs:
+        finite = np.isfinite(values) & np.isfinite(stamps)
+        stamps, values = stamps[finite], values[finite]
+        dt = np.diff(stamps)
+        later = dt > 0
+        repeats += int(np.count_nonzero(values[1:][later] == values[:-1][later]))
+        pairs += int(np.count_nonzero(later))
+        intervals.append(dt[later])
+        kept.append(values)
+    if pairs < MIN_READINGS or repeats > MAX_REPEAT_FRACTION * pairs:
+        return False
+    low, high = np.percentile(np.concatenate(intervals), [5.0, 95.0])
+    return bool(high >= MIN_INTERVAL_SPREAD * low and quantum_degC(np.concatenate(kept)) > 0)
+
+
+class OnChangeWatch:
+    """The last :data:`WATCH_READINGS` readings, and whether they look published on change.
+
+    :meth:`add` is O(1) per reading; :meth:`looks_on_change` runs the test at most once per
+    new reading (its answer is kept until the next one).
+    """
+
+    def __init__(self) -> None:
+        self._stamps_s = np.zeros(WATCH_READINGS)
+        self._values_degC = np.zeros(WATCH_READINGS)
+        self._count = 0  # readings added in all
+        self._judged = -1  # the count when last judged
+        self._verdict = False
+
+    def add(self, stamp_s: float, temperature_degC: float) -> None:
+        """One reading used (s, degC)."""
+        slot = self._count % WATCH_READINGS
+        self._stamps_s[slot] = stamp_s
+        self._values_degC[slot] = temperature_degC
+        self._count += 1
+
+    def looks_on_change(self) -> bool:
+        """Whether the last readings look published on change (the test of this module)."""
+        if self._judged != self._count:
+            self._judged = self._count
+            order = np.roll(np.arange(WATCH_READINGS), -(self._count % WATCH_READINGS))
+            order = order[-min(self._count, WATCH_READINGS) :]
+            self._verdict = looks_published_on_change(
+                [(self._stamps_s[order], self._values_degC[order])]
+            )
+        return self._verdict
