@@ -240,6 +240,9 @@ def test_calibrate_and_compensate_a_bag_published_on_change(
     )
     err = capsys.readouterr().err
     assert 'as from a driver that publishes only on change' in err, err
+    assert cli.main(['evaluate', str(bags['on change']), '--coeffs', str(coeffs)]) == 0
+    captured = capsys.readouterr()
+    assert 'after readings that look published only on change' in captured.out + captured.err
     a, b = corrected['on change'], corrected['periodic']
     np.testing.assert_array_equal(a.imu_stamps_s, b.imu_stamps_s)  # every gyro sample
     correction = periodic.rates_rad_s[-b.imu_stamps_s.size :] - b.rates_rad_s

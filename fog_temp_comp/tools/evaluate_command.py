@@ -135,6 +135,13 @@ def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) 
             f'note: {name}: {gaps} temperature gap{"s" if gaps > 1 else ""} longer than the '
             f'stale time: {bridged} bridged by the Kalman filter, {restarted} restarted the Tdot '
             'estimate'
+            + (
+                f'; {counters.temperature_silences_on_change} after readings that look published '
+                'only on change, which the coefficients do not say (temperature_hold_s 0): '
+                'calibrate on bags from this driver'
+                if counters.temperature_silences_on_change
+                else ''
+            )
         )
     return notes
 
