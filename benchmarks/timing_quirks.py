@@ -36,13 +36,13 @@ oracle`` on the same gyro messages (the quirky compensator's published ones, sco
 true stamps): the median 10 s stability ratio after/before, the median 100 s stability after
 (deg/h), the worst 10 s range ratio on the cycles and on the soak. ``100 s: quirky over clean``
 is what the quirk costs. ``model``: the model ``calibrate`` chose in ``b`` (``=``: the clean
-choice); ``period / hold``: the ``temperature_period_s`` / ``temperature_hold_s`` the replay
-used (``calibrate``'s in ``b``). ``warm-up``: the longest over the replayed runs of the time (s)
-from the first temperature reading to the compensator's estimator being ready (``never``: not
-within 2 h). ``counters``: the compensator's counters,
-summed over the replayed runs, that differ from the clean replay's (but the routine ones), the
-gyro's as a share of the gyro messages. The model choice runs in one process
-(``FOG_TEMP_COMP_PROCESSES=1`` unless set otherwise).
+choice); ``period / hold / spread``: the ``temperature_period_s`` / ``temperature_hold_s`` /
+``temperature_spread_s`` the replay used (``calibrate``'s in ``b``). ``warm-up``: the
+longest over the replayed runs of the time (s) from the first temperature reading to the
+compensator's estimator being ready (``never``: not within 2 h). ``counters``: the
+compensator's counters, summed over the replayed runs, that differ from the clean replay's
+(but the routine ones), the gyro's as a share of the gyro messages. The model choice runs in
+one process (``FOG_TEMP_COMP_PROCESSES=1`` unless set otherwise).
 """
 
 from __future__ import annotations
@@ -224,9 +224,9 @@ def longest_warm_up_s(runs: dict[str, SimulatedRun], coeffs: Coefficients) -> st
 
 
 def timing_text(coeffs: Coefficients) -> str:
-    """``temperature_period_s / temperature_hold_s`` of the coefficients."""
+    """``temperature_period_s / temperature_hold_s / temperature_spread_s`` of the coefficients."""
     d = coeffs.denoise
-    return f'{d.temperature_period_s:g} / {d.temperature_hold_s:g}'
+    return f'{d.temperature_period_s:g} / {d.temperature_hold_s:g} / {d.temperature_spread_s:g}'
 
 
 def changed_counters(counters: dict[str, int], clean: dict[str, int]) -> dict[str, int]:
@@ -291,7 +291,7 @@ def main() -> None:
     args = parser.parse_args()
     os.environ.setdefault(ONE_PROCESS_VARIABLE, '1')
     print(
-        '| plant | quirk | scenario | model | period / hold s '
+        '| plant | quirk | scenario | model | period / hold / spread s '
         '| 10 s ratio: quirky / clean / oracle | 100 s deg/h | range cycles | range soaks '
         '| 100 s: quirky over clean | warm-up | counters |'
     )

@@ -253,3 +253,23 @@ def test_a_model_with_a_term_twice_is_refused() -> None:
 
     with pytest.raises(ValueError, match='listed twice'):
         DriftModel(('const', 'T', 'T'), np.zeros((3, 3)), (-40.0, 60.0), (-1.0, 1.0))
+
+
+def test_a_file_written_before_the_spread_loads_as_readings_stamped_as_taken(
+    tmp_path: Path,
+) -> None:
+    """``denoise.temperature_spread_s`` is newer still: without it, 0 (stamps as taken)."""
+    path = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
+    data = yaml.safe_load(path.read_text(encoding='utf-8'))
+    data['denoise'].pop('temperature_spread_s', None)
+    older = tmp_path / 'older.yaml'
+    older.write_text(yaml.safe_dump(data), encoding='utf-8')
+    assert load(older).denoise.temperature_spread_s == 0.0
+    data['denoise']['temperature_spread_s'] = 0.5
+    polled = tmp_path / 'polled.yaml'
+    polled.write_text(yaml.safe_dump(data), encoding='utf-8')
+    assert load(polled).denoise.temperature_spread_s == 0.5
+    data['denoise']['temperature_spread_s'] = float('nan')
+    polled.write_text(yaml.safe_dump(data), encoding='utf-8')
+    with pytest.raises(CoefficientsError, match='temperature_spread_s'):
+        load(polled)

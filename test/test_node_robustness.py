@@ -483,6 +483,45 @@ def test_a_temperature_published_on_change_untold_is_said_when_it_goes_stale(
     assert status.level == WARN
 
 
+def test_a_temperature_delivered_in_polls_is_spread_back_on_the_node(
+    ros_context: object, tmp_path: Path, coefficients: Coefficients
+) -> None:
+    """The node takes ``temperature_spread_s`` from the file: a poll's readings spread back.
+
+    Received 1 ms apart, they are fed one sensor interval apart, ending at the poll's first
+    receipt. Nothing is dropped as repeated or out of order, and between polls the temperature is
+    fresh (stale after 3 of the 5 s between polls).
+    """
+    import dataclasses
+
+    polled = dataclasses.replace(
+        coefficients,
+        denoise=dataclasses.replace(
+            coefficients.denoise, temperature_period_s=5.0, temperature_spread_s=1.0
+        ),
+    )
+    path = tmp_path / 'polled.yaml'
+    save(polled, path)
+    h = Harness(ros_context, start(ros_context, path))
+    try:
+        fed = []
+        for poll in range(1, 5):  # a 1 Hz sensor read every 5 s
+            receipt = T0 + 5.0 * poll
+            for j in range(5):
+                h.send_temperature(receipt + 0.001 * j, 25.0 + 0.01 * (5 * poll + j))
+                fed.append(h.node.compensator.status.last_temperature_stamp_s)
+            assert h.send_imu(receipt + 4.0, RATE) is not None
+            assert not h.node.compensator.status.temperature_stale
+        # the first poll as received; then each one interval apart, the last at its receipt
+        np.testing.assert_allclose(fed[5:], T0 + 1.0 + np.arange(5, 20), atol=1e-6)
+        counters = h.node.compensator.status.counters
+        assert counters.temperature_accepted == 20
+        assert counters.temperature_duplicate == counters.temperature_out_of_order == 0
+        assert counters.temperature_gaps == counters.temperature_gaps_bridged == 0
+    finally:
+        h.close()
+
+
 @pytest.mark.parametrize('bridge_s', [None, 0.0])
 def test_a_temperature_gap_is_bridged_by_the_kalman_filter(
     ros_context: object, tmp_path: Path, coefficients: Coefficients, bridge_s: float | None

@@ -224,7 +224,9 @@ def test_calibrate_and_compensate_a_bag_published_on_change(
     corrected = {}
     for label, bag in bags.items():
         coeffs = tmp_path / f'{label}.yaml'
-        assert cli.main(['calibrate', str(bag), '-o', str(coeffs), '--quiet']) == 0
+        assert cli.main(['calibrate', str(bag), '-o', str(coeffs)]) == 0
+        said = 'published only on change (a conversion every 1 s)' in capsys.readouterr().out
+        assert said == (label == 'on change')
         hold = yaml.safe_load(coeffs.read_text())['denoise']['temperature_hold_s']
         assert (hold > 60.0) == (label == 'on change')
         out = tmp_path / f'{label} out'

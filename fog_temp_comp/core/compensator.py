@@ -35,6 +35,7 @@ from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.held_readings import HeldReadings
 from fog_temp_comp.core.lost_spans import _LostSpans
 from fog_temp_comp.core.model import DriftModel, scalar_term_function
+from fog_temp_comp.core.poll_spread import PollSpread
 from fog_temp_comp.core.rest import RestLearner, RestSettings
 from fog_temp_comp.core.tdot import make_estimator
 from fog_temp_comp.core.tdot_estimate import TdotEstimate, TdotEstimator
@@ -110,6 +111,8 @@ class Compensator(_BlockCorrection, _TemperatureLeaps, _LostSpans):
         self._set_stale_rule()
         # a sensor published only on change: its held value put back at its interval
         self._held = HeldReadings(denoise.temperature_period_s, denoise.temperature_hold_s)
+        # a driver that delivers the readings in polls: stamped back at the sensor's interval
+        self._spread = PollSpread(denoise.temperature_spread_s)
         self._held_due_s = math.inf  # a gyro stamp past this puts back held readings
         self._no_holes()
 
@@ -213,6 +216,7 @@ class Compensator(_BlockCorrection, _TemperatureLeaps, _LostSpans):
         if not (math.isfinite(stamp_s) and math.isfinite(temperature_degC)) or stamp_s <= 0:
             counters.temperature_rejected += 1
             return False
+        stamp_s = self._spread.stamp(stamp_s)
         leap, self._leap = self._leap, None
         held = self._held
         if held.next_s < stamp_s:  # put back the held readings before this one

@@ -28,6 +28,23 @@ from fog_temp_comp.core.names import METHODS
 __all__ = ['RECOMMENDED_SETTINGS', 'DenoiseSettings']
 
 
+#: the fields that are a float >= 0
+NON_NEGATIVE_FIELDS = (
+    'temperature_noise_degC',
+    'temperature_quantum_degC',
+    'sensor_lag_s',
+    'coil_lag_s',
+    'tdot_lag_s',
+    'tdot_shrink_sigmas',
+    'tdot_wiener_window_s',
+    'kalman_repeat_rate_degC_per_min',
+    'kalman_quantized_noise_degC',
+    'temperature_period_s',
+    'temperature_hold_s',
+    'temperature_spread_s',
+)
+
+
 @dataclass(frozen=True)
 class DenoiseSettings:
     """Validated configuration of the Tdot denoiser.
@@ -135,6 +152,13 @@ class DenoiseSettings:
         (:func:`~fog_temp_comp.core.publishing.hold_interval_s`); calibrate and the compensator
         put the held readings back alike (:mod:`~fog_temp_comp.core.held_readings`). Not used
         by the estimators.
+    temperature_spread_s : float
+        For a driver that delivers the sensor's readings in polls, stamped on receipt a few
+        milliseconds apart, the sensor's interval between readings (s), at which each poll's
+        readings are stamped back from its first one's receipt (0: stamped as taken).
+        ``calibrate`` detects such a driver and sets it
+        (:func:`~fog_temp_comp.core.poll_spread.polled_interval_s`); calibrate and the
+        compensator spread the readings alike (:mod:`~fog_temp_comp.core.poll_spread`).
 
     """
 
@@ -164,6 +188,7 @@ class DenoiseSettings:
     kalman_quantized_noise_degC: float = 0.0
     temperature_period_s: float = 0.0
     temperature_hold_s: float = 0.0
+    temperature_spread_s: float = 0.0
 
     def __post_init__(self) -> None:
         """Validate every field; raise ValueError naming the offending field."""
@@ -212,19 +237,7 @@ class DenoiseSettings:
         if walk <= 0.0:
             raise ValueError(f'kalman_rate_walk_degC_per_min_per_sqrt_s must be > 0, got {walk!r}')
         object.__setattr__(self, 'kalman_rate_walk_degC_per_min_per_sqrt_s', walk)
-        for name in (
-            'temperature_noise_degC',
-            'temperature_quantum_degC',
-            'sensor_lag_s',
-            'coil_lag_s',
-            'tdot_lag_s',
-            'tdot_shrink_sigmas',
-            'tdot_wiener_window_s',
-            'kalman_repeat_rate_degC_per_min',
-            'kalman_quantized_noise_degC',
-            'temperature_period_s',
-            'temperature_hold_s',
-        ):
+        for name in NON_NEGATIVE_FIELDS:
             value = _check_float(name, getattr(self, name))
             if value < 0.0:
                 raise ValueError(f'{name} must be >= 0, got {getattr(self, name)!r}')

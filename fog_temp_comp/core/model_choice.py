@@ -86,7 +86,7 @@ from fog_temp_comp.core.model_candidates import (
     default_structures,
 )
 from fog_temp_comp.core.model_choice_record import _selection, format_scores
-from fog_temp_comp.core.publishing import held_records, prepared
+from fog_temp_comp.core.publishing import prepared, timed_records
 from fog_temp_comp.core.quantized_noise_fit import noise_before_quantization
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.record_cleaning import without_outliers
@@ -510,7 +510,7 @@ def _choose_and_calibrate(
     heldout, _, _ = without_outliers(heldout, base)
     # the reading timing, and the held readings of a sensor published only on change
     records, base = prepared(records, base)
-    heldout = held_records(heldout, base)
+    heldout = timed_records(heldout, base)
     noise = sensor_noise(records)
     base = noise.apply(dataclasses.replace(base, method='kalman', coil_lag_s=0.0))
     if structures is None:

@@ -25,6 +25,7 @@ import numpy as np
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.held_readings import expand_held, held_margin_s
 from fog_temp_comp.core.on_change_watch import looks_published_on_change
+from fog_temp_comp.core.poll_spread import polled_interval_s, spread_polls
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.sensor_noise import reading_interval_s, shortest_interval_s
 
@@ -36,6 +37,7 @@ __all__ = [
     'hold_interval_s',
     'prepared',
     'published_on_change',
+    'timed_records',
     'with_reading_timing',
 ]
 
@@ -86,11 +88,15 @@ def with_reading_timing(
 
     ``temperature_hold_s``: :func:`hold_interval_s`; ``temperature_period_s``: the
     sensor's interval, :func:`~fog_temp_comp.core.sensor_noise.reading_interval_s` (or, on
-    change, :func:`conversion_interval_s`).
+    change, :func:`conversion_interval_s`); ``temperature_spread_s``: for readings delivered
+    in polls, the sensor's interval (:func:`~fog_temp_comp.core.poll_spread.polled_interval_s`).
     """
     hold = hold_interval_s(records)
     period = conversion_interval_s(records) if hold else reading_interval_s(records)
-    return dataclasses.replace(settings, temperature_period_s=period, temperature_hold_s=hold)
+    spread = 0.0 if hold else polled_interval_s([r.temp_stamps_s for r in records])
+    return dataclasses.replace(
+        settings, temperature_period_s=period, temperature_hold_s=hold, temperature_spread_s=spread
+    )
 
 
 def held_records(
@@ -116,13 +122,30 @@ def held_records(
     return out
 
 
+def timed_records(
+    records: Sequence[ChamberRecord], settings: DenoiseSettings
+) -> list[ChamberRecord]:
+    """The records' readings as the compensator feeds them: polls spread, held ones put back.
+
+    :func:`~fog_temp_comp.core.poll_spread.spread_polls` at ``temperature_spread_s``, then
+    :func:`held_records`.
+    """
+    spread = settings.temperature_spread_s
+    if spread > 0:
+        records = [
+            dataclasses.replace(r, temp_stamps_s=spread_polls(r.temp_stamps_s, spread))
+            for r in records
+        ]
+    return held_records(records, settings)
+
+
 def prepared(
     records: Sequence[ChamberRecord], settings: DenoiseSettings
 ) -> tuple[list[ChamberRecord], DenoiseSettings]:
-    """Settings with the records' reading timing, and the records with held readings put back.
+    """Settings with the records' reading timing, and the records' readings as they are fed.
 
     Every calibration path calls it once, on the cleaned records, before anything reads their
     temperature (the sensor's noise, the candidates' series, the fit).
     """
     settings = with_reading_timing(settings, records)
-    return held_records(records, settings), settings
+    return timed_records(records, settings), settings

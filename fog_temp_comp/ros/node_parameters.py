@@ -147,6 +147,13 @@ FILTER_PARAMETERS: dict[str, tuple[str, Parameter.Type, str]] = {
         'value is put back at temperature_period_s; 0 = published at the sensor rate '
         '(calibrate detects it)',
     ),
+    'temperature_spread_s': (
+        'temperature_spread_s',
+        _T.DOUBLE,
+        "for a driver that delivers the readings in polls stamped on receipt, the sensor's "
+        "interval (s) at which each poll's readings are stamped back from its first; 0 = "
+        'stamped as taken (calibrate detects it)',
+    ),
 }
 _GUARD_DEFAULTS = GuardSettings()
 #: input guards: name -> (default, text)

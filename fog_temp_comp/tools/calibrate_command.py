@@ -369,8 +369,27 @@ def _print_fit(
         f'Tdot [{r_range.low:.3f}, {r_range.high:.3f}] degC/min',
         file=stdout,
     )
+    timing = _reading_timing(coeffs.denoise)
+    if timing:
+        print(f'  temperature readings: {timing}', file=stdout)
     for warning in result.warnings:
         print(f'WARNING: {warning}', file=stderr)
+
+
+def _reading_timing(denoise: DenoiseSettings) -> str:
+    """How the driver delivers the readings, where not one by one as taken ('' if so)."""
+    period = denoise.temperature_period_s
+    if denoise.temperature_hold_s:
+        return (
+            f'published only on change (a conversion every {period:.3g} s): each value held for '
+            f'up to {denoise.temperature_hold_s:g} s (denoise.temperature_hold_s)'
+        )
+    if denoise.temperature_spread_s:
+        return (
+            f'delivered in polls every {period:.3g} s, stamped on receipt: stamped back at the '
+            f"sensor's {denoise.temperature_spread_s:g} s interval (denoise.temperature_spread_s)"
+        )
+    return ''
 
 
 def _validate(

@@ -1,0 +1,129 @@
+"""Readings a driver delivers in polls, stamped on receipt: detected, and spread back.
+
+Real simulated records through the detector, the spreading, ``calibrate`` and the compensator;
+the YAML key in ``test_coefficients.py``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from test_publishing import CHAMBER, write_record
+
+from fog_temp_comp.core.compensator import Compensator
+from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
+from fog_temp_comp.core.model_choice import choose_and_calibrate
+from fog_temp_comp.core.poll_spread import PollSpread, polled_interval_s, spread_polls
+from fog_temp_comp.core.record import ChamberRecord
+from fog_temp_comp.tools import cli
+from fog_temp_comp.tools.simulate import simulate_run
+
+#: the readings of one poll are stamped this far apart on receipt, s
+SPACING_S = 1e-3
+
+
+def polled(record: ChamberRecord, poll_s: float, phase_s: float = 7.3) -> ChamberRecord:
+    """``record`` stamped as a driver polling every ``poll_s`` s does: at the poll, 1 ms apart."""
+    t = record.temp_stamps_s
+    poll = np.ceil((t - phase_s) / poll_s)
+    first = np.r_[True, poll[1:] != poll[:-1]]
+    starts = np.flatnonzero(first)
+    rank = np.arange(t.size) - np.repeat(starts, np.diff(np.r_[starts, t.size]))
+    return dataclasses.replace(record, temp_stamps_s=phase_s + poll * poll_s + SPACING_S * rank)
+
+
+@pytest.fixture(scope='module')
+def periodic() -> ChamberRecord:
+    return simulate_run('cycle', 0.2, CHAMBER, seed=5).as_record()
+
+
+def test_a_polled_sensor_is_told_and_its_interval_measured(periodic: ChamberRecord) -> None:
+    """A poll's readings 1 ms apart: polled, at 1 s; at the sensor's rate, or sent twice: not."""
+    assert polled_interval_s([periodic.temp_stamps_s]) == 0.0
+    for poll_s in (5.0, 30.0):
+        stamps = polled(periodic, poll_s).temp_stamps_s
+        assert polled_interval_s([stamps]) == pytest.approx(1.0, abs=2e-3)
+        assert polled_interval_s([stamps, periodic.temp_stamps_s]) == 0.0  # 2 in 5 polled
+    twice = np.repeat(periodic.temp_stamps_s, 2)  # every message sent twice: one reading each
+    assert polled_interval_s([twice]) == 0.0
+
+
+def test_the_readings_of_a_poll_are_stamped_back_at_the_sensors_interval(
+    periodic: ChamberRecord,
+) -> None:
+    """After the first poll each reading within one interval of when it was taken.
+
+    In order, never after its receipt; a sensor read at its rate keeps its stamps.
+    """
+    true = periodic.temp_stamps_s
+    for poll_s in (5.0, 30.0):
+        receipt = polled(periodic, poll_s).temp_stamps_s
+        fed = spread_polls(receipt, 1.0)
+        assert (np.diff(fed) > 0).all() and (fed <= receipt).all()
+        later = true > true[0] + poll_s
+        assert np.abs(fed - true)[later].max() < 1.0
+        assert np.abs(receipt - true)[later].max() > poll_s - 1.5  # what it was
+        # online, one reading at a time, the same stamps
+        online = PollSpread(1.0)
+        np.testing.assert_array_equal([online.stamp(s) for s in receipt.tolist()], fed)
+    np.testing.assert_array_equal(spread_polls(true, 1.0), true)
+    np.testing.assert_array_equal(
+        spread_polls(polled(periodic, 30.0).temp_stamps_s, 0.0),
+        polled(periodic, 30.0).temp_stamps_s,
+    )
+
+
+def test_the_compensator_feeds_the_spread_stamps(periodic: ChamberRecord) -> None:
+    """With ``temperature_spread_s`` the Tdot after each poll is nearly the periodic one's.
+
+    Without it, far off.
+    """
+    fit = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)[0].coefficients
+    receipt = polled(periodic, 30.0).temp_stamps_s
+    values = periodic.temperature_degC
+    n = 20000
+    errors = {}
+    for spread in (0.0, 1.0):
+        settings = dataclasses.replace(
+            fit.denoise, temperature_period_s=30.0, temperature_spread_s=spread
+        )
+        clean = Compensator(fit.model, dataclasses.replace(fit.denoise, temperature_period_s=30.0))
+        comp = Compensator(fit.model, settings)
+        tdot = []
+        for k in range(n):
+            assert clean.add_temperature(float(periodic.temp_stamps_s[k]), float(values[k]))
+            assert comp.add_temperature(float(receipt[k]), float(values[k]))
+            if receipt[k + 1] - receipt[k] > 1.0 and clean.status.estimator_ready:
+                tdot.append((comp.status.tdot_degC_per_min, clean.status.tdot_degC_per_min))
+        got, want = np.array(tdot).T
+        errors[spread] = float(np.sqrt(np.mean((got - want) ** 2)))
+    assert errors[1.0] < 0.2 * errors[0.0], errors
+    assert errors[1.0] < 0.01  # degC/min
+
+
+def test_calibrate_writes_the_spread_and_compensate_applies_it(
+    periodic: ChamberRecord, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Real bags through the CLI: the YAML has the sensor's interval.
+
+    A bag of the sensor read at its rate has none.
+    """
+    for label, record in (('polled', polled(periodic, 30.0)), ('periodic', periodic)):
+        bag = write_record(tmp_path / label, record)
+        coeffs = tmp_path / f'{label}.yaml'
+        assert cli.main(['calibrate', str(bag), '-o', str(coeffs)]) == 0
+        said = 'delivered in polls every 30 s' in capsys.readouterr().out
+        assert said == (label == 'polled')
+        denoise = yaml.safe_load(coeffs.read_text())['denoise']
+        spread = denoise['temperature_spread_s']
+        assert spread == (pytest.approx(1.0, abs=2e-3) if label == 'polled' else 0.0)
+        if label == 'polled':
+            assert denoise['temperature_period_s'] == pytest.approx(30.0, abs=0.1)
+        out = tmp_path / f'{label} out'
+        assert cli.main(['compensate', str(bag), '--coeffs', str(coeffs), '-o', str(out)]) == 0
+        err = capsys.readouterr().err
+        assert 'gap' not in err and 'stale' not in err, err
