@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from test_compensator import Event, _assert_same_state, _drive
 from test_publishing import CHAMBER, write_record
 
 from fog_temp_comp.core.compensator import Compensator
@@ -127,3 +128,26 @@ def test_calibrate_writes_the_spread_and_compensate_applies_it(
         assert cli.main(['compensate', str(bag), '--coeffs', str(coeffs), '-o', str(out)]) == 0
         err = capsys.readouterr().err
         assert 'gap' not in err and 'stale' not in err, err
+
+
+def test_the_block_path_spreads_as_the_per_message_path(periodic: ChamberRecord) -> None:
+    """``compensate``'s blocks of gyro messages give the node's output, bit for bit."""
+    fit = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)[0].coefficients
+    settings = dataclasses.replace(
+        fit.denoise, temperature_period_s=30.0, temperature_spread_s=1.0
+    )
+    receipt = polled(periodic, 30.0).temp_stamps_s[:3000]
+    events: list[Event] = [
+        ('T', float(s), (float(v),))
+        for s, v in zip(receipt, periodic.temperature_degC[:3000], strict=True)
+    ]
+    gyro = periodic.imu_stamps_s[periodic.imu_stamps_s < receipt[-1]]
+    events += [('G', float(s), (1e-4, -2e-4, 3e-4)) for s in gyro]
+    events.sort(key=lambda e: (e[1], e[0] == 'G'))  # as received: a poll before its gyro
+    each = Compensator(fit.model, settings)
+    expected = _drive(each, events, 'each')
+    for mode in ('block', 'interleaved'):
+        other = Compensator(fit.model, settings)
+        np.testing.assert_array_equal(_drive(other, events, mode, seed=3), expected)
+        _assert_same_state(each, other)
+    assert each.status.counters.temperature_accepted == receipt.size
