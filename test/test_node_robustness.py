@@ -20,7 +20,7 @@ from rosharness import Harness, make_imu, rate_of, stamp_of
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load, save, to_dict
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H
-from fog_temp_comp.ros.diagnostics import ON_CHANGE_TEXT
+from fog_temp_comp.ros.diagnostics import ON_CHANGE_TEXT, POLLED_TEXT
 from fog_temp_comp.ros.node import CompensatorNode
 
 from simdata import example_coefficients
@@ -481,6 +481,27 @@ def test_a_temperature_published_on_change_untold_is_said_when_it_goes_stale(
     status = h.diagnose()
     assert 'temperature stale' in status.message and ON_CHANGE_TEXT in status.message
     assert status.level == WARN
+
+
+def test_a_temperature_delivered_in_polls_untold_is_said_when_it_goes_stale(
+    harness: Harness,
+) -> None:
+    """No ``temperature_spread_s`` in the file: a silence after polled readings says why.
+
+    Polls every 30 s of 30 readings stamped on receipt 1 ms apart (the file's sensor: 2 s).
+    """
+    h = harness
+    for poll in range(1, 6):
+        receipt = T0 + 30.0 * poll
+        for j in range(30):
+            h.send_temperature(receipt + 0.001 * j, 25.0 + 0.0625 * ((poll * 30 + j) // 7))
+        assert h.send_imu(receipt + 0.5, RATE) is not None
+    assert POLLED_TEXT not in h.diagnose().message
+    assert h.send_imu(receipt + 20.0, RATE) is not None  # 20 s on: stale after 10 s
+    status = h.diagnose()
+    assert 'temperature stale' in status.message and POLLED_TEXT in status.message
+    assert ON_CHANGE_TEXT not in status.message
+    assert h.node.compensator.status.counters.temperature_silences_polled >= 1
 
 
 def test_a_temperature_delivered_in_polls_is_spread_back_on_the_node(

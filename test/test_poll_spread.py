@@ -16,6 +16,7 @@ from test_compensator import Event, _assert_same_state, _drive
 from test_publishing import CHAMBER, write_record
 
 from fog_temp_comp.core.compensator import Compensator
+from fog_temp_comp.core.delivery_watch import DeliveryWatch
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.model_choice import choose_and_calibrate
 from fog_temp_comp.core.poll_spread import PollSpread, polled_interval_s, spread_polls
@@ -78,6 +79,37 @@ def test_the_readings_of_a_poll_are_stamped_back_at_the_sensors_interval(
     )
 
 
+def test_the_watch_and_the_compensator_tell_polls_the_settings_do_not_say(
+    periodic: ChamberRecord,
+) -> None:
+    """Told no spread, a polled sensor's silences are gaps, each counted as polled."""
+    watch = DeliveryWatch()
+    for stamp in periodic.temp_stamps_s[:300].tolist():
+        watch.add(stamp, 20.0)
+    assert not watch.looks_polled()
+    for stamp in polled(periodic, 30.0).temp_stamps_s[300:600].tolist():
+        watch.add(stamp, 20.0)
+    assert watch.looks_polled()
+    fit = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)[0].coefficients
+    receipt = polled(periodic, 30.0).temp_stamps_s
+    for spread, expected in ((0.0, 'polled'), (1.0, '')):
+        comp = Compensator(
+            fit.model, dataclasses.replace(fit.denoise, temperature_spread_s=spread)
+        )
+        for k in range(1000):
+            comp.add_temperature(float(receipt[k]), float(periodic.temperature_degC[k]))
+            comp.correct_xyz(float(receipt[k]) + 0.5, 1e-4, 0.0, 0.0)
+        comp.correct_xyz(float(receipt[999]) + 20.0, 1e-4, 0.0, 0.0)
+        assert comp.status.temperature_stale  # stale after 10 s: the file's 1 s sensor
+        assert comp.untold_delivery == expected
+        counters = comp.status.counters
+        gaps = counters.temperature_gaps + counters.temperature_gaps_bridged
+        assert counters.temperature_silences_on_change == 0
+        assert counters.temperature_silences_polled == (0 if spread else gaps - 1) or (
+            not spread and 0 < counters.temperature_silences_polled <= gaps
+        )
+
+
 def test_the_compensator_feeds_the_spread_stamps(periodic: ChamberRecord) -> None:
     """With ``temperature_spread_s`` the Tdot after each poll is nearly the periodic one's.
 
@@ -128,6 +160,16 @@ def test_calibrate_writes_the_spread_and_compensate_applies_it(
         assert cli.main(['compensate', str(bag), '--coeffs', str(coeffs), '-o', str(out)]) == 0
         err = capsys.readouterr().err
         assert 'gap' not in err and 'stale' not in err, err
+    # the periodic sensor's coefficients (no spread) on the polled bag: said, as gaps
+    polled_bag, coeffs = tmp_path / 'polled', tmp_path / 'periodic.yaml'
+    out = tmp_path / 'untold out'
+    assert cli.main(['compensate', str(polled_bag), '--coeffs', str(coeffs), '-o', str(out)]) == 0
+    err = capsys.readouterr().err
+    assert 'as from a driver that polls the sensor and stamps on receipt' in err, err
+    assert 'no denoise.temperature_spread_s' in err
+    assert cli.main(['evaluate', str(polled_bag), '--coeffs', str(coeffs)]) == 0
+    captured = capsys.readouterr()
+    assert 'after readings that look delivered in polls' in captured.out + captured.err
 
 
 def test_the_block_path_spreads_as_the_per_message_path(periodic: ChamberRecord) -> None:

@@ -18,10 +18,10 @@ from test_model_choice import CHAMBER as MODEL_CHOICE_CHAMBER
 from fog_temp_comp.bag.bagio import BagWriter, make_imu, make_temperature, s_to_stamp_ns
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.compensator import Compensator
+from fog_temp_comp.core.delivery_watch import WATCH_READINGS, DeliveryWatch
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.held_readings import expand_held
 from fog_temp_comp.core.model_choice import choose_and_calibrate
-from fog_temp_comp.core.on_change_watch import WATCH_READINGS, OnChangeWatch
 from fog_temp_comp.core.publishing import (
     HOLD_FACTOR,
     HOLD_MIN_S,
@@ -92,7 +92,7 @@ def test_the_online_watch_judges_the_last_readings_as_calibrate_judges_a_record(
     """Fed reading by reading, the watch gives what the test gives on its last readings."""
     changed = on_change(periodic)
     for record, expected in ((periodic, False), (changed, True)):
-        watch = OnChangeWatch()
+        watch = DeliveryWatch()
         for k, (stamp, value) in enumerate(
             zip(record.temp_stamps_s, record.temperature_degC, strict=True)
         ):
@@ -107,7 +107,7 @@ def test_the_online_watch_judges_the_last_readings_as_calibrate_judges_a_record(
                 assert watch.looks_on_change() == published_on_change([window])
         assert watch.looks_on_change() == expected
     # periodic readings after readings on change: judged by the last ones only
-    watch = OnChangeWatch()
+    watch = DeliveryWatch()
     for record in (changed, periodic):
         for stamp, value in zip(
             record.temp_stamps_s[:400], record.temperature_degC[:400], strict=True
@@ -136,10 +136,11 @@ def test_the_compensator_says_a_silence_looks_like_readings_published_on_change(
             if k == 400:
                 comp.correct_xyz(float(stamps[k]) + 59.0, 1e-4, 0.0, 0.0)
                 assert comp.status.temperature_stale
-                assert comp.readings_look_on_change == expected
+                assert comp.untold_delivery == ('on change' if expected else '')
         counters = comp.status.counters
         gaps = counters.temperature_gaps + counters.temperature_gaps_bridged
         silences = counters.temperature_silences_on_change
+        assert counters.temperature_silences_polled == 0
         if expected:  # every gap after the first 100 readings or so
             assert 100 < silences <= gaps, (silences, gaps)
         else:  # the one gap, its silence
@@ -148,7 +149,7 @@ def test_the_compensator_says_a_silence_looks_like_readings_published_on_change(
     for k in range(400):
         told.add_temperature(float(changed.temp_stamps_s[k]), float(changed.temperature_degC[k]))
     told.correct_xyz(float(changed.temp_stamps_s[399]) + 60.0, 1e-4, 0.0, 0.0)
-    assert not told.status.temperature_stale and not told.readings_look_on_change
+    assert not told.status.temperature_stale and not told.untold_delivery
     assert told.status.counters.temperature_silences_on_change == 0
 
 

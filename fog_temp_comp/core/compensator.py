@@ -159,14 +159,17 @@ class Compensator(_BlockCorrection, _TemperatureLeaps, _LostSpans):
         return self._stale_after_s
 
     @property
-    def readings_look_on_change(self) -> bool:
-        """Whether the last readings look published only on change, with no hold told.
+    def untold_delivery(self) -> str:
+        """How the last readings look delivered, where the settings do not say: '' (as taken).
 
-        With ``denoise.temperature_hold_s`` 0 (:mod:`~fog_temp_comp.core.on_change_watch`):
-        such a sensor's silences are stale and gaps (counted at each gap in
-        ``temperature_silences_on_change``).
+        ``'on change'`` with no ``temperature_hold_s``, ``'polled'`` with no
+        ``temperature_spread_s`` (:mod:`~fog_temp_comp.core.delivery_watch`): such a sensor's
+        silences are stale and gaps (counted at each gap in ``temperature_silences_*``).
         """
-        return self._held.watch.looks_on_change()
+        watch = self._held.watch  # on change first: its intervals may look like polls too
+        if watch.looks_on_change():
+            return 'on change'
+        return 'polled' if not self._spread.interval_s and watch.looks_polled() else ''
 
     def reset(self) -> None:
         """Forget the temperature history (keeps the counters and the last correction).
@@ -255,7 +258,9 @@ class Compensator(_BlockCorrection, _TemperatureLeaps, _LostSpans):
         ):
             if stamp_s - last >= max(guard.time_jump_threshold_s, self._stale_after_s):
                 self._save_leap()  # undone if the next reading goes on from before it
-            counters.temperature_silences_on_change += self.readings_look_on_change
+            delivery = self.untold_delivery
+            counters.temperature_silences_on_change += delivery == 'on change'
+            counters.temperature_silences_polled += delivery == 'polled'
             self._after_gap(stamp_s - last)
         elif not self._plausible(stamp_s, temperature_degC):
             return False

@@ -171,8 +171,10 @@ class CompensatorCounters:
     temperature_gaps: int = 0  # gap longer than the timeout, estimate restarted
     temperature_gaps_bridged: int = 0  # gap bridged by the Kalman filter (temperature_bridge_s)
     # gaps, with no denoise.temperature_hold_s, after readings that looked published only on
-    # change (core.on_change_watch): silences that are no fault
+    # change (core.delivery_watch): silences that are no fault
     temperature_silences_on_change: int = 0
+    # gaps, with no denoise.temperature_spread_s, after readings that looked delivered in polls
+    temperature_silences_polled: int = 0
     time_jumps: int = 0
 
     @property

@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from fog_temp_comp.core.on_change_watch import OnChangeWatch
+from fog_temp_comp.core.delivery_watch import DeliveryWatch
 
 FloatArray = NDArray[np.float64]
 
@@ -54,8 +54,8 @@ class HeldReadings:
         self._j = 1
         #: stamp of the next held reading (inf: none due, ever, until a real reading)
         self.next_s = math.inf
-        #: while off, the readings: do they look published on change all the same?
-        self.watch = OnChangeWatch()
+        #: while off, the readings: do they look published on change (or polled) all the same?
+        self.watch = DeliveryWatch()
 
     @property
     def real_s(self) -> float:

@@ -100,7 +100,9 @@ def polled_interval_s(stamps: Sequence[FloatArray]) -> float:
     :data:`IN_POLL_FRACTION` of the mean interval after the one before (a driver that polls
     every 5 s and stamps on receipt: 4 in 5 at 1 Hz). The interval is the mean over the
     records (their spans over their readings), to the millisecond. Readings with the stamp of
-    the one before (a message sent twice) count for nothing.
+    the one before (a message sent twice) count for nothing. A sensor published only on change
+    may look polled too (changes a conversion apart against a mean of minutes): ask
+    :func:`~fog_temp_comp.core.publishing.published_on_change` first.
     """
     span, count, in_poll = 0.0, 0, 0
     for run in stamps:

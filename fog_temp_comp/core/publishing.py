@@ -22,9 +22,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from fog_temp_comp.core.delivery_watch import looks_published_on_change
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.held_readings import expand_held, held_margin_s
-from fog_temp_comp.core.on_change_watch import looks_published_on_change
 from fog_temp_comp.core.poll_spread import polled_interval_s, spread_polls
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.sensor_noise import reading_interval_s, shortest_interval_s
@@ -50,7 +50,7 @@ HOLD_MIN_S = 60.0
 def published_on_change(records: Sequence[ChamberRecord]) -> bool:
     """Whether the records' temperature readings were published only when they changed.
 
-    :func:`~fog_temp_comp.core.on_change_watch.looks_published_on_change` of their readings.
+    :func:`~fog_temp_comp.core.delivery_watch.looks_published_on_change` of their readings.
     """
     return looks_published_on_change([(r.temp_stamps_s, r.temperature_degC) for r in records])
 

@@ -546,8 +546,9 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             frames=self.temperature_frames,
             plausible_degC=self.compensator.plausible_temperature_degC,
             type_mismatches=self._type_mismatches(counters),
-            readings_on_change=self.compensator.status.temperature_stale
-            and self.compensator.readings_look_on_change,
+            untold_delivery=self.compensator.untold_delivery
+            if self.compensator.status.temperature_stale
+            else '',
             rest=None if self.compensator.rest is None else self.compensator.rest.finish(),
             rest_bias_file=(
                 (self.config.rest_bias_file, self._rest_bias_state)

@@ -25,6 +25,14 @@ ON_CHANGE_TEXT = (
     'publishes only on change: set temperature_hold_s, or calibrate on bags from this driver '
     '(it writes denoise.temperature_hold_s)'
 )
+#: why a temperature delivered in polls goes stale, and what to do
+POLLED_TEXT = (
+    'temperature stamps come in bursts milliseconds apart, as from a driver that polls the '
+    'sensor and stamps on receipt: set temperature_spread_s and temperature_period_s, or '
+    'calibrate on bags from this driver (it writes both)'
+)
+#: the texts of the untold deliveries (Compensator.untold_delivery)
+DELIVERY_TEXTS = {'on change': ON_CHANGE_TEXT, 'polled': POLLED_TEXT}
 #: counters whose increase since the previous report is a warning
 _WARN_COUNTERS = {
     'imu_duplicate': 'duplicate gyro messages dropped',
@@ -88,7 +96,7 @@ def build_report(
     frames: FrameLock | None = None,
     plausible_degC: tuple[float, float] = (-math.inf, math.inf),
     type_mismatches: Sequence[TypeMismatch] = (),
-    readings_on_change: bool = False,
+    untold_delivery: str = '',
 ) -> Report:
     """Summarise ``status``; ``previous`` are the counters at the last report (for deltas).
 
@@ -99,14 +107,14 @@ def build_report(
     clocks hours apart that made the node time both on arrival (nan: it did not). ``frames``:
     the temperature frame_id kept; ``frame_mismatches``: gyro messages of another frame_id,
     in all and since the last report; ``type_mismatches``: inputs published as other types;
-    ``readings_on_change``: the readings look published only on change, with no hold told.
+    ``untold_delivery``: how the readings look delivered where the settings do not say.
     ``imu_rate_hz``: gyro messages received, any frame_id; ``gyro_stopped``: none since the
     last report after some came; ``inactive``: a lifecycle node's output is off, (gyro
     messages ignored in all, since the last report).
     """
     counters = status.counters
     reasons = _input_reasons(gyro_stopped, inactive)
-    reasons += _temperature_reasons(status, previous, plausible_degC, readings_on_change)
+    reasons += _temperature_reasons(status, previous, plausible_degC, untold_delivery)
     reasons += _counter_reasons(counters, previous, frame_mismatches[1], require_frame_match)
     reasons += _clock_reasons(temperature_stamp_offset_s, two_clocks, clocks_apart_s, unstamped)
     frame_reasons, frame_values = _temperature_frames(frames)
@@ -266,7 +274,7 @@ def _temperature_reasons(
     status: CompensatorStatus,
     previous: CompensatorCounters,
     plausible_degC: tuple[float, float] = (-math.inf, math.inf),
-    readings_on_change: bool = False,
+    untold_delivery: str = '',
 ) -> list[tuple[int, str]]:
     """(level, text) of the temperature input: faulty, missing, stale, warming up, clamped."""
     counters = status.counters
@@ -283,8 +291,8 @@ def _temperature_reasons(
         return reasons
     if status.temperature_stale:
         reasons.append(_stale_reason(counters, previous))
-        if readings_on_change:
-            reasons.append((WARN, ON_CHANGE_TEXT))
+        if untold_delivery:
+            reasons.append((WARN, DELIVERY_TEXTS[untold_delivery]))
     elif never_stamped_uncorrected(status, previous):
         reasons.append(
             (

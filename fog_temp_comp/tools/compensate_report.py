@@ -14,7 +14,7 @@ __all__ = [
     'report_gaps',
     'report_input',
     'report_nonfinite_gyro',
-    'report_on_change',
+    'report_untold_delivery',
 ]
 
 
@@ -22,7 +22,7 @@ def report_input(in_bag: Path, compensator: Compensator) -> None:
     """The warnings on the input the replay found: sensor faults, gaps, NaN gyro rates."""
     report_faults(in_bag, compensator)
     report_gaps(in_bag, compensator.status.counters)
-    report_on_change(in_bag, compensator.status.counters)
+    report_untold_delivery(in_bag, compensator.status.counters)
     report_dropped_temperature(in_bag, compensator.status.counters)
     report_nonfinite_gyro(in_bag, compensator.status.counters)
 
@@ -77,21 +77,33 @@ def report_gaps(in_bag: Path, counters: CompensatorCounters) -> None:
     )
 
 
-def report_on_change(in_bag: Path, counters: CompensatorCounters) -> None:
-    """A ``WARNING`` line where readings published only on change went stale, untold.
+def report_untold_delivery(in_bag: Path, counters: CompensatorCounters) -> None:
+    """``WARNING`` lines where the temperature went stale after readings delivered untold.
 
-    Told: the coefficients' ``denoise.temperature_hold_s`` (0 here), which puts them back.
+    Published only on change with no ``denoise.temperature_hold_s`` in the coefficients, or in
+    polls with no ``denoise.temperature_spread_s`` (fitted on another driver's bags).
     """
-    silences = counters.temperature_silences_on_change
-    if silences:
-        print(
-            f'WARNING: {in_bag}: the temperature went stale {silences} times after readings '
+    for silences, how, key in (
+        (
+            counters.temperature_silences_on_change,
             'that never repeat and come at uneven intervals, as from a driver that publishes '
-            'only on change, and the coefficients have no denoise.temperature_hold_s: '
-            'calibrate on bags from this driver (it measures the hold), or set it in the '
-            'coefficients file',
-            file=sys.stderr,
-        )
+            'only on change',
+            'temperature_hold_s',
+        ),
+        (
+            counters.temperature_silences_polled,
+            'whose stamps come in bursts milliseconds apart, as from a driver that polls the '
+            'sensor and stamps on receipt',
+            'temperature_spread_s',
+        ),
+    ):
+        if silences:
+            print(
+                f'WARNING: {in_bag}: the temperature went stale {silences} times after readings '
+                f'{how}, and the coefficients have no denoise.{key}: calibrate on bags from '
+                'this driver (it measures it), or set it in the coefficients file',
+                file=sys.stderr,
+            )
 
 
 def report_dropped_temperature(in_bag: Path, counters: CompensatorCounters) -> None:

@@ -134,16 +134,26 @@ def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) 
         notes.append(
             f'note: {name}: {gaps} temperature gap{"s" if gaps > 1 else ""} longer than the '
             f'stale time: {bridged} bridged by the Kalman filter, {restarted} restarted the Tdot '
-            'estimate'
-            + (
-                f'; {counters.temperature_silences_on_change} after readings that look published '
-                'only on change, which the coefficients do not say (temperature_hold_s 0): '
-                'calibrate on bags from this driver'
-                if counters.temperature_silences_on_change
-                else ''
-            )
+            'estimate' + _untold_delivery(counters)
         )
     return notes
+
+
+def _untold_delivery(counters: CompensatorCounters) -> str:
+    """The part of the gaps' note on readings delivered as the coefficients do not say."""
+    parts = [
+        f'{count} after readings that look {how}, which the coefficients do not say ({key} 0)'
+        for count, how, key in (
+            (
+                counters.temperature_silences_on_change,
+                'published only on change',
+                'temperature_hold_s',
+            ),
+            (counters.temperature_silences_polled, 'delivered in polls', 'temperature_spread_s'),
+        )
+        if count
+    ]
+    return f'; {"; ".join(parts)}: calibrate on bags from this driver' if parts else ''
 
 
 def _share(count: int, total: int) -> str:

@@ -1,12 +1,15 @@
-"""Whether temperature readings look published only on change: the test, and an online watch.
+"""How a driver delivers the temperature readings, judged from the last ones, online.
 
 A driver that publishes a quantized temperature only when it changes
 (:mod:`fog_temp_comp.core.publishing`) sends readings that never repeat, at intervals from one
 conversion to minutes. :func:`looks_published_on_change` tells such readings from readings
 published at the sensor's rate (which repeat, a quantized sensor's for minutes at a soak) and
-from a float sensor's (never repeating, but not quantized). ``calibrate`` asks it of the
-training bags; :class:`OnChangeWatch` asks it of the node's last readings when the temperature
-falls silent, so that a node told no ``denoise.temperature_hold_s`` can say why its
+from a float sensor's (never repeating, but not quantized). A driver that polls the sensor and
+stamps on receipt delivers its readings in bursts milliseconds apart
+(:func:`~fog_temp_comp.core.poll_spread.polled_interval_s`). ``calibrate`` asks both of the
+training bags; :class:`DeliveryWatch` asks them of the compensator's last readings when the
+temperature falls silent, so that coefficients fitted on another driver's bags (no
+``denoise.temperature_hold_s``, no ``denoise.temperature_spread_s``) are said to be why the
 temperature keeps going stale. Stamps in s, temperatures in degC.
 """
 
@@ -17,6 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from fog_temp_comp.core.poll_spread import polled_interval_s
 from fog_temp_comp.core.sensor_noise import quantum_degC
 
 FloatArray = NDArray[np.float64]
@@ -26,7 +30,7 @@ __all__ = [
     'MIN_INTERVAL_SPREAD',
     'MIN_READINGS',
     'WATCH_READINGS',
-    'OnChangeWatch',
+    'DeliveryWatch',
     'looks_published_on_change',
 ]
 
@@ -67,19 +71,21 @@ def looks_published_on_change(runs: Sequence[tuple[FloatArray, FloatArray]]) -> 
     return bool(high >= MIN_INTERVAL_SPREAD * low and quantum_degC(np.concatenate(kept)) > 0)
 
 
-class OnChangeWatch:
-    """The last :data:`WATCH_READINGS` readings, and whether they look published on change.
+class DeliveryWatch:
+    """The last :data:`WATCH_READINGS` readings, to tell how the driver delivers them.
 
-    :meth:`add` is O(1) per reading; :meth:`looks_on_change` runs the test at most once per
-    new reading (its answer is kept until the next one).
+    :meth:`add` is O(1) per reading; :meth:`looks_on_change` and :meth:`looks_polled` run
+    their test at most once per new reading (the answer is kept until the next one).
     """
 
     def __init__(self) -> None:
         self._stamps_s = np.zeros(WATCH_READINGS)
         self._values_degC = np.zeros(WATCH_READINGS)
         self._count = 0  # readings added in all
-        self._judged = -1  # the count when last judged
+        self._judged = -1  # the count when last judged on change
         self._verdict = False
+        self._judged_polled = -1  # the count when last judged polled
+        self._polled = False
 
     def add(self, stamp_s: float, temperature_degC: float) -> None:
         """One reading used (s, degC)."""
@@ -92,9 +98,26 @@ class OnChangeWatch:
         """Whether the last readings look published on change (the test of this module)."""
         if self._judged != self._count:
             self._judged = self._count
-            order = np.roll(np.arange(WATCH_READINGS), -(self._count % WATCH_READINGS))
-            order = order[-min(self._count, WATCH_READINGS) :]
+            order = self._order()
             self._verdict = looks_published_on_change(
                 [(self._stamps_s[order], self._values_degC[order])]
             )
         return self._verdict
+
+    def looks_polled(self) -> bool:
+        """Whether the last readings came in polls (:func:`polled_interval_s` > 0).
+
+        Not before :data:`MIN_READINGS`, as :meth:`looks_on_change`, which goes first (a
+        sensor published on change may look polled too).
+        """
+        if self._count < MIN_READINGS:
+            return False
+        if self._judged_polled != self._count:
+            self._judged_polled = self._count
+            self._polled = polled_interval_s([self._stamps_s[self._order()]]) > 0
+        return self._polled
+
+    def _order(self) -> NDArray[np.int64]:
+        """Indices of the readings kept, oldest first."""
+        order = np.roll(np.arange(WATCH_READINGS), -(self._count % WATCH_READINGS))
+        return order[-min(self._count, WATCH_READINGS) :]
