@@ -212,22 +212,30 @@ def test_a_file_written_before_the_sensor_interval_loads_with_it_unknown(tmp_pat
     assert load(path).denoise.temperature_period_s == 2.0
 
 
-def test_a_file_written_before_the_hold_loads_as_a_periodic_sensor(tmp_path: Path) -> None:
-    """``denoise.temperature_hold_s`` is newer still: without it, 0 (published at its rate)."""
+@pytest.mark.parametrize(
+    ('key', 'value'), [('temperature_hold_s', 1290.5), ('temperature_spread_s', 0.5)]
+)
+def test_a_file_written_before_a_delivery_key_loads_as_readings_as_taken(
+    tmp_path: Path, key: str, value: float
+) -> None:
+    """``denoise.temperature_hold_s`` and ``temperature_spread_s`` are newer still.
+
+    Without them, 0: published at the sensor's rate, stamped as taken.
+    """
     path = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
     data = yaml.safe_load(path.read_text(encoding='utf-8'))
-    data['denoise'].pop('temperature_hold_s', None)
+    data['denoise'].pop(key, None)
     older = tmp_path / 'older.yaml'
     older.write_text(yaml.safe_dump(data), encoding='utf-8')
-    assert load(older).denoise.temperature_hold_s == 0.0
-    data['denoise']['temperature_hold_s'] = 1290.5
-    held = tmp_path / 'held.yaml'
-    held.write_text(yaml.safe_dump(data), encoding='utf-8')
-    assert load(held).denoise.temperature_hold_s == 1290.5
-    data['denoise']['temperature_hold_s'] = -1.0
-    held.write_text(yaml.safe_dump(data), encoding='utf-8')
-    with pytest.raises(CoefficientsError, match='temperature_hold_s must be >= 0'):
-        load(held)
+    assert getattr(load(older).denoise, key) == 0.0
+    data['denoise'][key] = value
+    newer = tmp_path / 'newer.yaml'
+    newer.write_text(yaml.safe_dump(data), encoding='utf-8')
+    assert getattr(load(newer).denoise, key) == value
+    data['denoise'][key] = -1.0
+    newer.write_text(yaml.safe_dump(data), encoding='utf-8')
+    with pytest.raises(CoefficientsError, match=f'{key} must be >= 0'):
+        load(newer)
 
 
 def test_a_bias_table_round_trips_with_its_knots_in_the_keys(tmp_path: Path) -> None:
@@ -253,23 +261,3 @@ def test_a_model_with_a_term_twice_is_refused() -> None:
 
     with pytest.raises(ValueError, match='listed twice'):
         DriftModel(('const', 'T', 'T'), np.zeros((3, 3)), (-40.0, 60.0), (-1.0, 1.0))
-
-
-def test_a_file_written_before_the_spread_loads_as_readings_stamped_as_taken(
-    tmp_path: Path,
-) -> None:
-    """``denoise.temperature_spread_s`` is newer still: without it, 0 (stamps as taken)."""
-    path = Path(__file__).resolve().parents[1] / 'config' / 'example_coefficients.yaml'
-    data = yaml.safe_load(path.read_text(encoding='utf-8'))
-    data['denoise'].pop('temperature_spread_s', None)
-    older = tmp_path / 'older.yaml'
-    older.write_text(yaml.safe_dump(data), encoding='utf-8')
-    assert load(older).denoise.temperature_spread_s == 0.0
-    data['denoise']['temperature_spread_s'] = 0.5
-    polled = tmp_path / 'polled.yaml'
-    polled.write_text(yaml.safe_dump(data), encoding='utf-8')
-    assert load(polled).denoise.temperature_spread_s == 0.5
-    data['denoise']['temperature_spread_s'] = float('nan')
-    polled.write_text(yaml.safe_dump(data), encoding='utf-8')
-    with pytest.raises(CoefficientsError, match='temperature_spread_s'):
-        load(polled)

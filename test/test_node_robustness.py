@@ -42,6 +42,20 @@ def coeffs_file(tmp_path: Path, coefficients: Coefficients) -> Path:
     return path
 
 
+def with_denoise(coefficients: Coefficients, tmp_path: Path, **denoise: float) -> Path:
+    """A coefficients file: ``coefficients`` with these denoise settings."""
+    import dataclasses
+
+    path = tmp_path / 'denoise.yaml'
+    save(
+        dataclasses.replace(
+            coefficients, denoise=dataclasses.replace(coefficients.denoise, **denoise)
+        ),
+        path,
+    )
+    return path
+
+
 def start(context: object, coeffs_file: Path, **params: object) -> CompensatorNode:
     overrides = [Parameter('coefficients_file', value=str(coeffs_file))]
     overrides += [Parameter(k, value=v) for k, v in params.items()]
@@ -434,16 +448,7 @@ def test_a_temperature_published_on_change_holds_on_the_node(
     Readings 5 min apart are neither stale nor a gap: the held value is put back at the
     sensor's interval, as the gyro passes it; the staleness rule stays the sensor's.
     """
-    import dataclasses
-
-    held = dataclasses.replace(
-        coefficients,
-        denoise=dataclasses.replace(
-            coefficients.denoise, temperature_period_s=1.0, temperature_hold_s=900.0
-        ),
-    )
-    path = tmp_path / 'held.yaml'
-    save(held, path)
+    path = with_denoise(coefficients, tmp_path, temperature_period_s=1.0, temperature_hold_s=900.0)
     h = Harness(ros_context, start(ros_context, path))
     try:
         assert h.node.compensator.stale_after_s == 10.0
@@ -513,16 +518,7 @@ def test_a_temperature_delivered_in_polls_is_spread_back_on_the_node(
     receipt. Nothing is dropped as repeated or out of order, and between polls the temperature is
     fresh (stale after 3 of the 5 s between polls).
     """
-    import dataclasses
-
-    polled = dataclasses.replace(
-        coefficients,
-        denoise=dataclasses.replace(
-            coefficients.denoise, temperature_period_s=5.0, temperature_spread_s=1.0
-        ),
-    )
-    path = tmp_path / 'polled.yaml'
-    save(polled, path)
+    path = with_denoise(coefficients, tmp_path, temperature_period_s=5.0, temperature_spread_s=1.0)
     h = Harness(ros_context, start(ros_context, path))
     try:
         fed = []
