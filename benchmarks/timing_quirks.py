@@ -27,8 +27,9 @@ staying the simulated ones (but where it keeps fewer readings):
 Two scenarios as in ``message_loss.py``: ``a``, the replayed runs have the quirk, ``calibrate``
 (no flags) on the clean training run; ``b``, the training run has it too and ``calibrate`` runs
 on it (:func:`~fog_temp_comp.core.model_choice.choose_and_calibrate`). ``on change`` has a
-third, ``a+hold``: scenario ``a`` with the clean calibration's ``temperature_period_s`` and
-``temperature_hold_s`` set as ``calibrate`` measures them on the quirky training run (what a
+third, ``a+told`` (and so have the polls): scenario ``a`` with the clean calibration's
+``temperature_period_s``, ``temperature_hold_s`` and ``temperature_spread_s`` set as
+``calibrate`` measures them on the quirky training run (what a
 user sets as the node's parameters when the chamber bags were recorded with another driver).
 
 Figures as in ``message_loss.py`` (``accuracy.py``'s :func:`metrics`), each ``quirky / clean /
@@ -234,7 +235,11 @@ def changed_counters(counters: dict[str, int], clean: dict[str, int]) -> dict[st
     return {k: v if v != clean.get(k, 0) else 0 for k, v in counters.items()}
 
 
-def with_hold(coeffs: Coefficients, train: SimulatedRun) -> Coefficients:
+#: the quirks that the node can be told of (its reading-timing parameters): scenario a+told
+TOLD_QUIRKS = ('on change', 'temp polled 5 s', 'temp polled 30 s')
+
+
+def with_timing(coeffs: Coefficients, train: SimulatedRun) -> Coefficients:
     """``coeffs`` with the reading timing ``calibrate`` measures on ``train``."""
     denoise = with_reading_timing(coeffs.denoise, [train.as_record()])
     return dataclasses.replace(coeffs, denoise=denoise)
@@ -258,13 +263,13 @@ def study_plant(plant: str, quirks: list[str], scenarios: list[str]) -> None:
     for quirk in quirks:
         changed = {n: quirky(r, quirk, k + 1) for k, (n, r) in enumerate(tests.items())}
         train_quirky = quirky(train, quirk, 0)
-        for scenario in scenarios + (['a+hold'] if quirk == 'on change' else []):
+        for scenario in scenarios + (['a+told'] if quirk in TOLD_QUIRKS else []):
             used, name = coeffs, '='
             if scenario == 'b':
                 used, chosen, chosen_lags = calibrated(train_quirky)
                 name = model_text('=' if chosen == model else chosen, chosen_lags)
-            elif scenario == 'a+hold':
-                used = with_hold(coeffs, train_quirky)
+            elif scenario == 'a+told':
+                used = with_timing(coeffs, train_quirky)
             quirky_rad_s, counters = replayed(changed, used)
             figures, alike, orc = scored_alike(tests, every, quirky_rad_s, clean_rad_s)
             print(
