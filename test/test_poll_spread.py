@@ -59,7 +59,8 @@ def test_the_readings_of_a_poll_are_stamped_back_at_the_sensors_interval(
 ) -> None:
     """After the first poll each reading within one interval of when it was taken.
 
-    In order, never after its receipt; a sensor read at its rate keeps its stamps.
+    In order, never after its receipt; a sensor read at its rate keeps its stamps, lost
+    readings or not.
     """
     true = periodic.temp_stamps_s
     for poll_s in (5.0, 30.0):
@@ -73,6 +74,10 @@ def test_the_readings_of_a_poll_are_stamped_back_at_the_sensors_interval(
         online = PollSpread(1.0)
         np.testing.assert_array_equal([online.stamp(s) for s in receipt.tolist()], fed)
     np.testing.assert_array_equal(spread_polls(true, 1.0), true)
+    # nor one that loses readings (its silences follow no burst): a polled driver's
+    # coefficients on a driver that stamps as taken
+    lossy = true[np.random.default_rng(2).random(true.size) > 0.3]
+    np.testing.assert_array_equal(spread_polls(lossy, 1.0), lossy)
     np.testing.assert_array_equal(
         spread_polls(polled(periodic, 30.0).temp_stamps_s, 0.0),
         polled(periodic, 30.0).temp_stamps_s,

@@ -60,22 +60,31 @@ class PollSpread:
         self._receipt_s = math.nan  # the last reading's receipt stamp
         self._end_s = math.nan  # the stamp of a poll's last reading: its first one's receipt
         self._left = 0  # readings of the poll still expected after this one
+        self._burst = False  # whether the last poll (or the first) held more than one reading
         self._fed_s = -math.inf  # the last stamp given
 
     def stamp(self, receipt_s: float) -> float:
-        """The stamp (s) to feed a reading received at ``receipt_s`` (s) at."""
+        """The stamp (s) to feed a reading received at ``receipt_s`` (s) at.
+
+        A silence begins a poll only after a burst: a sensor read at its rate that loses a
+        reading (the coefficients of a polled driver on another) keeps its stamps.
+        """
         interval = self.interval_s
         if not interval:
             return receipt_s
         gap = receipt_s - self._receipt_s
         self._receipt_s = receipt_s
-        if gap > SILENCE_INTERVALS * interval:  # a poll begins
+        in_poll = 0.0 <= gap < IN_POLL_FRACTION * interval
+        self._burst = self._burst or in_poll
+        if gap > SILENCE_INTERVALS * interval and self._burst:  # a poll begins
             self._left = max(round(gap / interval), 1) - 1
             self._end_s = receipt_s
-        elif 0.0 <= gap < IN_POLL_FRACTION * interval and self._left > 0:  # in the poll
+            self._burst = False
+        elif in_poll and self._left > 0:  # in the poll
             self._left -= 1
-        else:  # the first reading, one at the sensor's rate, or a stamp back in time
+        else:  # the first poll, a reading at the sensor's rate or after a lone silence, ...
             self._left = 0
+            self._burst = self._burst and in_poll  # ... or beyond the poll's count
             self._fed_s = receipt_s
             return receipt_s
         stamp = self._end_s - self._left * interval
