@@ -1336,3 +1336,47 @@ def test_evaluate_notes_never_say_zero_percent(coeffs_yaml: Path) -> None:
     assert notes[0].endswith('for 3 (under 1 %) of the gyro samples')
     assert notes[1].endswith('for 1 % of the gyro samples')
     assert clamp_notes('run', CompensatorCounters(imu_corrected=10_000), coeffs) == []
+
+
+@pytest.mark.parametrize('command', ['calibrate', 'evaluate'])
+def test_a_reader_that_leaves_early_costs_nothing(tmp_path: Path, command: str) -> None:
+    """``fog-temp-comp calibrate ... | head``: the reader gone, the coefficients still written.
+
+    The pipe's reader closes before the command prints: the command finishes, exit 0, no
+    ``Broken pipe`` error (it lost the fit before).
+    """
+    out = tmp_path / 'c.yaml'
+    argv = ['calibrate', str(REPO / 'bags' / 'cycle_0p2'), '-o', str(out), '--quiet']
+    if command == 'evaluate':
+        assert cli.main(argv) == 0
+        argv = ['evaluate', str(REPO / 'bags' / 'cycle_1'), '--coeffs', str(out)]
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'fog_temp_comp', *argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # the reader leaves before the first line
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 0, err
+    assert 'Broken pipe' not in err and 'BrokenPipeError' not in err, err
+    assert yaml.safe_load(out.read_text())['schema_version'] == 1
+
+
+def test_fleet_without_dask_is_one_error_line(tmp_path: Path) -> None:
+    """A ROS install brings no Dask: ``fleet calibrate`` says so, and writes nothing."""
+    manifest = tmp_path / 'fleet.yaml'
+    manifest.write_text('units: []\n')
+    code = (
+        "import sys\nsys.modules['distributed'] = None  # import distributed: ImportError\n"
+        'from fog_temp_comp.tools import cli\n'
+        f"sys.exit(cli.main(['fleet', 'calibrate', {str(manifest)!r}, '-o', "
+        f'{str(tmp_path / "out")!r}]))\n'
+    )
+    proc = subprocess.run(
+        [sys.executable, '-c', code], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert proc.returncode == 1, proc.stderr
+    assert proc.stderr.startswith('ERROR: fleet calibrate runs on Dask'), proc.stderr
+    assert "pip install 'dask[distributed]'" in proc.stderr
+    assert 'Traceback' not in proc.stderr and not (tmp_path / 'out').exists()

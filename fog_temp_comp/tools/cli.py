@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 from fog_temp_comp.tools.cli_parser import build_parser
+from fog_temp_comp.tools.closed_pipe import ClosedPipeSafe
 
 if TYPE_CHECKING:
     from fog_temp_comp.core.compensator import GuardSettings
@@ -204,6 +205,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print('interrupted: nothing written (during start-up)', file=sys.stderr)
         return 130
 
+    stdout = sys.stdout
+    sys.stdout = ClosedPipeSafe(stdout)  # type: ignore[assignment]  # ``| head``: still written
     try:  # SIGTERM, SIGHUP: unwind (partial outputs removed) and exit 128 + n, as SIGINT
         with terminating_on_signals():
             from fog_temp_comp.tools import commands
@@ -217,6 +220,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f'interrupted: nothing written{" to " + names if names else ""}', file=sys.stderr
             )
         return err.exit_code if isinstance(err, Terminated) else 130
+    finally:
+        sys.stdout = stdout
 
 
 def _run_reporting_errors(
@@ -229,7 +234,8 @@ def _run_reporting_errors(
         print(f'ERROR: {err}', file=sys.stderr)
         return 1
     except OSError as err:  # unwritable output, disk full, permissions
-        print(f'ERROR: {err.filename or ""}: {err.strerror or err}', file=sys.stderr)
+        where = f'{err.filename}: ' if err.filename else ''
+        print(f'ERROR: {where}{err.strerror or err}', file=sys.stderr)
         return 1
 
 

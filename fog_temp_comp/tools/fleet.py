@@ -91,6 +91,7 @@ def fleet_calibrate_command(
     stderr = stderr or sys.stderr
     if workers is not None and workers < 1:
         raise ValueError(f'--workers {workers}: must be >= 1')
+    require_dask()
     jobs = load_manifest(manifest, parse_calibrate)
     for sub in ('', STATE_DIR, 'logs'):
         (out_dir / sub).mkdir(parents=True, exist_ok=True)
@@ -127,6 +128,21 @@ def fleet_calibrate_command(
         index = write_fleet_report(out_dir / 'report', table)
         print(f'report: {index}', file=stdout)
     return min(counts['failed'], MAX_EXIT_STATUS)
+
+
+def require_dask() -> None:
+    """ValueError (one ``ERROR:`` line) where Dask is not installed, before anything is written.
+
+    A ROS install (rosdep, colcon) brings the node's dependencies, not the fleet's.
+    """
+    try:
+        import distributed  # noqa: F401
+    except ImportError as err:
+        raise ValueError(
+            f'fleet calibrate runs on Dask, which is not installed here ({err}): pip install '
+            "'dask[distributed]' (requirements.txt pins it; rosdep installs only the node's "
+            'dependencies)'
+        ) from None
 
 
 def run_units(
