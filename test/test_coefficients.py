@@ -93,7 +93,7 @@ def del_key(path: str) -> Callable[[dict], None]:
         (del_key('axes.x.dt_deg_h_per_degC'), 'axes.x.dt_deg_h_per_degC'),
         (set_key('axes.y.d0_deg_h', float('nan')), 'axes.y.d0_deg_h'),
         (set_key('axes.y.d0_deg_h', '3.2'), 'axes.y.d0_deg_h'),
-        (set_key('axes.x.extra_deg_h', 1.0), 'axes.x'),
+        (set_key('axes.x.extra_deg_h', 1.0), 'axes.x.extra_deg_h: unknown key; the keys are'),
         (set_key('schema_version', 2), 'schema_version'),
         (del_key('schema_version'), 'schema_version'),
         (set_key('terms', ['const', 'T4']), 'terms'),
@@ -112,6 +112,18 @@ def del_key(path: str) -> Callable[[dict], None]:
         (set_key('temperature_topc', '/t'), 'did you mean temperature_topic[?]'),
         (set_key('notes', 'unit 7'), 'notes: unknown key; the keys are .*under provenance[)]'),
         (set_key('axes.w', {'d0_deg_h': 1.0}), 'axes.w: unknown key; the keys are x, y, z'),
+        (
+            set_key('axes.x.d0_deg_hh', 1.0),
+            'axes.x.d0_deg_hh: unknown key; did you mean axes.x.d0_deg_h[?]',
+        ),
+        (
+            set_key('calibrated_range.temprature_degC', [0, 1]),
+            'did you mean calibrated_range.temperature_degC[?]',
+        ),
+        (
+            set_key('denoise.coil_lag', 100.0),
+            'denoise.coil_lag: unknown key; did you mean denoise.coil_lag_s[?]',
+        ),
     ],
 )
 def test_malformed_file_names_the_key(

@@ -20,6 +20,7 @@ Schema (version 1)::
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import math
 from collections.abc import Sequence
@@ -87,6 +88,11 @@ def model_equation(terms: tuple[str, ...]) -> str:
     parts = [names.get(t, _hinge_text(t)).format(k=coefficient_key(t)) for t in terms]
     return 'D [deg/h] = ' + ' + '.join(parts)
 
+
+#: the keys of ``calibrated_range``: T in degC, Tdot in degC/min, each [low, high]
+RANGE_KEYS = ('temperature_degC', 'tdot_degC_per_min')
+#: the keys of ``denoise``: the fields of :class:`DenoiseSettings`
+DENOISE_KEYS = tuple(f.name for f in dataclasses.fields(DenoiseSettings))
 
 #: every top-level key :func:`to_dict` may write; :func:`from_dict` refuses others
 TOP_LEVEL_KEYS = (
@@ -254,16 +260,18 @@ def from_dict(data: Any) -> Coefficients:
     matrix = np.empty((len(terms), len(AXES)))
     for j, axis in enumerate(AXES):
         entry = _get(axes, axis, dict, where='axes.')
-        for i, term in enumerate(terms):
-            matrix[i, j] = _number(entry, coefficient_key(term), where=f'axes.{axis}.')
-        extra = set(entry) - {coefficient_key(t) for t in terms}
-        if extra:
-            raise CoefficientsError(f'axes.{axis}: keys {sorted(extra)} are not in terms {terms}')
+        hint = f'one coefficient per term of terms: {", ".join(terms)}'
+        _refuse_unknown(entry, keys, f'axes.{axis}.', hint)
+        for i, key in enumerate(keys):
+            matrix[i, j] = _number(entry, key, where=f'axes.{axis}.')
     ranges = _get(data, 'calibrated_range', dict)
-    t_range = _range(ranges, 'temperature_degC')
-    r_range = _range(ranges, 'tdot_degC_per_min')
+    _refuse_unknown(ranges, RANGE_KEYS, 'calibrated_range.', 'the ranges calibrate measured')
+    t_range = _range(ranges, RANGE_KEYS[0])
+    r_range = _range(ranges, RANGE_KEYS[1])
+    denoise_data = _get(data, 'denoise', dict)
+    _refuse_unknown(denoise_data, DENOISE_KEYS, 'denoise.', "the Tdot filter's settings")
     try:
-        denoise = DenoiseSettings.from_dict(_get(data, 'denoise', dict))
+        denoise = DenoiseSettings.from_dict(denoise_data)
     except (TypeError, ValueError) as err:
         raise CoefficientsError(f'denoise: {err}') from None
     frame_id = data.get('frame_id', '') or ''
