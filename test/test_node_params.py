@@ -307,3 +307,23 @@ def test_package_paths_resolve_through_the_ament_index(
     marker.parent.mkdir(parents=True)
     marker.touch()
     assert resolve_path(url) == str(tmp_path / 'share' / 'fog_temp_comp' / 'config' / 'c.yaml')
+
+
+@pytest.mark.parametrize('module', ['node', 'lifecycle_node'])
+@pytest.mark.parametrize('flag', ['--help', '-h'])
+def test_help_prints_the_usage_and_starts_no_node(module: str, flag: str) -> None:
+    """``compensator --help``: how to run it and what it does, exit 0.
+
+    Not 'parameter coefficients_file is not set', as before; no ROS context is made.
+    """
+    done = subprocess.run(
+        [sys.executable, '-m', f'fog_temp_comp.ros.{module}', flag],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith('usage: ros2 run fog_temp_comp '), done.stdout
+    assert 'coefficients_file:=COEFFS.yaml' in done.stdout and 'imu/data' in done.stdout
+    assert 'ERROR' not in done.stderr

@@ -120,7 +120,7 @@ class CompensatorLifecycleNode(CompensatorShell, LifecycleNode):
 
 def main(args: Sequence[str] | None = None) -> int:
     """Entry point of ``ros2 run fog_temp_comp compensator_lifecycle``."""
-    return run(CompensatorLifecycleNode, args)
+    return run(CompensatorLifecycleNode, args, about=__doc__ or '')
 
 
 if __name__ == '__main__':

@@ -69,7 +69,7 @@ class CompensatorNode(CompensatorShell, Node):
 
 def main(args: Sequence[str] | None = None) -> int:
     """Entry point of ``ros2 run fog_temp_comp compensator``."""
-    return run(CompensatorNode, args)
+    return run(CompensatorNode, args, about=__doc__ or '')
 
 
 if __name__ == '__main__':

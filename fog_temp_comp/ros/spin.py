@@ -6,6 +6,7 @@ parameter or coefficients file is one ``ERROR:`` line on stderr and exit code 1.
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable, Sequence
 
@@ -17,10 +18,22 @@ from fog_temp_comp.core.coefficients import CoefficientsError
 from fog_temp_comp.ros.params import ParameterError, params_files, read_params_file
 from fog_temp_comp.ros.rclpy_compat import RCLError, events_executor_factory
 
-__all__ = ['EXECUTORS', 'make_executor', 'run']
+__all__ = ['EXECUTORS', 'make_executor', 'run', 'usage']
 
 #: values of the ``executor`` parameter
 EXECUTORS = ('auto', 'events', 'single')
+
+
+def usage(program: str, about: str) -> str:
+    """The ``--help`` text of a node executable: how it is run, then ``about``."""
+    name = program.rsplit('/', 1)[-1] or 'compensator'
+    return (
+        f'usage: ros2 run fog_temp_comp {name} --ros-args -p coefficients_file:=COEFFS.yaml\n'
+        '         [-p NAME:=VALUE ...] [--params-file PARAMS.yaml] [-r FROM:=TO ...]\n\n'
+        f'{about.strip()}\n\n'
+        "Parameters: the README's Parameters table (every one, with its unit and default), or\n"
+        f'`ros2 param describe /fog_temp_compensator NAME` while it runs.'
+    )
 
 
 def make_executor(node: Node) -> Executor:
@@ -47,9 +60,22 @@ def make_executor(node: Node) -> Executor:
     return SingleThreadedExecutor(context=node.context)
 
 
-def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> int:
-    """Init rclpy, spin one ``node_class(params_file_paths=...)`` until shutdown; exit code."""
+def run(
+    node_class: Callable[..., Node], args: Sequence[str] | None = None, *, about: str = ''
+) -> int:
+    """Init rclpy, spin one ``node_class(params_file_paths=...)`` until shutdown; exit code.
+
+    ``-h`` or ``--help`` before any ``--ros-args``: the usage and ``about`` (the executable's
+    docstring) on stdout, exit 0, no ROS started.
+    """
     argv = list(sys.argv if args is None else args)
+    ours = argv[1 : argv.index('--ros-args')] if '--ros-args' in argv else argv[1:]
+    if '-h' in ours or '--help' in ours:
+        try:
+            print(usage(argv[0] if argv else 'compensator', about), flush=True)
+        except BrokenPipeError:  # | head: the rest goes nowhere, the exit stays clean
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     try:  # before rcl, which logs its own error and raises on a file it cannot parse
         files = params_files(argv)
         for path in files:

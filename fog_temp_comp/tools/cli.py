@@ -206,7 +206,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
     stdout = sys.stdout
-    sys.stdout = ClosedPipeSafe(stdout)  # type: ignore[assignment]  # ``| head``: still written
+    sys.stdout = ClosedPipeSafe(stdout)  # ``| head``: the command still writes its outputs
     try:  # SIGTERM, SIGHUP: unwind (partial outputs removed) and exit 128 + n, as SIGINT
         with terminating_on_signals():
             from fog_temp_comp.tools import commands

@@ -124,10 +124,10 @@ def simulate_fleet_command(
     (out_dir / 'fleet.yaml').write_text(yaml.safe_dump(manifest, sort_keys=False))
     (out_dir / 'population.yaml').write_text(yaml.safe_dump(truth, sort_keys=False))
     faulty = {u: t['fault'] for u, t in truth.items() if t['fault'] != 'none'}
+    which = ': ' + ', '.join(f'{u} {f}' for u, f in faulty.items()) if faulty else ''
     print(
-        f'wrote {n_units} units to {out_dir} ({len(faulty)} faulty: '
-        + ', '.join(f'{u} {f}' for u, f in faulty.items())
-        + f'); manifest {out_dir / "fleet.yaml"}',
+        f'wrote {n_units} units to {out_dir} ({len(faulty)} faulty{which}); manifest '
+        f'{out_dir / "fleet.yaml"}',
         file=stdout,
     )
     return 0
