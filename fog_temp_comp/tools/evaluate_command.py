@@ -106,7 +106,7 @@ def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) 
     for count, text in (
         (
             counters.imu_temperature_clamped,
-            f'temperature left the calibrated range [{t_rng.low:.3g}, {t_rng.high:.3g}] degC '
+            f'temperature left the calibrated range [{t_rng.low:.2f}, {t_rng.high:.2f}] degC '
             'and was clamped',
         ),
         (
@@ -116,7 +116,7 @@ def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) 
         ),
         (
             counters.imu_tdot_extrapolated,
-            f'Tdot left the calibrated range [{r_rng.low:.3g}, {r_rng.high:.3g}] degC/min; the '
+            f'Tdot left the calibrated range [{r_rng.low:.3f}, {r_rng.high:.3f}] degC/min; the '
             'linear Tdot terms were applied beyond it',
         ),
     ):
