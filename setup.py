@@ -37,7 +37,6 @@ setup(
     maintainer_email='fog-temp-comp@example.com',
     description='Temperature-drift compensation for fibre-optic gyros (ROS 2 node + tools).',
     license='Apache-2.0',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'compensator = fog_temp_comp.ros.node:main',
