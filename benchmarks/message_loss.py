@@ -248,18 +248,62 @@ def plant_config(plant: str) -> SimulationConfig:
     return SimulationConfig(imu_hz=2.0) if plant == 'default' else draw_plant(int(plant))
 
 
-def study_plant(plant: str, patterns: list[str], scenarios: list[str]) -> None:
-    """Print the rows of one plant: clean, then each pattern and scenario."""
-    started = time.perf_counter()
+@dataclasses.dataclass
+class Baseline:
+    """One plant's clean pipeline: the runs, the default calibration and its clean figures."""
+
+    train: SimulatedRun
+    tests: dict[str, SimulatedRun]  # the replayed runs by name
+    coeffs: Coefficients
+    model: str
+    lags: str
+    clean_rad_s: dict[str, np.ndarray]  # each replayed run's corrected rates
+    clean_counters: dict[str, int]
+    every: dict[str, Mask]  # every gyro message of each replayed run
+    clean: dict[str, float]  # the clean replay's figures
+    clean_oracle: dict[str, float]  # the oracle's on the same messages
+
+
+def baseline(plant: str) -> Baseline:
+    """Simulate ``plant``'s plan (seed 0), calibrate on its training run, replay the others."""
     runs = list(simulate_plan(plant_config(plant), seed=0, runs=RUNS).values())
     train, tests = runs[0], {r.name: r for r in runs[1:]}
     coeffs, model, lags = calibrated(train)
     clean_rad_s, clean_counters = replayed(tests, coeffs)
     every = {n: np.ones(r.imu_stamps_s.size, dtype=bool) for n, r in tests.items()}
     clean, _, clean_oracle = scored_alike(tests, every, clean_rad_s, clean_rad_s)
+    return Baseline(
+        train, tests, coeffs, model, lags, clean_rad_s, clean_counters, every, clean, clean_oracle
+    )
+
+
+def run_study(
+    study: Callable[[str, list[str], list[str]], None],
+    header: str,
+    plants: list[str],
+    cases: list[str],
+    scenarios: list[str],
+) -> None:
+    """Print ``header`` (table columns), then ``study``'s rows of each plant, in one process."""
+    os.environ.setdefault(ONE_PROCESS_VARIABLE, '1')
+    print(header)
+    print('|---' * header.count('|', 1) + '|')
+    started = time.perf_counter()
+    for plant in plants:
+        study(plant, cases, scenarios)
+    print(f'(total {time.perf_counter() - started:.0f} s)', flush=True)
+
+
+def study_plant(plant: str, patterns: list[str], scenarios: list[str]) -> None:
+    """Print the rows of one plant: clean, then each pattern and scenario."""
+    started = time.perf_counter()
+    base = baseline(plant)
+    train, tests, coeffs, model = base.train, base.tests, base.coeffs, base.model
+    clean_rad_s, clean_oracle = base.clean_rad_s, base.clean_oracle
     print(
-        f'| {plant} | none | - | {model_text(model, lags)} | {cells(clean, clean, clean_oracle)} '
-        f'| - | - | {counter_text(clean_counters)} |',
+        f'| {plant} | none | - | {model_text(model, base.lags)} '
+        f'| {cells(base.clean, base.clean, clean_oracle)} | - | - '
+        f'| {counter_text(base.clean_counters)} |',
         flush=True,
     )
     for pattern in patterns:
@@ -289,17 +333,12 @@ def main() -> None:
     parser.add_argument('--patterns', nargs='+', choices=list(PATTERNS), default=list(PATTERNS))
     parser.add_argument('--scenarios', nargs='+', choices=('a', 'b'), default=['a', 'b'])
     args = parser.parse_args()
-    os.environ.setdefault(ONE_PROCESS_VARIABLE, '1')
-    print(
+    header = (
         '| plant | loss | scenario | model | 10 s ratio: lossy / clean / oracle '
         '| 100 s deg/h | range cycles | range soaks | 100 s: lossy over clean '
         '| oracle 100 s: kept over all | counters |'
     )
-    print('|---|---|---|---|---|---|---|---|---|---|---|')
-    started = time.perf_counter()
-    for plant in args.plants:
-        study_plant(plant, args.patterns, args.scenarios)
-    print(f'(total {time.perf_counter() - started:.0f} s)', flush=True)
+    run_study(study_plant, header, args.plants, args.patterns, args.scenarios)
 
 
 if __name__ == '__main__':

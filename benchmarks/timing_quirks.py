@@ -51,29 +51,27 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-import os
 import time
 import zlib
 from collections.abc import Callable
 
 import numpy as np
 from message_loss import (
-    RUNS,
+    baseline,
     calibrated,
     cells,
     counter_text,
     growth_percent,
     model_text,
-    plant_config,
     replayed,
+    run_study,
     scored_alike,
 )
 
 from fog_temp_comp.core.coefficients import Coefficients
 from fog_temp_comp.core.compensator import Compensator
-from fog_temp_comp.core.forked import ONE_PROCESS_VARIABLE
 from fog_temp_comp.core.publishing import with_reading_timing
-from fog_temp_comp.tools.simulate import SimulatedRun, simulate_plan
+from fog_temp_comp.tools.simulate import SimulatedRun
 
 #: a timing quirk: the run as a quirky driver stamps it, from a generator
 Quirk = Callable[[SimulatedRun, np.random.Generator], SimulatedRun]
@@ -248,16 +246,13 @@ def with_timing(coeffs: Coefficients, train: SimulatedRun) -> Coefficients:
 def study_plant(plant: str, quirks: list[str], scenarios: list[str]) -> None:
     """Print the rows of one plant: clean, then each quirk and scenario."""
     started = time.perf_counter()
-    runs = simulate_plan_runs(plant)
-    train, tests = runs[0], {r.name: r for r in runs[1:]}
-    coeffs, model, lags = calibrated(train)
-    clean_rad_s, clean_counters = replayed(tests, coeffs)
-    every = {n: np.ones(r.imu_stamps_s.size, dtype=bool) for n, r in tests.items()}
-    clean, _, clean_oracle = scored_alike(tests, every, clean_rad_s, clean_rad_s)
+    base = baseline(plant)
+    train, tests, coeffs, model = base.train, base.tests, base.coeffs, base.model
+    clean_rad_s, clean_counters, every = base.clean_rad_s, base.clean_counters, base.every
     print(
-        f'| {plant} | none | - | {model_text(model, lags)} | {timing_text(coeffs)} '
-        f'| {cells(clean, clean, clean_oracle)} | - | {longest_warm_up_s(tests, coeffs)} '
-        f'| {counter_text(clean_counters)} |',
+        f'| {plant} | none | - | {model_text(model, base.lags)} | {timing_text(coeffs)} '
+        f'| {cells(base.clean, base.clean, base.clean_oracle)} | - '
+        f'| {longest_warm_up_s(tests, coeffs)} | {counter_text(clean_counters)} |',
         flush=True,
     )
     for quirk in quirks:
@@ -283,28 +278,18 @@ def study_plant(plant: str, quirks: list[str], scenarios: list[str]) -> None:
     print(f'(plant {plant}: {time.perf_counter() - started:.0f} s)', flush=True)
 
 
-def simulate_plan_runs(plant: str) -> list[SimulatedRun]:
-    """The plan's runs of ``plant``, seed 0: training first."""
-    return list(simulate_plan(plant_config(plant), seed=0, runs=RUNS).values())
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--plants', nargs='+', default=['100', '105', '900'])
     parser.add_argument('--quirks', nargs='+', choices=list(QUIRKS), default=list(QUIRKS))
     parser.add_argument('--scenarios', nargs='+', choices=('a', 'b'), default=['a', 'b'])
     args = parser.parse_args()
-    os.environ.setdefault(ONE_PROCESS_VARIABLE, '1')
-    print(
+    header = (
         '| plant | quirk | scenario | model | period / hold / spread s '
         '| 10 s ratio: quirky / clean / oracle | 100 s deg/h | range cycles | range soaks '
         '| 100 s: quirky over clean | warm-up | counters |'
     )
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|')
-    started = time.perf_counter()
-    for plant in args.plants:
-        study_plant(plant, args.quirks, args.scenarios)
-    print(f'(total {time.perf_counter() - started:.0f} s)', flush=True)
+    run_study(study_plant, header, args.plants, args.quirks, args.scenarios)
 
 
 if __name__ == '__main__':

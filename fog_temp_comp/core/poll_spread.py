@@ -24,6 +24,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from fog_temp_comp.core.sensor_noise import BURST_FRACTION
+
 FloatArray = NDArray[np.float64]
 
 __all__ = [
@@ -36,8 +38,8 @@ __all__ = [
 ]
 
 #: a reading closer than this fraction of the sensor's interval to the one before came in the
-#: same poll
-IN_POLL_FRACTION = 0.1
+#: same poll: the fraction that makes ``calibrate``'s reading interval one between deliveries
+IN_POLL_FRACTION = BURST_FRACTION
 #: a reading more than this many of the sensor's intervals after the one before begins a poll
 SILENCE_INTERVALS = 1.5
 #: a record is delivered in polls where at least this share of its readings came in a poll
