@@ -20,7 +20,7 @@ from rosharness import Harness, make_imu, rate_of, stamp_of
 from fog_temp_comp.core.coefficients import Coefficients, CoefficientsError, load, save, to_dict
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.units import RAD_S_PER_DEG_H
-from fog_temp_comp.ros.diagnostics import ON_CHANGE_TEXT, POLLED_TEXT
+from fog_temp_comp.ros.diagnostics import ON_CHANGE_TEXT, POLLED_TEXT, TIMING_TAKEN_TEXT
 from fog_temp_comp.ros.node import CompensatorNode
 
 from simdata import example_coefficients
@@ -488,25 +488,61 @@ def test_a_temperature_published_on_change_untold_is_said_when_it_goes_stale(
     assert status.level == WARN
 
 
-def test_a_temperature_delivered_in_polls_untold_is_said_when_it_goes_stale(
-    harness: Harness,
-) -> None:
-    """No ``temperature_spread_s`` in the file: a silence after polled readings says why.
-
-    Polls every 30 s of 30 readings stamped on receipt 1 ms apart (the file's sensor: 2 s).
-    """
-    h = harness
-    for poll in range(1, 6):
+def send_polls(h: Harness, polls: int) -> float:
+    """Polls every 30 s of 30 readings stamped on receipt 1 ms apart; the last receipt, s."""
+    for poll in range(1, polls + 1):
         receipt = T0 + 30.0 * poll
         for j in range(30):
             h.send_temperature(receipt + 0.001 * j, 25.0 + 0.0625 * ((poll * 30 + j) // 7))
         assert h.send_imu(receipt + 0.5, RATE) is not None
-    assert POLLED_TEXT not in h.diagnose().message
-    assert h.send_imu(receipt + 20.0, RATE) is not None  # 20 s on: stale after 10 s
+    return receipt
+
+
+def test_a_temperature_delivered_in_polls_untold_is_said_when_it_goes_stale(
+    ros_context: object, coeffs_file: Path
+) -> None:
+    """No ``temperature_spread_s`` in the file, kept so: a silence after polls says why.
+
+    The file's sensor: 2 s; ``adopt_delivery`` false.
+    """
+    h = Harness(ros_context, start(ros_context, coeffs_file, adopt_delivery=False))
+    try:
+        receipt = send_polls(h, 5)
+        assert POLLED_TEXT not in h.diagnose().message
+        assert h.send_imu(receipt + 20.0, RATE) is not None  # 20 s on: stale after 10 s
+        status = h.diagnose()
+        assert 'temperature stale' in status.message and POLLED_TEXT in status.message
+        assert ON_CHANGE_TEXT not in status.message
+        assert h.node.compensator.status.counters.temperature_silences_polled >= 1
+        assert diag_values(status)['temperature_timing_taken'] == 'none'
+    finally:
+        h.close()
+
+
+def test_the_node_takes_an_untold_polls_timing_from_the_readings(harness: Harness) -> None:
+    """By default the node takes the spread and the interval between polls at a silence.
+
+    Said in the diagnostics, with the values taken; a silence between polls is then no longer
+    stale, and the readings of a poll are spread back. A time jump forgets the readings
+    watched before it.
+    """
+    h = harness
+    receipt = send_polls(h, 3)  # 90 readings: too few to judge
+    assert not h.node.compensator.adopted_delivery
+    receipt = send_polls(h, 6)  # the clock restarts: a time jump, then 180 readings
+    compensator = h.node.compensator
+    assert compensator.adopted_delivery == 'polled'
+    assert compensator.denoise.temperature_spread_s == pytest.approx(1.0, abs=0.01)
+    assert compensator.denoise.temperature_period_s == pytest.approx(30.0, abs=0.1)
+    assert h.send_imu(receipt + 20.0, RATE) is not None  # 20 s on: fresh (stale after 90 s)
     status = h.diagnose()
-    assert 'temperature stale' in status.message and POLLED_TEXT in status.message
-    assert ON_CHANGE_TEXT not in status.message
-    assert h.node.compensator.status.counters.temperature_silences_polled >= 1
+    assert 'stale' not in status.message and POLLED_TEXT not in status.message
+    assert TIMING_TAKEN_TEXT in status.message, status.message
+    taken = diag_values(status)['temperature_timing_taken']
+    assert taken == compensator.status.timing_taken and taken.startswith('delivered in polls')
+    # taken at the 5th poll: the 6th one's readings were fed one interval apart, ending at
+    # its first one's receipt
+    assert compensator.status.last_temperature_stamp_s == pytest.approx(receipt, abs=1e-6)
 
 
 def test_a_temperature_delivered_in_polls_is_spread_back_on_the_node(

@@ -15,8 +15,8 @@ import yaml
 from test_compensator import Event, _assert_same_state, _drive
 from test_publishing import CHAMBER, write_record
 
-from fog_temp_comp.core.compensator import Compensator
-from fog_temp_comp.core.delivery_watch import DeliveryWatch
+from fog_temp_comp.core.compensator import Compensator, GuardSettings
+from fog_temp_comp.core.delivery_watch import WATCH_READINGS, DeliveryWatch
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.model_choice import choose_and_calibrate
 from fog_temp_comp.core.poll_spread import PollSpread, polled_interval_s, spread_polls
@@ -87,19 +87,25 @@ def test_the_readings_of_a_poll_are_stamped_back_at_the_sensors_interval(
 def test_the_watch_and_the_compensator_tell_polls_the_settings_do_not_say(
     periodic: ChamberRecord,
 ) -> None:
-    """Told no spread, a polled sensor's silences are gaps, each counted as polled."""
+    """Told no spread and kept so, a polled sensor's silences are gaps, each counted as polled."""
     watch = DeliveryWatch()
-    for stamp in periodic.temp_stamps_s[:300].tolist():
+    for stamp in periodic.temp_stamps_s[:WATCH_READINGS].tolist():
         watch.add(stamp, 20.0)
     assert not watch.looks_polled()
-    for stamp in polled(periodic, 30.0).temp_stamps_s[300:600].tolist():
+    later = polled(periodic, 30.0).temp_stamps_s[WATCH_READINGS:]
+    for stamp in later[: WATCH_READINGS // 2].tolist():  # half the last readings polled
+        watch.add(stamp, 20.0)
+    assert not watch.looks_polled()
+    for stamp in later[WATCH_READINGS // 2 : WATCH_READINGS].tolist():
         watch.add(stamp, 20.0)
     assert watch.looks_polled()
     fit = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)[0].coefficients
     receipt = polled(periodic, 30.0).temp_stamps_s
     for spread, expected in ((0.0, 'polled'), (1.0, '')):
         comp = Compensator(
-            fit.model, dataclasses.replace(fit.denoise, temperature_spread_s=spread)
+            fit.model,
+            dataclasses.replace(fit.denoise, temperature_spread_s=spread),
+            GuardSettings(adopt_delivery=False),
         )
         for k in range(1000):
             comp.add_temperature(float(receipt[k]), float(periodic.temperature_degC[k]))
@@ -113,6 +119,61 @@ def test_the_watch_and_the_compensator_tell_polls_the_settings_do_not_say(
         assert counters.temperature_silences_polled == (0 if spread else gaps - 1) or (
             not spread and 0 < counters.temperature_silences_polled <= gaps
         )
+
+
+def test_the_compensator_takes_an_untold_polls_timing_from_the_readings(
+    periodic: ChamberRecord,
+) -> None:
+    """Told no spread, the compensator takes it (and the interval between polls) at a silence.
+
+    Once the last readings hold three polls (the sensor's 1 s, polls 30 s apart), at the first
+    silence after 100 readings; then it feeds the stamps the told compensator feeds, and a
+    silence between polls is no longer stale. The readings of a sensor read at its rate are
+    never taken for polls.
+    """
+    fit = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)[0].coefficients
+    receipt, values = polled(periodic, 30.0).temp_stamps_s, periodic.temperature_degC
+    told = Compensator(
+        fit.model,
+        dataclasses.replace(fit.denoise, temperature_period_s=30.0, temperature_spread_s=1.0),
+    )
+    untold = Compensator(fit.model, fit.denoise)
+    assert untold.stale_after_s == 10.0  # the file's 1 s sensor
+    taken_at = None
+    for k in range(3000):
+        told.add_temperature(float(receipt[k]), float(values[k]))
+        untold.add_temperature(float(receipt[k]), float(values[k]))
+        if taken_at is None and untold.adopted_delivery:
+            taken_at = k
+    assert untold.adopted_delivery == 'polled' and taken_at is not None
+    assert 100 <= taken_at <= 130 and receipt[taken_at] - receipt[taken_at - 1] > 20.0
+    assert untold.denoise.temperature_spread_s == pytest.approx(1.0, abs=5e-3)
+    assert untold.denoise.temperature_period_s == pytest.approx(30.0, abs=0.1)
+    assert untold.stale_after_s == pytest.approx(90.0, abs=0.3)
+    assert untold.status.timing_taken == (
+        f'delivered in polls: temperature_spread_s {untold.denoise.temperature_spread_s:g}, '
+        f'temperature_period_s {untold.denoise.temperature_period_s:g}'
+    )
+    counters = untold.status.counters
+    assert counters.temperature_silences_polled == 1  # the silence it was taken at
+    # from the poll after it on, the stamps fed are the told compensator's
+    assert untold.status.last_temperature_stamp_s == told.status.last_temperature_stamp_s
+    assert untold.status.tdot_degC_per_min == pytest.approx(
+        told.status.tdot_degC_per_min, abs=2e-3
+    )
+    untold.correct_xyz(float(receipt[2999]) + 20.0, 1e-4, 0.0, 0.0)
+    assert not untold.status.temperature_stale and not untold.untold_delivery
+    # a reset (a time jump) keeps what was taken: it is the driver's
+    untold.reset()
+    assert untold.adopted_delivery == 'polled' and untold.status.timing_taken
+    # at its rate, with readings lost: nothing taken
+    lossy = np.random.default_rng(4).random(3000) > 0.2
+    lossy[1000:1030] = False  # and a silence of 30 s
+    rated = Compensator(fit.model, fit.denoise)
+    for k in np.flatnonzero(lossy).tolist():
+        rated.add_temperature(float(periodic.temp_stamps_s[k]), float(values[k]))
+    assert rated.status.counters.temperature_gaps_bridged == 1
+    assert not rated.adopted_delivery and not rated.status.timing_taken
 
 
 def test_the_compensator_feeds_the_spread_stamps(periodic: ChamberRecord) -> None:
@@ -170,11 +231,24 @@ def test_calibrate_writes_the_spread_and_compensate_applies_it(
     out = tmp_path / 'untold out'
     assert cli.main(['compensate', str(polled_bag), '--coeffs', str(coeffs), '-o', str(out)]) == 0
     err = capsys.readouterr().err
-    assert 'as from a driver that polls the sensor and stamps on receipt' in err, err
-    assert 'no denoise.temperature_spread_s' in err
+    assert (
+        'NOTE: ' in err and 'as from a driver that polls the sensor and stamps on receipt' in err
+    )
+    assert 'no denoise.temperature_spread_s: then the compensator took their timing' in err, err
+    # the interval between deliveries: from a poll's last reading to the next one's first
+    assert 'delivered in polls: temperature_spread_s 1, temperature_period_s 29.97' in err
+    assert 'WARNING: ' not in err  # the first silences are bridged
     assert cli.main(['evaluate', str(polled_bag), '--coeffs', str(coeffs)]) == 0
     captured = capsys.readouterr()
     assert 'after readings that look delivered in polls' in captured.out + captured.err
+    assert 'then their timing was taken from them' in captured.out + captured.err
+    # kept as the file says: a warning, as every silence went stale
+    kept = tmp_path / 'kept out'
+    args = ['compensate', str(polled_bag), '--coeffs', str(coeffs), '-o', str(kept)]
+    assert cli.main([*args, '--keep-timing']) == 0
+    err = capsys.readouterr().err
+    assert 'WARNING: ' in err and 'took their timing' not in err
+    assert 'no denoise.temperature_spread_s: calibrate on bags from this driver' in err
 
 
 def test_the_block_path_spreads_as_the_per_message_path(periodic: ChamberRecord) -> None:

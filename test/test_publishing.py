@@ -17,7 +17,7 @@ from test_model_choice import CHAMBER as MODEL_CHOICE_CHAMBER
 
 from fog_temp_comp.bag.bagio import BagWriter, make_imu, make_temperature, s_to_stamp_ns
 from fog_temp_comp.bag.stream import read_record
-from fog_temp_comp.core.compensator import Compensator
+from fog_temp_comp.core.compensator import Compensator, GuardSettings
 from fog_temp_comp.core.delivery_watch import WATCH_READINGS, DeliveryWatch
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.held_readings import expand_held
@@ -29,6 +29,7 @@ from fog_temp_comp.core.publishing import (
     hold_interval_s,
     prepared,
     published_on_change,
+    with_reading_timing,
 )
 from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.tools import cli
@@ -97,7 +98,7 @@ def test_the_online_watch_judges_the_last_readings_as_calibrate_judges_a_record(
             zip(record.temp_stamps_s, record.temperature_degC, strict=True)
         ):
             watch.add(float(stamp), float(value))
-            if k in (50, 99, 300):  # too few; then a window that wrapped round
+            if k in (50, 99, WATCH_READINGS + 200):  # too few; then a window that wrapped round
                 last = slice(max(k + 1 - WATCH_READINGS, 0), k + 1)
                 window = dataclasses.replace(
                     record,
@@ -110,7 +111,9 @@ def test_the_online_watch_judges_the_last_readings_as_calibrate_judges_a_record(
     watch = DeliveryWatch()
     for record in (changed, periodic):
         for stamp, value in zip(
-            record.temp_stamps_s[:400], record.temperature_degC[:400], strict=True
+            record.temp_stamps_s[:WATCH_READINGS],
+            record.temperature_degC[:WATCH_READINGS],
+            strict=True,
         ):
             watch.add(float(stamp), float(value))
         assert watch.looks_on_change() == (record is changed)
@@ -119,7 +122,7 @@ def test_the_online_watch_judges_the_last_readings_as_calibrate_judges_a_record(
 def test_the_compensator_says_a_silence_looks_like_readings_published_on_change(
     periodic: ChamberRecord,
 ) -> None:
-    """Told no hold, a soak's silences are gaps: each one after readings on change is counted.
+    """Told no hold and kept so, a soak's silences are gaps: each after readings on change counted.
 
     A sensor published at its rate that stops is stale too, and not taken for one; told the
     hold, the silences are neither stale nor counted.
@@ -127,7 +130,7 @@ def test_the_compensator_says_a_silence_looks_like_readings_published_on_change(
     fit = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)[0].coefficients
     changed = on_change(periodic)
     for record, expected in ((changed, True), (periodic, False)):
-        comp = Compensator(fit.model, fit.denoise)
+        comp = Compensator(fit.model, fit.denoise, GuardSettings(adopt_delivery=False))
         stamps, values = record.temp_stamps_s[:600], record.temperature_degC[:600]
         silent = (stamps > stamps[400]) & (stamps < stamps[400] + 60.0)  # a silence of 60 s
         for k in np.flatnonzero(~silent).tolist():
@@ -151,6 +154,79 @@ def test_the_compensator_says_a_silence_looks_like_readings_published_on_change(
     told.correct_xyz(float(changed.temp_stamps_s[399]) + 60.0, 1e-4, 0.0, 0.0)
     assert not told.status.temperature_stale and not told.untold_delivery
     assert told.status.counters.temperature_silences_on_change == 0
+
+
+def test_the_compensator_takes_an_untold_hold_from_the_readings(periodic: ChamberRecord) -> None:
+    """Told no hold, the compensator takes one (and the conversion interval) at a silence.
+
+    At the first silence after 100 readings that look published on change: the hold
+    ``calibrate`` measures on them (twice the longest silence, at least 60 s), the held value
+    then put back as for a told hold, and a longer silence later lengthens it. Readings of the
+    sensor at its rate are never taken for readings on change.
+    """
+    fit = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)[0].coefficients
+    changed = on_change(periodic)
+    stamps, values = changed.temp_stamps_s, changed.temperature_degC
+    untold = Compensator(fit.model, fit.denoise)
+    taken_at = None
+    for k in range(stamps.size):
+        untold.add_temperature(float(stamps[k]), float(values[k]))
+        if taken_at is None and untold.adopted_delivery:
+            taken_at, hold = k, untold.denoise.temperature_hold_s
+            silence = float(stamps[k] - stamps[k - 1])
+            assert silence > untold.guard.temperature_timeout_s  # taken at a silence
+            before = stamps[max(k - WATCH_READINGS, 0) : k + 1]
+            assert hold == pytest.approx(
+                max(HOLD_FACTOR * float(np.diff(before).max()), HOLD_MIN_S), abs=1e-3
+            )
+            assert untold.denoise.temperature_period_s == pytest.approx(1.0, abs=0.01)
+    assert taken_at is not None and taken_at >= 100
+    assert untold.adopted_delivery == 'on change'
+    assert untold.status.timing_taken.startswith('published only on change: temperature_hold_s')
+    counters = untold.status.counters
+    assert counters.temperature_silences_on_change == 1
+    assert counters.temperature_held > 1000  # the held value put back since
+    # as with the hold calibrate measures on the whole record, up to the silences before
+    told = Compensator(fit.model, with_reading_timing(fit.denoise, [changed]))
+    for k in range(stamps.size):
+        told.add_temperature(float(stamps[k]), float(values[k]))
+    assert untold.status.tdot_degC_per_min == pytest.approx(
+        told.status.tdot_degC_per_min, abs=2e-3
+    )
+    rated = Compensator(fit.model, fit.denoise)
+    since = periodic.temp_stamps_s - periodic.temp_stamps_s[0]
+    silent = (since > 3000.0) & (since < 3060.0)  # a silence of 60 s
+    for k in np.flatnonzero(~silent).tolist():
+        rated.add_temperature(
+            float(periodic.temp_stamps_s[k]), float(periodic.temperature_degC[k])
+        )
+    assert rated.status.counters.temperature_gaps_bridged == 1
+    assert not rated.adopted_delivery
+
+
+def test_a_hold_taken_from_the_readings_grows_with_a_longer_silence(
+    periodic: ChamberRecord,
+) -> None:
+    """Taken at 60 s from silences of up to 20 s, it becomes twice a 200 s silence after it."""
+    fit = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)[0].coefficients
+    comp = Compensator(fit.model, fit.denoise)
+    stamp = 1000.0
+    for k in range(150):  # a dithering reading, 1-20 s apart
+        stamp += (1.0, 3.0, 8.0, 20.0)[k % 4]
+        comp.add_temperature(stamp, 20.0 + (k % 2) / 16)
+    assert comp.adopted_delivery == 'on change'
+    assert comp.denoise.temperature_hold_s == HOLD_MIN_S
+    assert comp.status.counters.temperature_gaps_bridged > 0  # the 20 s ones, before
+    gaps = comp.status.counters.temperature_gaps_bridged
+    comp.add_temperature(stamp + 200.0, 20.0 + 2 / 16)
+    assert comp.status.counters.temperature_gaps_bridged == gaps + 1  # past the hold: a gap
+    assert comp.denoise.temperature_hold_s == HOLD_FACTOR * 200.0
+    assert comp.status.timing_taken == (
+        'published only on change: temperature_hold_s 400, temperature_period_s 1'
+    )
+    comp.add_temperature(stamp + 500.0, 20.0 + 1 / 16)  # within the new hold: no gap
+    assert comp.status.counters.temperature_gaps_bridged == gaps + 1
+    assert comp.status.counters.temperature_silences_on_change == 1
 
 
 def test_a_short_hold_is_at_least_a_minute(periodic: ChamberRecord) -> None:
@@ -243,15 +319,30 @@ def test_calibrate_and_compensate_a_bag_published_on_change(
     )
     err = capsys.readouterr().err
     assert 'as from a driver that publishes only on change' in err, err
+    assert 'then the compensator took their timing from them (published only on change' in err
+    untold = read_record(out, gyro_topic='/imu/data', temp_topic=TEMP_TOPIC)
     assert cli.main(['evaluate', str(bags['on change']), '--coeffs', str(coeffs)]) == 0
     captured = capsys.readouterr()
     assert 'after readings that look published only on change' in captured.out + captured.err
+    kept = tmp_path / 'kept out'
+    args = ['compensate', str(bags['on change']), '--coeffs', str(coeffs), '-o', str(kept)]
+    assert cli.main([*args, '--keep-timing']) == 0
+    assert 'WARNING: ' in capsys.readouterr().err
+    kept_record = read_record(kept, gyro_topic='/imu/data', temp_topic=TEMP_TOPIC)
     a, b = corrected['on change'], corrected['periodic']
     np.testing.assert_array_equal(a.imu_stamps_s, b.imu_stamps_s)  # every gyro sample
     correction = periodic.rates_rad_s[-b.imu_stamps_s.size :] - b.rates_rad_s
     difference = a.rates_rad_s - b.rates_rad_s
     # the held readings reach the gyro up to 2 s late: 1e-4 of the correction here
     assert np.sqrt(np.mean(difference**2)) < 1e-3 * np.sqrt(np.mean(correction**2))
+    # untold, the timing taken from the readings: the told output, once taken; kept so, not
+    error = {}
+    for label, got in (('taken', untold), ('kept', kept_record)):
+        rows = np.isin(b.imu_stamps_s, got.imu_stamps_s)
+        later = got.imu_stamps_s > got.imu_stamps_s[0] + 3600.0
+        off = got.rates_rad_s[later] - b.rates_rad_s[rows][later]
+        error[label] = np.sqrt(np.mean(off**2)) / np.sqrt(np.mean(correction**2))
+    assert error['taken'] < min(1e-3, 0.3 * error['kept']), error
 
 
 def write_record(path: Path, record: ChamberRecord) -> Path:

@@ -29,13 +29,11 @@ from fog_temp_comp.core.compensator_types import (
     CompensatorCounters,
     CompensatorStatus,
     GuardSettings,
-    stale_after_s,
 )
+from fog_temp_comp.core.delivery_timing import _DeliveryTiming
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
-from fog_temp_comp.core.held_readings import HeldReadings
 from fog_temp_comp.core.lost_spans import _LostSpans
 from fog_temp_comp.core.model import DriftModel, scalar_term_function
-from fog_temp_comp.core.poll_spread import PollSpread
 from fog_temp_comp.core.rest import RestLearner, RestSettings
 from fog_temp_comp.core.tdot import make_estimator
 from fog_temp_comp.core.tdot_estimate import TdotEstimate, TdotEstimator
@@ -53,7 +51,7 @@ __all__ = [
 ]
 
 
-class Compensator(_BlockCorrection, _TemperatureLeaps, _LostSpans):
+class Compensator(_BlockCorrection, _DeliveryTiming, _TemperatureLeaps, _LostSpans):
     """Online temperature-drift compensation for a 3-axis gyro.
 
     Parameters
@@ -108,11 +106,7 @@ class Compensator(_BlockCorrection, _TemperatureLeaps, _LostSpans):
             scalar_term_function(term) for term in model.terms
         ]
         self._coefficient_rows = model.coefficients.tolist()
-        self._set_stale_rule()
-        # a sensor published only on change: its held value put back at its interval
-        self._held = HeldReadings(denoise.temperature_period_s, denoise.temperature_hold_s)
-        # a driver that delivers the readings in polls: stamped back at the sensor's interval
-        self._spread = PollSpread(denoise.temperature_spread_s)
+        self._set_timing(denoise)  # held readings, polls spread, the stale rule
         self._held_due_s = math.inf  # a gyro stamp past this puts back held readings
         self._no_holes()
 
@@ -126,14 +120,6 @@ class Compensator(_BlockCorrection, _TemperatureLeaps, _LostSpans):
         self._guard = guard
         self._set_stale_rule()
 
-    def _set_stale_rule(self) -> None:
-        """The stale age, the extrapolation horizon (s) and the fault band (degC) of the guard."""
-        self._stale_after_s = stale_after_s(self._guard, self.denoise.temperature_period_s)
-        self._horizon_s = 2 * self.denoise.tdot_period_s + self._stale_after_s
-        calibrated = self.model.temperature_range_degC
-        margin = self._guard.temperature_fault_margin_degC
-        self._fault_band = (calibrated.low - margin, calibrated.high + margin)
-
     @property
     def plausible_temperature_degC(self) -> tuple[float, float]:
         """(low, high) degC: readings outside are sensor faults (calibrated range +- margin)."""
@@ -146,31 +132,6 @@ class Compensator(_BlockCorrection, _TemperatureLeaps, _LostSpans):
             return None
         return (self._last_reading_stamp_s, self._last_temperature)
 
-    @property
-    def stale_after_s(self) -> float:
-        """Age (s) past which temperature is stale and a pause between readings is a gap.
-
-        The guard's ``temperature_timeout_s``, or 3 of the sensor's calibrated intervals
-        (``denoise.temperature_period_s``) where longer (:func:`stale_after_s`). A sensor
-        published only on change (``denoise.temperature_hold_s``) has its held value put back
-        at its interval (:mod:`~fog_temp_comp.core.held_readings`), so its silences are not
-        stale until the hold is over.
-        """
-        return self._stale_after_s
-
-    @property
-    def untold_delivery(self) -> str:
-        """How the last readings look delivered, where the settings do not say: '' (as taken).
-
-        ``'on change'`` with no ``temperature_hold_s``, ``'polled'`` with no
-        ``temperature_spread_s`` (:mod:`~fog_temp_comp.core.delivery_watch`): such a sensor's
-        silences are stale and gaps (counted at each gap in ``temperature_silences_*``).
-        """
-        watch = self._held.watch  # on change first: its intervals may look like polls too
-        if watch.looks_on_change():
-            return 'on change'
-        return 'polled' if not self._spread.interval_s and watch.looks_polled() else ''
-
     def reset(self) -> None:
         """Forget the temperature history (keeps the counters and the last correction).
 
@@ -182,11 +143,13 @@ class Compensator(_BlockCorrection, _TemperatureLeaps, _LostSpans):
             counters=self.status.counters,
             correction_deg_h=self.status.correction_deg_h,
             last_fault_degC=self.status.last_fault_degC,
+            timing_taken=self.status.timing_taken,
         )
         self._last_temperature = math.nan
         self._imu_jump_s = self._temperature_jump_s = self._imu_before_s = math.nan
         self._leap = None
         self._forget_readings()
+        self._held.watch.clear()  # stamps before a time jump say nothing of those after it
         if self.rest is not None:
             self.rest.reset()
 
@@ -258,9 +221,7 @@ class Compensator(_BlockCorrection, _TemperatureLeaps, _LostSpans):
         ):
             if stamp_s - last >= max(guard.time_jump_threshold_s, self._stale_after_s):
                 self._save_leap()  # undone if the next reading goes on from before it
-            delivery = self.untold_delivery
-            counters.temperature_silences_on_change += delivery == 'on change'
-            counters.temperature_silences_polled += delivery == 'polled'
+            self._silence(stamp_s, temperature_degC)  # may take the driver's timing
             self._after_gap(stamp_s - last)
         elif not self._plausible(stamp_s, temperature_degC):
             return False

@@ -87,6 +87,12 @@ class GuardSettings:
         goes on from the first reading after the gap, Tdot terms included. A longer gap, and
         any gap with another estimator, restarts the estimate, whose Tdot terms then wait for
         its warm-up. 0 restarts after every gap.
+    adopt_delivery : bool
+        Where the settings do not say how the driver delivers the readings (no
+        ``temperature_hold_s``, no ``temperature_spread_s``: coefficients fitted on another
+        driver's bags) and the last readings look published only on change or delivered in
+        polls, take their timing from them at a silence, as ``calibrate`` measures it
+        (:mod:`~fog_temp_comp.core.delivery_timing`), rather than go stale at every silence.
 
     """
 
@@ -101,6 +107,7 @@ class GuardSettings:
     step_confirm_samples: int = 5
     temperature_fault_margin_degC: float = TEMPERATURE_FAULT_MARGIN_DEGC
     temperature_bridge_s: float = TEMPERATURE_BRIDGE_S
+    adopt_delivery: bool = True
 
     def __post_init__(self) -> None:
         if self.stale_policy not in STALE_POLICIES:
@@ -229,5 +236,9 @@ class CompensatorStatus:
     awaiting_temperature_since_s: float = math.nan
     #: the last reading rejected as a sensor fault, degC (NaN: none yet)
     last_fault_degC: float = math.nan
+    #: the reading timing taken from the readings, the settings silent
+    #: (:mod:`~fog_temp_comp.core.delivery_timing`): how they looked delivered and the
+    #: ``denoise.temperature_*`` values taken; '' none
+    timing_taken: str = ''
     correction_deg_h: tuple[float, float, float] = (0.0, 0.0, 0.0)
     counters: CompensatorCounters = field(default_factory=CompensatorCounters)

@@ -43,7 +43,7 @@ MIN_READINGS = 100
 #: (a sensor whose noise changes every reading is as good as periodic, and not flagged)
 MIN_INTERVAL_SPREAD = 3.0
 #: the online watch keeps this many of the last readings
-WATCH_READINGS = 256
+WATCH_READINGS = 1024
 
 
 def looks_published_on_change(runs: Sequence[tuple[FloatArray, FloatArray]]) -> bool:
@@ -81,11 +81,17 @@ class DeliveryWatch:
     def __init__(self) -> None:
         self._stamps_s = np.zeros(WATCH_READINGS)
         self._values_degC = np.zeros(WATCH_READINGS)
-        self._count = 0  # readings added in all
+        self._count = 0  # readings added since the start or the last clear
         self._judged = -1  # the count when last judged on change
         self._verdict = False
         self._judged_polled = -1  # the count when last judged polled
         self._polled = False
+
+    def clear(self) -> None:
+        """Forget the readings (a time jump: stamps before it say nothing of those after)."""
+        self._count = 0
+        self._judged = self._judged_polled = -1
+        self._verdict = self._polled = False
 
     def add(self, stamp_s: float, temperature_degC: float) -> None:
         """One reading used (s, degC)."""
@@ -116,6 +122,11 @@ class DeliveryWatch:
             self._judged_polled = self._count
             self._polled = polled_interval_s([self._stamps_s[self._order()]]) > 0
         return self._polled
+
+    def readings(self) -> tuple[FloatArray, FloatArray]:
+        """The readings kept, oldest first: stamps (s) and degC, shape (n,) each."""
+        order = self._order()
+        return self._stamps_s[order], self._values_degC[order]
 
     def _order(self) -> NDArray[np.int64]:
         """Indices of the readings kept, oldest first."""

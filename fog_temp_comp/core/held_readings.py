@@ -54,7 +54,7 @@ class HeldReadings:
         self._j = 1
         #: stamp of the next held reading (inf: none due, ever, until a real reading)
         self.next_s = math.inf
-        #: while off, the readings: do they look published on change (or polled) all the same?
+        #: the last real readings: do they look published on change (or polled)?
         self.watch = DeliveryWatch()
 
     @property
@@ -63,9 +63,9 @@ class HeldReadings:
         return self._real_s
 
     def real(self, stamp_s: float, temperature_degC: float) -> None:
-        """A real reading was used: its value holds from ``stamp_s`` on (off: watched)."""
+        """A real reading was used: its value holds from ``stamp_s`` on (and it is watched)."""
+        self.watch.add(stamp_s, temperature_degC)
         if not self.period_s:
-            self.watch.add(stamp_s, temperature_degC)
             return
         self.value_degC = temperature_degC
         self._real_s = stamp_s

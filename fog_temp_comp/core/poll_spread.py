@@ -109,22 +109,31 @@ def polled_interval_s(stamps: Sequence[FloatArray]) -> float:
 
     Polled: at least :data:`MIN_POLLED_SHARE` of the readings came less than
     :data:`IN_POLL_FRACTION` of the mean interval after the one before (a driver that polls
-    every 5 s and stamps on receipt: 4 in 5 at 1 Hz). The interval is the mean over the
-    records (their spans over their readings), to the millisecond. Readings with the stamp of
-    the one before (a message sent twice) count for nothing. A sensor published only on change
-    may look polled too (changes a conversion apart against a mean of minutes): ask
+    every 5 s and stamps on receipt: 4 in 5 at 1 Hz). The interval is the time from a
+    record's first poll to its last but one over the readings taken in it (those of the polls
+    between), over all records, to the millisecond: exact from three polls, where a record
+    (the compensator's last readings) begins or ends in the middle of a poll. Readings with
+    the stamp of the one before (a message sent twice) count for nothing. A sensor published
+    only on change may look polled too (changes a conversion apart against a mean of minutes): ask
     :func:`~fog_temp_comp.core.publishing.published_on_change` first.
     """
-    span, count, in_poll = 0.0, 0, 0
+    span, count, pairs, in_poll = 0.0, 0, 0, 0
     for run in stamps:
-        intervals = np.diff(run[np.isfinite(run)])
-        intervals = intervals[intervals > 0]
+        run = run[np.isfinite(run)]
+        intervals = np.diff(run)
+        later = intervals > 0
+        run, intervals = run[np.r_[True, later]], intervals[later]
         if not intervals.size:
             continue
-        mean = float(intervals.sum()) / intervals.size
-        span += float(intervals.sum())
-        count += intervals.size
-        in_poll += int(np.count_nonzero(intervals < IN_POLL_FRACTION * mean))
-    if not count or in_poll < MIN_POLLED_SHARE * count:
+        close = intervals < IN_POLL_FRACTION * (float(intervals.sum()) / intervals.size)
+        pairs += intervals.size
+        in_poll += int(np.count_nonzero(close))
+        # the first readings of the polls after the first; the readings of polls 1 .. k - 1
+        # were taken between the receipts of polls 0 and k - 1 (the last may be cut short)
+        starts = np.flatnonzero(~close) + 1
+        if starts.size >= 2:
+            span += float(run[starts[-2]] - run[0])
+            count += int(starts[-1] - starts[0])
+    if not count or in_poll < MIN_POLLED_SHARE * pairs:
         return 0.0
     return round(span / count, 3)

@@ -31,6 +31,8 @@ POLLED_TEXT = (
     'sensor and stamps on receipt: set temperature_spread_s and temperature_period_s, or '
     'calibrate on bags from this driver (it writes both)'
 )
+#: the reading timing taken from the readings (CompensatorStatus.timing_taken), the file silent
+TIMING_TAKEN_TEXT = 'reading timing taken from the readings, the coefficients silent'
 #: the texts of the untold deliveries (Compensator.untold_delivery)
 DELIVERY_TEXTS = {'on change': ON_CHANGE_TEXT, 'polled': POLLED_TEXT}
 #: counters whose increase since the previous report is a warning
@@ -301,6 +303,14 @@ def _temperature_reasons(
                 'computed yet (time_source receive times them on arrival)',
             )
         )
+    if status.timing_taken:
+        reasons.append(
+            (
+                OK,
+                f'{TIMING_TAKEN_TEXT} ({status.timing_taken}): calibrate on bags from this '
+                'driver, or set them',
+            )
+        )
     if not status.estimator_ready:
         reasons.append((WARN, 'Tdot filter warming up'))
     if status.temperature_clamped:
@@ -322,6 +332,7 @@ def _estimate_values(status: CompensatorStatus) -> list[tuple[str, str]]:
         ('tdot_raw_degC_per_min', _num(status.tdot_raw_degC_per_min)),
         ('temperature_used_degC', _num(status.temperature_used_degC)),
         ('tdot_used_degC_per_min', _num(status.tdot_used_degC_per_min)),
+        ('temperature_timing_taken', status.timing_taken or 'none'),
     ]
     return values + [
         (f'correction_{axis}_deg_h', _num(float(status.correction_deg_h[j])))

@@ -203,6 +203,12 @@ GUARD_PARAMETERS: dict[str, tuple[Any, str]] = {
         'a gap between temperature readings up to this long (s) is bridged by the Kalman '
         "filter's prediction (Tdot terms go on); a longer one restarts it (0: every gap)",
     ),
+    'adopt_delivery': (
+        _GUARD_DEFAULTS.adopt_delivery,
+        'where the coefficients say nothing of it (temperature_hold_s and temperature_spread_s '
+        '0) and the readings look published only on change or delivered in polls, take their '
+        "timing from them at a silence rather than go stale at each (false: keep the file's)",
+    ),
 }
 
 

@@ -74,6 +74,8 @@ class CalibrateOptions:
     validate: tuple[Path, ...] = ()
     report_dir: Path | None = None
     clamp_tdot: bool = False
+    #: take a driver's reading timing from the readings of --validate bags where it differs
+    adopt_delivery: bool = True
     quiet: bool = True
     #: fit without the terms the bags do not excite (with a warning) instead of refusing
     drop_unidentifiable: bool = False
@@ -81,6 +83,10 @@ class CalibrateOptions:
     strict: bool = False
     #: a fleet prior YAML (``fleet prior``): fit toward it (:mod:`fog_temp_comp.core.prior`)
     prior: Path | None = None
+
+    def guard(self) -> GuardSettings:
+        """The input guards of the replays (``--validate``, ``--report``, held-out bags)."""
+        return GuardSettings(clamp_tdot=self.clamp_tdot, adopt_delivery=self.adopt_delivery)
 
 
 def calibrate_command(
@@ -169,7 +175,7 @@ def _calibrate(
     if opt.report_dir is None or report_dir is None:
         return None
     if not runs:  # no validation bags: show the training runs
-        guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
+        guard = opt.guard()
         for record in records:
             corrected, _ = replay_record(record, coeffs, guard=guard)
             runs.append((f'{record.path.name} (training)', record, corrected))
@@ -315,7 +321,7 @@ def _fit(
             candidates,
             records,
             heldout or None,
-            guard=GuardSettings(clamp_tdot=opt.clamp_tdot),
+            guard=opt.guard(),
             tolerance=opt.tolerance,
         )
         print(format_results(results, chosen), file=stdout)
@@ -402,13 +408,13 @@ def _validate(
     runs: list[tuple[str, ChamberRecord, Any]] = []
     if not named:
         return runs
-    guard = GuardSettings(clamp_tdot=opt.clamp_tdot)
+    guard = opt.guard()
     scores = []
     notes = []
     for name, record in named:
         corrected, status = replay_record(record, coeffs, guard=guard)
         scores += score_record(name, record.imu_stamps_s, record.rates_rad_s, corrected)
-        notes += clamp_notes(name, status.counters, coeffs)
+        notes += clamp_notes(name, status, coeffs)
         runs.append((name, record, corrected))
     print('\nheld-out validation:', file=stdout)
     print(format_scores(scores), file=stdout)

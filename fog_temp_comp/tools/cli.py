@@ -44,7 +44,7 @@ def _guard(args: argparse.Namespace) -> GuardSettings:
 
     if args.extrapolate_tdot:
         print('note: --extrapolate-tdot is the default now; the flag is ignored', file=sys.stderr)
-    return GuardSettings(clamp_tdot=args.clamp_tdot)
+    return GuardSettings(clamp_tdot=args.clamp_tdot, adopt_delivery=not args.keep_timing)
 
 
 def _rest(args: argparse.Namespace) -> RestSettings | None:
@@ -69,6 +69,7 @@ def calibrate_options(args: argparse.Namespace) -> CalibrateOptions:
     from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
     from fog_temp_comp.tools import commands
 
+    guard = _guard(args)
     return commands.CalibrateOptions(
         gyro_topic=args.gyro_topic,
         temp_topic=args.temp_topic,
@@ -90,7 +91,8 @@ def calibrate_options(args: argparse.Namespace) -> CalibrateOptions:
         quantized_likelihood=not args.gaussian_readings,
         validate=tuple(args.validate),
         report_dir=args.report,
-        clamp_tdot=_guard(args).clamp_tdot,
+        clamp_tdot=guard.clamp_tdot,
+        adopt_delivery=guard.adopt_delivery,
         prior=args.prior,
         quiet=args.quiet,
         drop_unidentifiable=args.drop_unidentifiable,

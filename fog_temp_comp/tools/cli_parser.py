@@ -54,6 +54,13 @@ def _add_guard(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> Non
         "paper's protocol: fit on one cycle rate, judge on faster ones)",
     )
     parser.add_argument(
+        '--keep-timing',
+        action='store_true',
+        help="keep the coefficients' reading timing (denoise.temperature_*) even where the "
+        'readings look published only on change or delivered in polls and it says neither '
+        '(default: take their timing from them at a silence, as the node does)',
+    )
+    parser.add_argument(
         '--extrapolate-tdot',
         action='store_true',
         help='(deprecated: now the default) apply the Tdot terms beyond the calibrated range',

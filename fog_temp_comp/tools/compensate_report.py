@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from fog_temp_comp.bag.bagio import BagError
-from fog_temp_comp.core.compensator import Compensator, CompensatorCounters
+from fog_temp_comp.core.compensator import Compensator, CompensatorCounters, CompensatorStatus
 
 __all__ = [
     'check_temperature_used',
@@ -22,7 +22,7 @@ def report_input(in_bag: Path, compensator: Compensator) -> None:
     """The warnings on the input the replay found: sensor faults, gaps, NaN gyro rates."""
     report_faults(in_bag, compensator)
     report_gaps(in_bag, compensator.status.counters)
-    report_untold_delivery(in_bag, compensator.status.counters)
+    report_untold_delivery(in_bag, compensator.status)
     report_dropped_temperature(in_bag, compensator.status.counters)
     report_nonfinite_gyro(in_bag, compensator.status.counters)
 
@@ -77,12 +77,15 @@ def report_gaps(in_bag: Path, counters: CompensatorCounters) -> None:
     )
 
 
-def report_untold_delivery(in_bag: Path, counters: CompensatorCounters) -> None:
-    """``WARNING`` lines where the temperature went stale after readings delivered untold.
+def report_untold_delivery(in_bag: Path, status: CompensatorStatus) -> None:
+    """A line where the temperature went stale after readings delivered untold.
 
     Published only on change with no ``denoise.temperature_hold_s`` in the coefficients, or in
-    polls with no ``denoise.temperature_spread_s`` (fitted on another driver's bags).
+    polls with no ``denoise.temperature_spread_s`` (fitted on another driver's bags): a
+    ``NOTE`` where the compensator took their timing from them (``status.timing_taken``), a
+    ``WARNING`` where it did not (``--keep-timing``, or too few readings).
     """
+    counters = status.counters
     for silences, how, key in (
         (
             counters.temperature_silences_on_change,
@@ -97,7 +100,16 @@ def report_untold_delivery(in_bag: Path, counters: CompensatorCounters) -> None:
             'temperature_spread_s',
         ),
     ):
-        if silences:
+        if silences and key in status.timing_taken:
+            print(
+                f'NOTE: {in_bag}: the temperature went stale {silences} times after readings '
+                f'{how}, and the coefficients have no denoise.{key}: then the compensator took '
+                f'their timing from them ({status.timing_taken}), as the node does; calibrate '
+                'on bags from this driver, or set it in the coefficients file (--keep-timing '
+                "keeps the file's)",
+                file=sys.stderr,
+            )
+        elif silences:
             print(
                 f'WARNING: {in_bag}: the temperature went stale {silences} times after readings '
                 f'{how}, and the coefficients have no denoise.{key}: calibrate on bags from '

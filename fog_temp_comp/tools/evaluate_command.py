@@ -15,7 +15,7 @@ from typing import TextIO
 from fog_temp_comp.bag.one_clock import on_one_clock
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.coefficients import Coefficients, load
-from fog_temp_comp.core.compensator import CompensatorCounters, GuardSettings
+from fog_temp_comp.core.compensator import CompensatorCounters, CompensatorStatus, GuardSettings
 from fog_temp_comp.core.denoise import DenoiseSettings
 from fog_temp_comp.core.evaluate import format_scores, replay_record, score_record
 from fog_temp_comp.core.record import ChamberRecord
@@ -78,7 +78,7 @@ def evaluate_command(
         if (mismatch := frame_mismatch(bag, record.frame_id, coeffs.frame_id)) is not None:
             print(mismatch, file=sys.stderr)
         scores += score_record(bag.name, record.imu_stamps_s, record.rates_rad_s, corrected)
-        notes += clamp_notes(bag.name, status.counters, coeffs)
+        notes += clamp_notes(bag.name, status, coeffs)
     print(format_scores(scores), file=stdout)
     for note in notes:
         print(note, file=stdout)
@@ -95,9 +95,10 @@ def frame_mismatch(bag: Path, frame_id: str | None, calibrated: str) -> str | No
     )
 
 
-def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) -> list[str]:
+def clamp_notes(name: str, status: CompensatorStatus, coeffs: Coefficients) -> list[str]:
     """Say when the calibrated-range guards limited, extrapolated or held the correction."""
     notes = []
+    counters = status.counters
     # the samples whose correction was computed (the counts below are of those; a message
     # sent twice, dropped, is not one)
     total = max(counters.imu_corrected, 1)
@@ -134,13 +135,16 @@ def clamp_notes(name: str, counters: CompensatorCounters, coeffs: Coefficients) 
         notes.append(
             f'note: {name}: {gaps} temperature gap{"s" if gaps > 1 else ""} longer than the '
             f'stale time: {bridged} bridged by the Kalman filter, {restarted} restarted the Tdot '
-            'estimate' + _untold_delivery(counters)
+            'estimate' + _untold_delivery(counters, status.timing_taken)
         )
     return notes
 
 
-def _untold_delivery(counters: CompensatorCounters) -> str:
-    """The part of the gaps' note on readings delivered as the coefficients do not say."""
+def _untold_delivery(counters: CompensatorCounters, timing_taken: str) -> str:
+    """The part of the gaps' note on readings delivered as the coefficients do not say.
+
+    ``timing_taken``: what the compensator took from the readings then ('' nothing).
+    """
     parts = [
         f'{count} after readings that look {how}, which the coefficients do not say ({key} 0)'
         for count, how, key in (
@@ -153,7 +157,10 @@ def _untold_delivery(counters: CompensatorCounters) -> str:
         )
         if count
     ]
-    return f'; {"; ".join(parts)}: calibrate on bags from this driver' if parts else ''
+    if not parts:
+        return ''
+    taken = f', then their timing was taken from them ({timing_taken})' if timing_taken else ''
+    return f'; {"; ".join(parts)}{taken}: calibrate on bags from this driver'
 
 
 def _share(count: int, total: int) -> str:
