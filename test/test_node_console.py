@@ -300,3 +300,23 @@ def test_warm_up_done_is_one_info_line_with_its_duration(
         h.send_temperature(T0 + 2200.0 + k / hz, 21.0)
     assert h.node.compensator.status.counters.temperature_gaps == 1
     assert len(console.matching('INFO', r'warmed up after')) == 2
+
+
+def test_a_reading_timing_taken_from_the_readings_is_logged_once(
+    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Polls every 30 s of 30 readings 1 ms apart, the file silent: one WARN when taken."""
+    h = harness_factory()
+    console = Console(capfd)
+    pattern = r'^reading timing of /imu/temperature taken from its readings'
+    for poll in range(1, 9):
+        receipt = T0 + 30.0 * poll
+        for j in range(30):
+            h.send_temperature(receipt + 0.001 * j, 25.0 + 0.0625 * ((poll * 30 + j) // 7))
+        h.send_imu(receipt + 0.5, RATE)
+        h.node.publish_diagnostics()
+        taken = h.node.compensator.status.timing_taken
+        assert len(console.matching('WARN', pattern)) == (1 if taken else 0), console.lines
+    (line,) = console.matching('WARN', pattern)
+    assert f'({taken}): calibrate on bags from this driver' in line
+    assert taken.startswith('delivered in polls: temperature_spread_s 1,')

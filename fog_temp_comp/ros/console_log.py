@@ -1,7 +1,8 @@
 """Console lines of the compensator node: its configuration, warm-up, and what went wrong.
 
 What went wrong: no temperature, stale temperature, temperature and gyro stamped by two
-clocks, clamped temperature or Tdot, gyro frame_id mismatch. Each kind of warning has its own
+clocks, clamped temperature or Tdot, gyro frame_id mismatch; and a reading timing taken from
+the readings (logged once each time it changes). Each kind of warning has its own
 call (rclpy throttles per call site), at most one line per ``log_throttle_s`` seconds.
 """
 
@@ -38,6 +39,8 @@ class ConsoleLogMixin(ParametersMixin):
     _last_frame_mismatches: int
     _warm_up_start_s: float | None
     _arrival: ArrivalOffsets
+    #: the reading timing taken from the readings, as last logged ('' none)
+    _logged_timing: str = ''
 
     def _log_config(self, what: str) -> None:
         cfg = self.config
@@ -135,6 +138,13 @@ class ConsoleLogMixin(ParametersMixin):
                 throttle_duration_sec=every,
             )
         self._log_stale(counters, previous, topic)
+        if status.timing_taken != self._logged_timing:
+            self._logged_timing = status.timing_taken
+            log.warning(
+                f'reading timing of {topic} taken from its readings, which the coefficients '
+                f'do not say ({status.timing_taken}): calibrate on bags from this driver, or '
+                "set them (adopt_delivery false keeps the file's)"
+            )
         jumps = counters.time_jumps - previous.time_jumps
         if jumps:
             log.warning(
