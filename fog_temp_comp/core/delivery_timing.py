@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from fog_temp_comp.core.compensator_types import CompensatorStatus, GuardSettings, stale_after_s
+from fog_temp_comp.core.delivery_watch import DeliveryWatch
 from fog_temp_comp.core.denoise_settings import DenoiseSettings
 from fog_temp_comp.core.held_readings import HeldReadings
 from fog_temp_comp.core.model import DriftModel
@@ -72,10 +73,12 @@ class _DeliveryTiming:
     #: how the readings were taken to be delivered where the settings did not say ('': not)
     _adopted: str = ''
 
-    def _set_timing(self, denoise: DenoiseSettings) -> None:
-        """Use ``denoise``'s reading timing: held readings, poll spreading, the stale rule."""
+    def _set_timing(self, denoise: DenoiseSettings, watch: DeliveryWatch | None = None) -> None:
+        """Use ``denoise``'s reading timing: held readings, poll spreading, the stale rule.
+
+        ``watch``: the readings watched so far, kept (None: a new watch).
+        """
         self.denoise = denoise
-        watch = self._held.watch if hasattr(self, '_held') else None
         # a sensor published only on change: its held value put back at its interval
         self._held = HeldReadings(denoise.temperature_period_s, denoise.temperature_hold_s)
         if watch is not None:
@@ -153,7 +156,7 @@ class _DeliveryTiming:
             taken = dataclasses.replace(self.denoise, temperature_hold_s=hold)
         else:
             return
-        self._set_timing(taken)
+        self._set_timing(taken, self._held.watch)
         self.status.timing_taken = timing_text(self._adopted, taken)
 
 
