@@ -33,7 +33,7 @@ from fog_temp_comp.bag.bagio import (
 )
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.coefficients import load
-from fog_temp_comp.core.compensator_types import CompensatorCounters
+from fog_temp_comp.core.compensator_types import CompensatorCounters, CompensatorStatus
 from fog_temp_comp.core.denoise import METHODS
 from fog_temp_comp.core.evaluate import compensate_record
 from fog_temp_comp.core.model import PAPER_TERMS, coefficient_key
@@ -1331,11 +1331,12 @@ def test_evaluate_notes_never_say_zero_percent(coeffs_yaml: Path) -> None:
     """A guard that acted on a few samples of many is counted, not rounded to '0 %'."""
     coeffs = load(coeffs_yaml)
     few = CompensatorCounters(imu_corrected=10_000, imu_tdot_clamped=3, imu_tdot_extrapolated=60)
-    notes = clamp_notes('run', few, coeffs)
+    notes = clamp_notes('run', CompensatorStatus(counters=few), coeffs)
     assert len(notes) == 2
     assert notes[0].endswith('for 3 (under 1 %) of the gyro samples')
     assert notes[1].endswith('for 1 % of the gyro samples')
-    assert clamp_notes('run', CompensatorCounters(imu_corrected=10_000), coeffs) == []
+    none = CompensatorStatus(counters=CompensatorCounters(imu_corrected=10_000))
+    assert clamp_notes('run', none, coeffs) == []
 
 
 @pytest.mark.parametrize('command', ['calibrate', 'evaluate'])
