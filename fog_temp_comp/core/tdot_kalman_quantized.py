@@ -224,8 +224,8 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         advance, k = self._advance, 3 if self.tau > 0.0 else 2
         t_in, z_in = t_all.tolist(), z_all.tolist()
         i = 0
-        # until ready (the plain model; the sensor lag's always), one reading at a time
-        while i < len(t_in) and not (self._ready and self.tau == 0.0):
+        # until ready, one reading at a time (the warm-up covariance is stepped too)
+        while i < len(t_in) and not self._ready:
             if advance(t_in[i], z_in[i]):
                 out_t.append(t_in[i])
                 out_x.append(self._x[0])
@@ -234,7 +234,8 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
                 out_ready.append(self._ready)
             i += 1
         if i < len(t_in):
-            self._run_plain(t_in[i:], z_in[i:], (out_t, out_x, out_v, out_s))
+            run = self._run_lag if self.tau > 0.0 else self._run_plain
+            run(t_in[i:], z_in[i:], (out_t, out_x, out_v, out_s))
             out_ready += [True] * (len(out_t) - len(out_ready))
         if out_t:
             self._estimate = self._make_estimate()
@@ -291,6 +292,74 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
             add_v(x1)
             add_s(p11)
         self._stamp, self._x, self._p = stamp, [x0, x1], [p00, p01, p11]
+        self._tokens = tokens
+        self.log_likelihood = log_likelihood
+
+    def _run_lag(
+        self,
+        t_in: list[float],
+        z_in: list[float],
+        out: tuple[list[float], list[float], list[float], list[float]],
+    ) -> None:
+        """:meth:`_advance` on each reading of a ready sensor-lag filter, its helpers inlined.
+
+        The same operations in the same order as :meth:`_step_lag` and ``predict_lag``, so the
+        same bits. Appends each reading used to ``out``: stamp, coil T, coil Tdot (degC/s) and
+        its variance.
+        """
+        isfinite, factor = math.isfinite, self._repeated.factor
+        transitions, tau, q = self._transitions, self.tau, self.q
+        quantum, noise_var, log_floor = self.quantum, self.noise_var, self._log_floor
+        stamp, (tc, v, ts), (cc, cv, cs, vv, vs, ss) = self._stamp, self._x, self._p
+        tokens = self._tokens
+        log_likelihood = self.log_likelihood
+        add_t, add_x, add_v, add_s = (column.append for column in out)
+        for stamp_s, y in zip(t_in, z_in, strict=True):
+            if not (isfinite(stamp_s) and isfinite(y)):
+                continue
+            dt = round((stamp_s - stamp) * _DT_SCALE) / _DT_SCALE  # as _round_dt
+            if not dt > 0.0:  # a stamp not after the last one used
+                continue
+            budget = min(BURST_READINGS, tokens + dt / MIN_INTERVAL_S)  # as _advance
+            if budget < 1.0:
+                continue
+            tokens = budget - 1.0
+            damp = 1.0 / factor(stamp_s, y)
+            transition = transitions.get(dt)
+            if transition is None:
+                transition = cached_transition(transitions, dt, tau, q)
+            (a, b, c), (q_cc, q_cv, q_cs, q_vv, q_vs, q_ss) = transition
+            # predict_lag
+            f3_c = b * cc + c * cv + a * cs
+            f3_v = b * cv + c * vv + a * vs
+            f3_s = b * cs + c * vs + a * ss
+            cc, cv, cs, vv, vs, ss = (
+                cc + 2.0 * dt * cv + dt * dt * vv + q_cc,
+                cv + dt * vv + q_cv,
+                f3_c + dt * f3_v + q_cs,
+                vv + q_vv,
+                f3_v + q_vs,
+                b * f3_c + c * f3_v + a * f3_s + q_ss,
+            )
+            tc, ts = tc + dt * v, a * ts + b * tc + c * v
+            ez, vz, log_mass = quantized_update(ts, ss, y, quantum, noise_var)
+            log_likelihood += max(log_mass, log_floor)
+            g, h = damp * (ez - ts) / ss, damp * (ss - vz) / (ss * ss)
+            tc, v, ts = tc + cs * g, v + vs * g, ts + ss * g
+            cc, cv, cs, vv, vs, ss = (
+                cc - cs * cs * h,
+                cv - cs * vs * h,
+                cs - cs * ss * h,
+                vv - vs * vs * h,
+                vs - vs * ss * h,
+                ss - ss * ss * h,
+            )
+            stamp = stamp_s
+            add_t(stamp)
+            add_x(tc)
+            add_v(v)
+            add_s(vv)
+        self._stamp, self._x, self._p = stamp, [tc, v, ts], [cc, cv, cs, vv, vs, ss]
         self._tokens = tokens
         self.log_likelihood = log_likelihood
 
