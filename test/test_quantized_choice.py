@@ -347,9 +347,9 @@ def test_a_sensor_lag_rival_scored_in_a_forked_child_gives_the_same_step(
         children: list[str] = []
         real = model_choice.ForkedCall
 
-        def counted(function, rival, *args, real=real, children=children):
-            children.append(rival.structure.name)
-            return real(function, rival, *args)
+        def counted(function, structure, *args, real=real, children=children):
+            children.append(structure.name)  # the sensor lag's refining search
+            return real(function, structure, *args)
 
         here: list[str] = []  # the rivals scored in this process (a child's calls are its own)
         score_here = model_choice._rival_score

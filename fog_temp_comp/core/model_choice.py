@@ -36,12 +36,12 @@ This module holds the choice itself (:func:`choose`, :func:`refine_time_constant
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Sequence
 from contextlib import ExitStack
 from typing import Any
 
-from fog_temp_comp.core.bounded_search import minimize_bounded
 from fog_temp_comp.core.calibration import (
     CalibrationError,
     CalibrationResult,
@@ -77,7 +77,6 @@ from fog_temp_comp.core.kalman_series import (
 from fog_temp_comp.core.model import CANDIDATE_TERMS, PAPER_TERMS
 from fog_temp_comp.core.model_candidates import (
     KALMAN_WALKS,
-    SENSOR_LAGS_S,
     SHRINK_SIGMAS,
     TDOT_LAGS_S,
     Structure,
@@ -92,6 +91,13 @@ from fog_temp_comp.core.record import ChamberRecord
 from fog_temp_comp.core.record_cleaning import without_outliers
 from fog_temp_comp.core.sensor_noise import SensorNoise, sensor_noise
 from fog_temp_comp.core.structure_choice import TIE, TOLERANCE, choose
+from fog_temp_comp.core.time_constant import (
+    REFINE_EVALUATIONS,
+    best_refined,
+    dynamics_kind,
+    refine_time_constant,
+    refinement_scores,
+)
 
 __all__ = [
     'BLOCKS_PER_RUN',
@@ -121,10 +127,6 @@ __all__ = [
 ]
 
 
-#: cross-validations of the time constant's refinement, each one filter run over every record
-#: for a sensor lag (most of ``calibrate``'s time with a fast temperature sensor)
-REFINE_EVALUATIONS = 5
-
 #: the quantized-likelihood filter's refinement of a coil lag: within this factor of the
 #: Gaussian filter's, in at most this many cross-validations (:func:`quantized_choice`; a factor
 #: of 1 refines nothing: ``benchmarks/fast_sensor.py`` measures with and without)
@@ -136,71 +138,6 @@ QUANTIZED_REFINE_EVALUATIONS = 8
 QUANTIZED_RIVAL_WINDOW = 0.10
 #: cross-validations of a sensor-lag rival's refinement (:func:`quantized_choice`)
 SENSOR_LAG_RIVAL_EVALUATIONS = 2
-
-#: the refinement's objective where a time constant is refused (a score is a ratio near 1)
-REFUSED_PENALTY = 1e6
-
-
-def dynamics_kind(structure: Structure) -> str:
-    """Sensor-to-coil dynamics: ``'lead-lag'``, ``'coil lag'``, ``'sensor lag'``, ``'none'``."""
-    if 'Tdot_lag' in structure.terms:
-        return 'lead-lag'
-    if structure.coil_lag_s:
-        return 'coil lag'
-    return 'sensor lag' if structure.sensor_lag_s else 'none'
-
-
-#: the Structure field holding each kind's time constant (:func:`refine_time_constant`)
-_TIME_CONSTANT_FIELD = {
-    'lead-lag': 'tdot_lag_s',
-    'coil lag': 'coil_lag_s',
-    'sensor lag': 'sensor_lag_s',
-    'none': '',
-}
-
-
-def refine_time_constant(
-    chosen: StructureScore,
-    records: Sequence[ChamberRecord],
-    base: DenoiseSettings,
-    heldout: Sequence[ChamberRecord] = (),
-    *,
-    factor: float = 0.0,
-    evaluations: int = REFINE_EVALUATIONS,
-) -> StructureScore:
-    """The chosen structure with its time constant (lead-lag, coil or sensor lag) refined.
-
-    A bounded Brent search on log(tau) between the grid's neighbours of the chosen value
-    (:data:`TDOT_LAGS_S`), or between tau / ``factor`` and tau * ``factor`` if ``factor`` > 1,
-    on the same cross-validated score, to 5 % of tau or ``evaluations`` scores; the starting
-    value is kept unless the search beats it.
-    """
-    structure = chosen.structure
-    field_name = _TIME_CONSTANT_FIELD[dynamics_kind(structure)]
-    if not field_name or not math.isfinite(chosen.criterion):
-        return chosen
-    tau = getattr(structure, field_name)
-    grid = sorted({*(SENSOR_LAGS_S if field_name == 'sensor_lag_s' else TDOT_LAGS_S), tau})
-    k = grid.index(tau)
-    low = grid[k - 1] if k > 0 else tau / 2.0
-    high = grid[k + 1] if k + 1 < len(grid) else tau * 2.0
-    if factor > 1.0:
-        low, high = tau / factor, tau * factor
-    best = chosen
-
-    def objective(log_tau: float) -> float:
-        nonlocal best
-        value = float(math.exp(log_tau))
-        changes: dict[str, Any] = {field_name: value}
-        candidate = dataclasses.replace(structure, **changes)
-        (score,) = cross_validate(records, base, [candidate], heldout)
-        if score.criterion < best.criterion:
-            best = score
-        # a refused time constant scores inf, which turns Brent's parabola into nan
-        return score.criterion if math.isfinite(score.criterion) else REFUSED_PENALTY
-
-    minimize_bounded(objective, math.log(low), math.log(high), xatol=0.05, maxiter=evaluations)
-    return best
 
 
 def choose_fit(
@@ -328,14 +265,22 @@ def _quantized_scores(
 ) -> tuple[StructureScore, list[StructureScore]]:
     """The chosen structure's and each rival's quantized scores (:func:`quantized_choice`).
 
-    A sensor-lag rival (its filter rerun at every value tried: the slowest) is scored in a
-    forked child while the rest are scored here, where there is a second core.
+    A sensor-lag rival (its filter rerun at every value tried: the slowest) has its refining
+    search scored in a forked child while the rest, and its starting value, are scored here,
+    where there is a second core (the same scores to the bit: the search's points do not
+    depend on the start's score).
     """
     slow = [i for i, r in enumerate(rivals) if dynamics_kind(r.structure) == 'sensor lag'][:1]
     args = (records, with_noise, heldout)
     with ExitStack() as stack:
         child = (
-            stack.enter_context(ForkedCall(_rival_score, rivals[slow[0]], *args))
+            stack.enter_context(
+                ForkedCall(
+                    functools.partial(refinement_scores, evaluations=SENSOR_LAG_RIVAL_EVALUATIONS),
+                    rivals[slow[0]].structure,
+                    *args,
+                )
+            )
             if slow and two_processes(records)
             else None
         )
@@ -344,8 +289,16 @@ def _quantized_scores(
             None if child is not None and i == slow[0] else _rival_score(r, *args)
             for i, r in enumerate(rivals)
         ]
-        if child is not None:  # the same score as here, bit for bit (or computed here)
-            scored[slow[0]] = child.result() or _rival_score(rivals[slow[0]], *args)
+        if child is not None:
+            (again,) = cross_validate(records, with_noise, [rivals[slow[0]].structure], heldout)
+            refined = child.result()
+            scored[slow[0]] = (
+                _rival_score(rivals[slow[0]], *args)  # the child failed: here
+                if refined is None
+                else best_refined(again, refined)
+                if math.isfinite(again.criterion)
+                else again
+            )
     return score, [s for s in scored if s is not None]
 
 

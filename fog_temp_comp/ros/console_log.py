@@ -92,6 +92,17 @@ class ConsoleLogMixin(ParametersMixin):
                 throttle_duration_sec=self._throttle_s,
             )
 
+    def _log_timing_taken(self, topic: str) -> None:
+        """One WARN each time the compensator takes another reading timing from the readings."""
+        taken = self.compensator.status.timing_taken
+        if taken != self._logged_timing:
+            self._logged_timing = taken
+            self.get_logger().warning(
+                f'reading timing of {topic} taken from its readings, which the coefficients '
+                f'do not say ({taken}): calibrate on bags from this driver, or set them '
+                "(adopt_delivery false keeps the file's)"
+            )
+
     def _log_uncorrected(self, counters: Any, previous: Any, topic: str) -> None:
         """The throttled line of a gyro passed through for want of a temperature or a stamp."""
         status = self.compensator.status
@@ -138,13 +149,7 @@ class ConsoleLogMixin(ParametersMixin):
                 throttle_duration_sec=every,
             )
         self._log_stale(counters, previous, topic)
-        if status.timing_taken != self._logged_timing:
-            self._logged_timing = status.timing_taken
-            log.warning(
-                f'reading timing of {topic} taken from its readings, which the coefficients '
-                f'do not say ({status.timing_taken}): calibrate on bags from this driver, or '
-                "set them (adopt_delivery false keeps the file's)"
-            )
+        self._log_timing_taken(topic)
         jumps = counters.time_jumps - previous.time_jumps
         if jumps:
             log.warning(
