@@ -18,7 +18,11 @@ from test_model_choice import CHAMBER as MODEL_CHOICE_CHAMBER
 from fog_temp_comp.bag.bagio import BagWriter, make_imu, make_temperature, s_to_stamp_ns
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.compensator import Compensator, GuardSettings
-from fog_temp_comp.core.delivery_watch import WATCH_READINGS, DeliveryWatch
+from fog_temp_comp.core.delivery_watch import (
+    WATCH_READINGS,
+    DeliveryWatch,
+    looks_published_on_change,
+)
 from fog_temp_comp.core.denoise import RECOMMENDED_SETTINGS
 from fog_temp_comp.core.held_readings import expand_held
 from fog_temp_comp.core.model_choice import choose_and_calibrate
@@ -85,6 +89,34 @@ def test_a_float_sensor_or_a_few_readings_are_not_taken_for_on_change(
         few, temp_stamps_s=few.temp_stamps_s[:50], temperature_degC=few.temperature_degC[:50]
     )
     assert not published_on_change([few])
+
+
+def test_a_sensor_at_its_rate_losing_readings_on_a_ramp_is_not_taken_for_on_change(
+    periodic: ChamberRecord,
+) -> None:
+    """Never repeating, quantized, uneven intervals, and yet read at its rate: not on change.
+
+    A noiseless 1/64 degC sensor at 1 Hz on a 1 degC/min ramp moves a step a second, so its
+    readings never repeat; losing 30 % of them makes the intervals uneven. After each loss it
+    has moved by two steps or more, where a reading published on change moved by one. The
+    compensator takes no timing from it at a silence.
+    """
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 3000.0)
+    values = np.round((20.0 + t / 60.0) * 64.0) / 64.0
+    keep = rng.random(t.size) > 0.3
+    stamps, values = t[keep], values[keep]
+    repeats = np.count_nonzero(values[1:] == values[:-1])
+    low, high = np.percentile(np.diff(stamps), [5.0, 95.0])
+    assert repeats == 0 and high >= 3.0 * low  # what alone said 'on change'
+    assert not looks_published_on_change([(stamps, values)])
+    fit = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)[0].coefficients
+    comp = Compensator(fit.model, fit.denoise)
+    silent = (stamps > 2000.0) & (stamps < 2030.0)
+    for stamp, value in zip(stamps[~silent], values[~silent], strict=True):
+        comp.add_temperature(1000.0 + float(stamp), float(value))
+    assert comp.status.counters.temperature_gaps_bridged == 1
+    assert not comp.adopted_delivery and comp.status.counters.temperature_silences_on_change == 0
 
 
 def test_the_online_watch_judges_the_last_readings_as_calibrate_judges_a_record(

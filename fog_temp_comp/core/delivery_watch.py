@@ -28,7 +28,9 @@ FloatArray = NDArray[np.float64]
 __all__ = [
     'MAX_REPEAT_FRACTION',
     'MIN_INTERVAL_SPREAD',
+    'MIN_ONE_STEP_SHARE',
     'MIN_READINGS',
+    'SILENCE_FACTOR',
     'WATCH_READINGS',
     'DeliveryWatch',
     'looks_published_on_change',
@@ -37,6 +39,12 @@ __all__ = [
 #: at most this fraction of successive readings repeat on a sensor published on change (none
 #: do; a few may where a driver re-sends)
 MAX_REPEAT_FRACTION = 0.01
+#: on change, a reading after a silence (an interval of at least :data:`SILENCE_FACTOR` times
+#: the 5th percentile's) moved by one step (at most 1.5 of them) at least this often: the value
+#: held, then changed. A sensor read at its rate that loses readings on a ramp has moved by
+#: several steps after each loss (0 of them one step, where 57-100 % did on change)
+MIN_ONE_STEP_SHARE = 0.3
+SILENCE_FACTOR = 2.5
 #: fewer readings than this tell nothing
 MIN_READINGS = 100
 #: on change, the intervals are uneven: the 95th percentile at least this many times the 5th
@@ -51,11 +59,13 @@ def looks_published_on_change(runs: Sequence[tuple[FloatArray, FloatArray]]) -> 
 
     They were when they are quantized (:func:`~fog_temp_comp.core.sensor_noise.quantum_degC`
     finds a step: a float sensor's readings never repeat either), at most
-    :data:`MAX_REPEAT_FRACTION` of successive readings repeat, and the intervals are uneven.
-    Non-finite readings and pairs not in time order are left out.
+    :data:`MAX_REPEAT_FRACTION` of successive readings repeat, the intervals are uneven, and
+    the readings after a silence moved by one step often enough (:data:`MIN_ONE_STEP_SHARE`:
+    not a sensor at its rate that loses readings on a ramp). Non-finite readings and pairs
+    not in time order are left out.
     """
     repeats, pairs = 0, 0
-    intervals, kept = [], []
+    intervals, moves, kept = [], [], []
     for stamps, values in runs:
         finite = np.isfinite(values) & np.isfinite(stamps)
         stamps, values = stamps[finite], values[finite]
@@ -64,11 +74,18 @@ def looks_published_on_change(runs: Sequence[tuple[FloatArray, FloatArray]]) -> 
         repeats += int(np.count_nonzero(values[1:][later] == values[:-1][later]))
         pairs += int(np.count_nonzero(later))
         intervals.append(dt[later])
+        moves.append(np.abs(np.diff(values))[later])
         kept.append(values)
     if pairs < MIN_READINGS or repeats > MAX_REPEAT_FRACTION * pairs:
         return False
-    low, high = np.percentile(np.concatenate(intervals), [5.0, 95.0])
-    return bool(high >= MIN_INTERVAL_SPREAD * low and quantum_degC(np.concatenate(kept)) > 0)
+    every = np.concatenate(intervals)
+    low, high = np.percentile(every, [5.0, 95.0])
+    quantum = quantum_degC(np.concatenate(kept))
+    if not (high >= MIN_INTERVAL_SPREAD * low and quantum > 0):
+        return False
+    after_silence = np.concatenate(moves)[every >= SILENCE_FACTOR * low]
+    one_step = np.count_nonzero(after_silence <= 1.5 * quantum)
+    return bool(one_step >= MIN_ONE_STEP_SHARE * after_silence.size)
 
 
 class DeliveryWatch:
