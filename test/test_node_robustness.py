@@ -467,25 +467,36 @@ def test_a_temperature_published_on_change_holds_on_the_node(
         h.close()
 
 
+@pytest.mark.parametrize('adopt', [False, True])
 def test_a_temperature_published_on_change_untold_is_said_when_it_goes_stale(
-    harness: Harness,
+    ros_context: object, coeffs_file: Path, adopt: bool
 ) -> None:
     """No ``temperature_hold_s`` in the file: a silence after readings on change says why.
 
     Readings that never repeat, on 1/16 degC steps, 1-8 s apart, then a minute without one.
+    By default the node has taken the hold from them by then: the silence is not stale.
     """
-    h = harness
-    stamp = T0
-    for k in range(130):
-        stamp += (1.0, 3.0, 8.0)[k % 3]
-        h.send_temperature(stamp, 20.0 + k / 16)
-        assert h.send_imu(stamp + 0.5, RATE) is not None
-    status = h.diagnose()
-    assert 'stale' not in status.message and ON_CHANGE_TEXT not in status.message
-    assert h.send_imu(stamp + 60.0, RATE) is not None  # the last correction held
-    status = h.diagnose()
-    assert 'temperature stale' in status.message and ON_CHANGE_TEXT in status.message
-    assert status.level == WARN
+    h = Harness(ros_context, start(ros_context, coeffs_file, adopt_delivery=adopt))
+    try:
+        stamp = T0
+        for k in range(130):
+            stamp += (1.0, 3.0, 8.0)[k % 3]
+            h.send_temperature(stamp, 20.0 + k / 16)
+            assert h.send_imu(stamp + 0.5, RATE) is not None
+        status = h.diagnose()
+        assert 'stale' not in status.message and ON_CHANGE_TEXT not in status.message
+        assert h.send_imu(stamp + 60.0, RATE) is not None  # the last correction held
+        status = h.diagnose()
+        taken = h.node.compensator.status.timing_taken
+        if adopt:  # taken at the 128th reading: the held value put back since
+            assert taken.startswith('published only on change: temperature_hold_s 60,')
+            assert 'stale' not in status.message and TIMING_TAKEN_TEXT in status.message
+            assert h.node.compensator.status.counters.temperature_held > 50
+        else:
+            assert 'temperature stale' in status.message and ON_CHANGE_TEXT in status.message
+            assert status.level == WARN and not taken
+    finally:
+        h.close()
 
 
 def send_polls(h: Harness, polls: int) -> float:

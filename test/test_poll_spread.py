@@ -124,7 +124,7 @@ def test_the_watch_and_the_compensator_tell_polls_the_settings_do_not_say(
 def test_the_compensator_takes_an_untold_polls_timing_from_the_readings(
     periodic: ChamberRecord,
 ) -> None:
-    """Told no spread, the compensator takes it (and the interval between polls) at a silence.
+    """Told no spread, the compensator takes it (and the interval between polls) from the polls.
 
     Once the last readings hold three polls (the sensor's 1 s, polls 30 s apart), at the first
     silence after 100 readings; then it feeds the stamps the told compensator feeds, and a
@@ -179,7 +179,7 @@ def test_the_compensator_takes_an_untold_polls_timing_from_the_readings(
 def test_the_compensator_feeds_the_spread_stamps(periodic: ChamberRecord) -> None:
     """With ``temperature_spread_s`` the Tdot after each poll is nearly the periodic one's.
 
-    Without it, far off.
+    Without it (and none taken from the readings), far off.
     """
     fit = choose_and_calibrate([periodic], RECOMMENDED_SETTINGS)[0].coefficients
     receipt = polled(periodic, 30.0).temp_stamps_s
@@ -191,7 +191,7 @@ def test_the_compensator_feeds_the_spread_stamps(periodic: ChamberRecord) -> Non
             fit.denoise, temperature_period_s=30.0, temperature_spread_s=spread
         )
         clean = Compensator(fit.model, dataclasses.replace(fit.denoise, temperature_period_s=30.0))
-        comp = Compensator(fit.model, settings)
+        comp = Compensator(fit.model, settings, GuardSettings(adopt_delivery=False))
         tdot = []
         for k in range(n):
             assert clean.add_temperature(float(periodic.temp_stamps_s[k]), float(values[k]))

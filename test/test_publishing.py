@@ -189,9 +189,10 @@ def test_the_compensator_says_a_silence_looks_like_readings_published_on_change(
 
 
 def test_the_compensator_takes_an_untold_hold_from_the_readings(periodic: ChamberRecord) -> None:
-    """Told no hold, the compensator takes one (and the conversion interval) at a silence.
+    """Told no hold, the compensator takes one (and the conversion interval) from the readings.
 
-    At the first silence after 100 readings that look published on change: the hold
+    At the first silence after 100 readings that look published on change (or when it
+    judges them, every 64 readings; here a silence comes first): the hold
     ``calibrate`` measures on them (twice the longest silence, at least 60 s), the held value
     then put back as for a told hold, and a longer silence later lengthens it. Readings of the
     sensor at its rate are never taken for readings on change.

@@ -231,6 +231,7 @@ class Compensator(_BlockCorrection, _DeliveryTiming, _TemperatureLeaps, _LostSpa
         self._last_reading_stamp_s = stamp_s
         if self.rest is not None:
             self.rest.temperature_degC = temperature_degC
+        self._watch_delivery()  # may take the driver's timing, before this reading holds
         self._held.real(stamp_s, temperature_degC)
         self._held_due_s = self._held.next_s + self._held.margin_s
         self._feed(stamp_s, temperature_degC)

@@ -91,7 +91,8 @@ class GuardSettings:
         Where the settings do not say how the driver delivers the readings (no
         ``temperature_hold_s``, no ``temperature_spread_s``: coefficients fitted on another
         driver's bags) and the last readings look published only on change or delivered in
-        polls, take their timing from them at a silence, as ``calibrate`` measures it
+        polls, take their timing from them (at a silence, or judged every 64 readings), as
+        ``calibrate`` measures it
         (:mod:`~fog_temp_comp.core.delivery_timing`), rather than go stale at every silence.
 
     """

@@ -7,7 +7,8 @@ holds the timing the settings give (``denoise.temperature_period_s``, ``temperat
 (:mod:`~fog_temp_comp.core.poll_spread`). Coefficients fitted on another driver's bags say
 nothing of the driver the compensator reads: a sensor published only on change, or delivered
 in polls, then goes stale at every silence (a 30 s poll held the correction two thirds of the
-time). So, at such a silence, where the last readings look delivered so
+time). So, at such a silence or every :data:`JUDGE_EVERY` readings, where the last readings
+look delivered so
 (:mod:`~fog_temp_comp.core.delivery_watch`) and ``guard.adopt_delivery`` is on, the
 compensator takes the timing ``calibrate`` would have measured on them
 (:func:`~fog_temp_comp.core.publishing.with_reading_timing` of the last readings), once, and
@@ -31,7 +32,11 @@ from fog_temp_comp.core.poll_spread import PollSpread
 from fog_temp_comp.core.publishing import HOLD_FACTOR, with_reading_timing
 from fog_temp_comp.core.record import ChamberRecord
 
-__all__ = ['adopted_timing', 'timing_text']
+__all__ = ['JUDGE_EVERY', 'adopted_timing', 'timing_text']
+
+#: the readings are judged (an untold delivery taken) once per this many, between silences:
+#: about 70 us each time on 1024 readings
+JUDGE_EVERY = 64
 
 
 def adopted_timing(
@@ -143,21 +148,34 @@ class _DeliveryTiming:
             return
         stamps, values = self._held.watch.readings()
         if delivery:
-            taken = adopted_timing(
-                self.denoise, np.r_[stamps, stamp_s], np.r_[values, temperature_degC], delivery
-            )
-            if taken is None:
-                return
-            self._adopted = delivery
+            self._take(delivery, np.r_[stamps, stamp_s], np.r_[values, temperature_degC])
         elif self._adopted == 'on change' and stamps.size:
             hold = round(HOLD_FACTOR * (stamp_s - float(stamps[-1])), 3)
-            if hold <= self.denoise.temperature_hold_s:
-                return
-            taken = dataclasses.replace(self.denoise, temperature_hold_s=hold)
-        else:
+            if hold > self.denoise.temperature_hold_s:
+                taken = dataclasses.replace(self.denoise, temperature_hold_s=hold)
+                self._set_timing(taken, self._held.watch)
+                self.status.timing_taken = timing_text(self._adopted, taken)
+
+    def _watch_delivery(self) -> None:
+        """Every :data:`JUDGE_EVERY` readings watched, take an untold delivery's timing.
+
+        As at a silence (:meth:`_silence`), without waiting for one: the next silence of a
+        sensor published on change then has its held value put back, and a poll is spread.
+        """
+        watch = self._held.watch
+        if self._adopted or not self._guard.adopt_delivery or watch.count % JUDGE_EVERY:
             return
-        self._set_timing(taken, self._held.watch)
-        self.status.timing_taken = timing_text(self._adopted, taken)
+        delivery = self.untold_delivery
+        if delivery:
+            self._take(delivery, *watch.readings())
+
+    def _take(self, delivery: str, stamps_s: np.ndarray, values_degC: np.ndarray) -> None:
+        """Take the timing of readings (s, degC; shape (n,)) that look delivered so, if given."""
+        taken = adopted_timing(self.denoise, stamps_s, values_degC, delivery)
+        if taken is not None:
+            self._adopted = delivery
+            self._set_timing(taken, self._held.watch)
+            self.status.timing_taken = timing_text(delivery, taken)
 
 
 def timing_text(delivery: str, settings: DenoiseSettings) -> str:

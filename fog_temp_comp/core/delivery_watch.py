@@ -104,6 +104,11 @@ class DeliveryWatch:
         self._judged_polled = -1  # the count when last judged polled
         self._polled = False
 
+    @property
+    def count(self) -> int:
+        """Readings added since the start or the last :meth:`clear`."""
+        return self._count
+
     def clear(self) -> None:
         """Forget the readings (a time jump: stamps before it say nothing of those after)."""
         self._count = 0

@@ -207,7 +207,7 @@ GUARD_PARAMETERS: dict[str, tuple[Any, str]] = {
         _GUARD_DEFAULTS.adopt_delivery,
         'where the coefficients say nothing of it (temperature_hold_s and temperature_spread_s '
         '0) and the readings look published only on change or delivered in polls, take their '
-        "timing from them at a silence rather than go stale at each (false: keep the file's)",
+        "timing from them rather than go stale at each silence (false: keep the file's)",
     ),
 }
 

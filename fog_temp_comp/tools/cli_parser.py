@@ -58,7 +58,7 @@ def _add_guard(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> Non
         action='store_true',
         help="keep the coefficients' reading timing (denoise.temperature_*) even where the "
         'readings look published only on change or delivered in polls and it says neither '
-        '(default: take their timing from them at a silence, as the node does)',
+        '(default: take their timing from them, as the node does)',
     )
     parser.add_argument(
         '--extrapolate-tdot',
