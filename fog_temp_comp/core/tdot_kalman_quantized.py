@@ -15,6 +15,7 @@ variance reduction are divided by it. Stamps in s, temperatures in degC, Tdot in
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -248,6 +249,30 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
             ready=np.array(out_ready, dtype=bool),
         )
 
+    def _used_readings(
+        self, t_in: list[float], z_in: list[float]
+    ) -> Iterator[tuple[float, float, float, float]]:
+        """Each reading :meth:`_advance` would use: (stamp s, degC, dt s, damp factor).
+
+        Its gates in its order (finite, after the last stamp used, the token bucket), the
+        bucket left as they leave it once the readings are exhausted.
+        """
+        isfinite, factor = math.isfinite, self._repeated.factor
+        stamp, tokens = self._stamp, self._tokens
+        for stamp_s, y in zip(t_in, z_in, strict=True):
+            if not (isfinite(stamp_s) and isfinite(y)):
+                continue
+            dt = round((stamp_s - stamp) * _DT_SCALE) / _DT_SCALE  # as _round_dt
+            if not dt > 0.0:  # a stamp not after the last one used
+                continue
+            budget = min(BURST_READINGS, tokens + dt / MIN_INTERVAL_S)  # as _advance
+            if budget < 1.0:
+                continue
+            tokens = budget - 1.0
+            stamp = stamp_s
+            yield stamp_s, y, dt, 1.0 / factor(stamp_s, y)
+        self._tokens = tokens
+
     def _run_plain(
         self,
         t_in: list[float],
@@ -260,23 +285,11 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         the same bits. Appends each reading used to ``out``: stamp, T, Tdot (degC/s) and its
         variance.
         """
-        isfinite, factor = math.isfinite, self._repeated.factor
         q, quantum, noise_var, log_floor = self.q, self.quantum, self.noise_var, self._log_floor
         stamp, (x0, x1), (p00, p01, p11) = self._stamp, self._x, self._p
-        tokens = self._tokens
         log_likelihood = self.log_likelihood
         add_t, add_x, add_v, add_s = (column.append for column in out)
-        for stamp_s, y in zip(t_in, z_in, strict=True):
-            if not (isfinite(stamp_s) and isfinite(y)):
-                continue
-            dt = round((stamp_s - stamp) * _DT_SCALE) / _DT_SCALE  # as _round_dt
-            if not dt > 0.0:  # a stamp not after the last one used
-                continue
-            budget = min(BURST_READINGS, tokens + dt / MIN_INTERVAL_S)  # as _advance
-            if budget < 1.0:
-                continue
-            tokens = budget - 1.0
-            damp = 1.0 / factor(stamp_s, y)
+        for stamp_s, y, dt, damp in self._used_readings(t_in, z_in):
             a00 = p00 + 2.0 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
             a01 = p01 + dt * p11 + q * dt * dt / 2.0
             a11 = p11 + q * dt
@@ -292,7 +305,6 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
             add_v(x1)
             add_s(p11)
         self._stamp, self._x, self._p = stamp, [x0, x1], [p00, p01, p11]
-        self._tokens = tokens
         self.log_likelihood = log_likelihood
 
     def _run_lag(
@@ -307,24 +319,12 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
         same bits. Appends each reading used to ``out``: stamp, coil T, coil Tdot (degC/s) and
         its variance.
         """
-        isfinite, factor = math.isfinite, self._repeated.factor
         transitions, tau, q = self._transitions, self.tau, self.q
         quantum, noise_var, log_floor = self.quantum, self.noise_var, self._log_floor
         stamp, (tc, v, ts), (cc, cv, cs, vv, vs, ss) = self._stamp, self._x, self._p
-        tokens = self._tokens
         log_likelihood = self.log_likelihood
         add_t, add_x, add_v, add_s = (column.append for column in out)
-        for stamp_s, y in zip(t_in, z_in, strict=True):
-            if not (isfinite(stamp_s) and isfinite(y)):
-                continue
-            dt = round((stamp_s - stamp) * _DT_SCALE) / _DT_SCALE  # as _round_dt
-            if not dt > 0.0:  # a stamp not after the last one used
-                continue
-            budget = min(BURST_READINGS, tokens + dt / MIN_INTERVAL_S)  # as _advance
-            if budget < 1.0:
-                continue
-            tokens = budget - 1.0
-            damp = 1.0 / factor(stamp_s, y)
+        for stamp_s, y, dt, damp in self._used_readings(t_in, z_in):
             transition = transitions.get(dt)
             if transition is None:
                 transition = cached_transition(transitions, dt, tau, q)
@@ -360,7 +360,6 @@ class QuantizedKalmanTdotEstimator(PerSampleEstimator):
             add_v(v)
             add_s(vv)
         self._stamp, self._x, self._p = stamp, [tc, v, ts], [cc, cv, cs, vv, vs, ss]
-        self._tokens = tokens
         self.log_likelihood = log_likelihood
 
     def feed(self, stamps_s: ArrayLike, temperature_degC: ArrayLike) -> int:
