@@ -52,6 +52,8 @@ def test_a_polled_sensor_is_told_and_its_interval_measured(periodic: ChamberReco
         assert polled_interval_s([stamps, periodic.temp_stamps_s]) == 0.0  # 2 in 5 polled
     twice = np.repeat(periodic.temp_stamps_s, 2)  # every message sent twice: one reading each
     assert polled_interval_s([twice]) == 0.0
+    twice[1::2] += SPACING_S  # sent twice a millisecond apart: half the intervals, not polls
+    assert polled_interval_s([twice]) == 0.0
 
 
 def test_the_readings_of_a_poll_are_stamped_back_at_the_sensors_interval(
