@@ -42,10 +42,10 @@ __all__ = [
 IN_POLL_FRACTION = BURST_FRACTION
 #: a reading more than this many of the sensor's intervals after the one before begins a poll
 SILENCE_INTERVALS = 1.5
-#: a record is delivered in polls where more than this share of its readings came in a poll
-#: with the one before (every message sent twice, a millisecond apart, is exactly half: not
-#: polls)
-MIN_POLLED_SHARE = 0.5
+#: a record is delivered in polls where at least this share of its readings came in a poll
+#: with the one before: polls of 3 readings or more (every message sent twice, a millisecond
+#: apart, is half: not polls)
+MIN_POLLED_SHARE = 0.6
 #: the least step (s) between two stamps given to the readings of one poll
 MIN_STEP_S = 1e-6
 
@@ -108,7 +108,7 @@ def spread_polls(stamps_s: FloatArray, interval_s: float) -> FloatArray:
 def polled_interval_s(stamps: Sequence[FloatArray]) -> float:
     """The sensor's interval (s) of records whose readings came in polls, else 0.
 
-    Polled: more than :data:`MIN_POLLED_SHARE` of the readings came less than
+    Polled: at least :data:`MIN_POLLED_SHARE` of the readings came less than
     :data:`IN_POLL_FRACTION` of the mean interval after the one before (a driver that polls
     every 5 s and stamps on receipt: 4 in 5 at 1 Hz). The interval is the time from a
     record's first poll to its last but one over the readings taken in it (those of the polls
@@ -135,6 +135,6 @@ def polled_interval_s(stamps: Sequence[FloatArray]) -> float:
         if starts.size >= 2:
             span += float(run[starts[-2]] - run[0])
             count += int(starts[-1] - starts[0])
-    if not count or in_poll <= MIN_POLLED_SHARE * pairs:
+    if not count or in_poll < MIN_POLLED_SHARE * pairs:
         return 0.0
     return round(span / count, 3)
