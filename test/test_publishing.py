@@ -91,6 +91,23 @@ def test_a_float_sensor_or_a_few_readings_are_not_taken_for_on_change(
     assert not published_on_change([few])
 
 
+def test_the_watch_gives_its_last_readings_oldest_first_and_forgets_them_at_a_clear() -> None:
+    """Before and after the ring wraps round; copies, which later readings leave alone."""
+    for n in (0, 5, WATCH_READINGS, WATCH_READINGS + 1, 3 * WATCH_READINGS + 17):
+        watch = DeliveryWatch()
+        for k in range(n):
+            watch.add(float(k), 2.0 * k)
+        stamps, values = watch.readings()
+        expected = np.arange(max(0, n - WATCH_READINGS), n, dtype=float)
+        np.testing.assert_array_equal(stamps, expected)
+        np.testing.assert_array_equal(values, 2.0 * expected)
+        watch.add(-1.0, -1.0)
+        np.testing.assert_array_equal(stamps, expected)  # a copy
+        assert watch.count == n + 1
+        watch.clear()
+        assert watch.count == 0 and watch.readings()[0].size == 0
+
+
 def test_a_sensor_at_its_rate_losing_readings_on_a_ramp_is_not_taken_for_on_change(
     periodic: ChamberRecord,
 ) -> None:

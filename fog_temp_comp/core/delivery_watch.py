@@ -126,10 +126,7 @@ class DeliveryWatch:
         """Whether the last readings look published on change (the test of this module)."""
         if self._judged != self._count:
             self._judged = self._count
-            order = self._order()
-            self._verdict = looks_published_on_change(
-                [(self._stamps_s[order], self._values_degC[order])]
-            )
+            self._verdict = looks_published_on_change([self.readings()])
         return self._verdict
 
     def looks_polled(self) -> bool:
@@ -142,15 +139,15 @@ class DeliveryWatch:
             return False
         if self._judged_polled != self._count:
             self._judged_polled = self._count
-            self._polled = polled_interval_s([self._stamps_s[self._order()]]) > 0
+            self._polled = polled_interval_s([self.readings()[0]]) > 0
         return self._polled
 
     def readings(self) -> tuple[FloatArray, FloatArray]:
-        """The readings kept, oldest first: stamps (s) and degC, shape (n,) each."""
-        order = self._order()
-        return self._stamps_s[order], self._values_degC[order]
-
-    def _order(self) -> NDArray[np.int64]:
-        """Indices of the readings kept, oldest first."""
-        order = np.roll(np.arange(WATCH_READINGS), -(self._count % WATCH_READINGS))
-        return order[-min(self._count, WATCH_READINGS) :]
+        """The readings kept, oldest first: stamps (s) and degC, shape (n,) each (copies)."""
+        if self._count <= WATCH_READINGS:
+            return self._stamps_s[: self._count].copy(), self._values_degC[: self._count].copy()
+        slot = self._count % WATCH_READINGS
+        return (
+            np.concatenate((self._stamps_s[slot:], self._stamps_s[:slot])),
+            np.concatenate((self._values_degC[slot:], self._values_degC[:slot])),
+        )
