@@ -491,6 +491,7 @@ def test_a_temperature_published_on_change_untold_is_said_when_it_goes_stale(
         if adopt:  # taken at the 128th reading: the held value put back since
             assert taken.startswith('published only on change: temperature_hold_s 60,')
             assert 'stale' not in status.message and TIMING_TAKEN_TEXT in status.message
+            assert status.level == OK, status.message  # said, not a warning: it is corrected
             assert h.node.compensator.status.counters.temperature_held > 50
         else:
             assert 'temperature stale' in status.message and ON_CHANGE_TEXT in status.message
