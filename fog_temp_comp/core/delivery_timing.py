@@ -146,11 +146,12 @@ class _DeliveryTiming:
         counters.temperature_silences_polled += delivery == 'polled'
         if not self._guard.adopt_delivery:
             return
-        stamps, values = self._held.watch.readings()
         if delivery:
+            stamps, values = self._held.watch.readings()
             self._take(delivery, np.r_[stamps, stamp_s], np.r_[values, temperature_degC])
-        elif self._adopted == 'on change' and stamps.size:
-            hold = round(HOLD_FACTOR * (stamp_s - float(stamps[-1])), 3)
+        elif self._adopted == 'on change' and self._held.watch.count:
+            last_s = float(self._held.watch.readings()[0][-1])  # the last real reading
+            hold = round(HOLD_FACTOR * (stamp_s - last_s), 3)
             if hold > self.denoise.temperature_hold_s:
                 taken = dataclasses.replace(self.denoise, temperature_hold_s=hold)
                 self._set_timing(taken, self._held.watch)

@@ -7,10 +7,11 @@ published at the sensor's rate (which repeat, a quantized sensor's for minutes a
 from a float sensor's (never repeating, but not quantized). A driver that polls the sensor and
 stamps on receipt delivers its readings in bursts milliseconds apart
 (:func:`~fog_temp_comp.core.poll_spread.polled_interval_s`). ``calibrate`` asks both of the
-training bags; :class:`DeliveryWatch` asks them of the compensator's last readings when the
-temperature falls silent, so that coefficients fitted on another driver's bags (no
-``denoise.temperature_hold_s``, no ``denoise.temperature_spread_s``) are said to be why the
-temperature keeps going stale. Stamps in s, temperatures in degC.
+training bags; :class:`DeliveryWatch` asks them of the compensator's last readings (at a
+silence, and every few readings), so that with coefficients fitted on another driver's bags
+(no ``denoise.temperature_hold_s``, no ``denoise.temperature_spread_s``) the compensator takes
+the driver's timing from them, or says why the temperature keeps going stale
+(:mod:`~fog_temp_comp.core.delivery_timing`). Stamps in s, temperatures in degC.
 """
 
 from __future__ import annotations
@@ -80,8 +81,10 @@ def looks_published_on_change(runs: Sequence[tuple[FloatArray, FloatArray]]) -> 
         return False
     every = np.concatenate(intervals)
     low, high = np.percentile(every, [5.0, 95.0])
-    quantum = quantum_degC(np.concatenate(kept))
-    if not (high >= MIN_INTERVAL_SPREAD * low and quantum > 0):
+    if high < MIN_INTERVAL_SPREAD * low:
+        return False
+    quantum = quantum_degC(np.concatenate(kept))  # the costly test last
+    if not quantum > 0:
         return False
     after_silence = np.concatenate(moves)[every >= SILENCE_FACTOR * low]
     one_step = np.count_nonzero(after_silence <= 1.5 * quantum)

@@ -290,14 +290,16 @@ def _quantized_scores(
             for i, r in enumerate(rivals)
         ]
         if child is not None:
-            (again,) = cross_validate(records, with_noise, [rivals[slow[0]].structure], heldout)
+            structure = rivals[slow[0]].structure
+            (again,) = cross_validate(records, with_noise, [structure], heldout)
             refined = child.result()
+            if refined is None:  # the child failed: the search here
+                refined = refinement_scores(
+                    structure, *args, evaluations=SENSOR_LAG_RIVAL_EVALUATIONS
+                )
+            # as refine_time_constant: a refused start is kept as it is
             scored[slow[0]] = (
-                _rival_score(rivals[slow[0]], *args)  # the child failed: here
-                if refined is None
-                else best_refined(again, refined)
-                if math.isfinite(again.criterion)
-                else again
+                best_refined(again, refined) if math.isfinite(again.criterion) else again
             )
     return score, [s for s in scored if s is not None]
 
