@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from fog_temp_comp.bag.bagio import BagError
 from fog_temp_comp.bag.mcapscan import ScanStats
 from fog_temp_comp.bag.salvage import Salvage
 from fog_temp_comp.bag.stream import BagStream, Chunk, Progress, StampOrder
@@ -212,14 +211,10 @@ def reduce_bag(
         if processes == 1:
             for chunk in stream.chunks():
                 reduction.add(chunk)
-        progress.close()
-        stream.warn_unstamped()
-        if on_salvage is not None and (stream.salvage.recovered or stream.salvage.order_summary()):
-            on_salvage(stream.salvage)
         gyro, temperature = reduction.gyro, reduction.temperature
-        for acc, topic in ((gyro, stream.imu_topic), (temperature, stream.temp_topic)):
-            if not acc.samples:
-                raise BagError(f'{path}: topic {topic} has no messages')
+        stream.finish_reading(
+            {'imu': gyro.samples, 'temperature': temperature.samples}, on_salvage
+        )
         t_idx, t_stamp, temp = temperature.result()
         g_idx, g_stamp, rate = gyro.result()
         kept = _sorted_samples(reduction.kept) if keep_temperature else None

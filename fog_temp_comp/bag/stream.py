@@ -331,6 +331,24 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
             if note is not None:
                 print(note, file=stderr or sys.stderr)
 
+    def finish_reading(
+        self, messages: dict[str, int], on_salvage: Callable[[Salvage], None] | None
+    ) -> None:
+        """After the last chunk: close the progress line, warn, report damage, refuse no data.
+
+        ``messages``: how many messages (or chunks) of each kind, ``'imu'`` and
+        ``'temperature'``, were read: a topic with none is a :class:`BagError`. ``on_salvage``
+        is called with :attr:`salvage` where the bag was damaged or its stamps out of order.
+        """
+        if self.progress is not None:
+            self.progress.close()
+        self.warn_unstamped()
+        if on_salvage is not None and (self.salvage.recovered or self.salvage.order_summary()):
+            on_salvage(self.salvage)
+        for kind, topic in (('imu', self.imu_topic), ('temperature', self.temp_topic)):
+            if not messages[kind]:
+                raise BagError(f'{self.path}: topic {topic} has no messages')
+
     @property
     def temp_frame_id(self) -> str:
         """The temperature frame_id kept where the topic carried several, else ''."""
@@ -380,13 +398,7 @@ def read_record(
     ) as stream:
         for chunk in stream.chunks():
             parts[chunk.kind].append(chunk)
-        progress.close()
-        stream.warn_unstamped()
-        if on_salvage is not None and (stream.salvage.recovered or stream.salvage.order_summary()):
-            on_salvage(stream.salvage)
-        for kind, topic in (('imu', stream.imu_topic), ('temperature', stream.temp_topic)):
-            if not parts[kind]:
-                raise BagError(f'{path}: topic {topic} has no messages')
+        stream.finish_reading({kind: len(chunks) for kind, chunks in parts.items()}, on_salvage)
         imu_t = np.concatenate([c.stamps_s for c in parts['imu']])
         rates = np.concatenate([c.values for c in parts['imu']])
         temp_t = np.concatenate([c.stamps_s for c in parts['temperature']])
