@@ -1,8 +1,8 @@
 """Node throughput and latency: the compensator node against a do-nothing relay, in one process.
 
 Both nodes under test (DUT) subscribe ``imu/data_raw`` and publish ``imu/data``
-(``sensor_msgs/Imu``, best effort; the input keeps the last 100 (``node.IMU_INPUT_QOS``), the
-output the last 5 (``qos_profile_sensor_data``)). The compensator
+(``sensor_msgs/Imu``; the input best effort, keeping the last 100 (``node.IMU_INPUT_QOS``), the
+output reliable, keeping the last 100 (``node.OUTPUT_QOS``); the sink best effort). The compensator
 is :class:`fog_temp_comp.ros.node.CompensatorNode` with ``config/example_coefficients.yaml``; the
 relay republishes the message it received. Per case a fresh rclpy context holds three nodes:
 
@@ -64,7 +64,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, Temperature
 
-from fog_temp_comp.ros.node import IMU_INPUT_QOS, CompensatorNode
+from fog_temp_comp.ros.node import IMU_INPUT_QOS, OUTPUT_QOS, CompensatorNode
 
 ROOT = Path(__file__).resolve().parents[1]
 COEFFICIENTS = ROOT / 'config' / 'example_coefficients.yaml'
@@ -80,7 +80,7 @@ class Relay(Node):
 
     def __init__(self, context: Context, namespace: str = NS) -> None:
         super().__init__('relay', namespace=namespace, context=context)
-        self._publisher = self.create_publisher(Imu, 'imu/data', qos_profile_sensor_data)
+        self._publisher = self.create_publisher(Imu, 'imu/data', OUTPUT_QOS)
         self.create_subscription(Imu, 'imu/data_raw', self._on_imu, IMU_INPUT_QOS)
 
     def _on_imu(self, msg: Imu) -> None:

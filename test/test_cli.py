@@ -902,7 +902,7 @@ def test_compensate_of_a_raw_rate_on_imu_data_writes_beside_it(
     assert cli.main(argv) == 0
     out = capsys.readouterr().out
     assert 'NOTE:' not in out  # the default for a gyro topic not named data_raw
-    assert 'corrected Imu on /imu/data_compensated' in out
+    assert 'Imu on /imu/data_compensated:' in out
     assert topic_types(out_bag) == {**topic_types(in_bag), '/imu/data_compensated': IMU_TYPE}
     messages = plain_read(out_bag)
     expected = compensate_record(read_record(in_bag), load(coeffs_yaml))

@@ -112,7 +112,7 @@ def test_the_corrected_imu_of_another_gyro_topic_is_told_apart_when_read_again(
     assert (
         cli.main(['compensate', str(fog_rate_bag), '--coeffs', str(coeffs), '-o', str(out)]) == 0
     )
-    assert 'corrected Imu on /fog/rate_compensated' in capsys.readouterr().out
+    assert 'Imu on /fog/rate_compensated:' in capsys.readouterr().out
     assert topic_types(out) == {**topic_types(fog_rate_bag), '/fog/rate_compensated': IMU_TYPE}
     tables = []
     for bag in (fog_rate_bag, out):
@@ -127,7 +127,7 @@ def test_evaluating_the_corrected_output_again_is_warned_about(
     """``/imu/data`` beside ``/imu/data_raw`` named by hand: compensated twice, so a WARNING."""
     out = tmp_path / 'out'
     assert cli.main(['compensate', str(soak), '--coeffs', str(coeffs), '-o', str(out)]) == 0
-    assert 'corrected Imu on /imu/data ' in capsys.readouterr().out  # the sample bags' name kept
+    assert 'Imu on /imu/data:' in capsys.readouterr().out  # the sample bags' name kept
     for command in ('evaluate', 'compensate'):
         argv = [command, str(out), '--coeffs', str(coeffs), '--gyro-topic', '/imu/data']
         if command == 'compensate':

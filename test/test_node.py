@@ -223,6 +223,32 @@ def test_gyro_input_queue_is_deep_and_overridable(ros_context: object, coeffs_fi
         node.destroy_node()
 
 
+@pytest.mark.parametrize('reliable', [True, False])
+def test_corrected_output_reaches_a_subscriber_of_either_reliability(
+    ros_context: object, coeffs_file: Path, short_cycle: SimulatedRun, reliable: bool
+) -> None:
+    """REP 2003: the output is reliable, so a plain ``create_subscription(..., 10)`` gets it.
+
+    A best-effort output (as before) reached the sensor-data subscriber only: a default-QoS
+    one got nothing, with only an incompatible-QoS warning from the middleware.
+    """
+    from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+
+    node = CompensatorNode(
+        context=ros_context,
+        parameter_overrides=[Parameter('coefficients_file', value=str(coeffs_file))],
+    )
+    assert node._publisher.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+    qos = QoSProfile(depth=10) if reliable else qos_profile_sensor_data
+    assert (qos.reliability == ReliabilityPolicy.RELIABLE) is reliable
+    harness = Harness(ros_context, node, qos=qos)
+    try:
+        out = drive(harness, short_cycle, 20)
+        assert all(msg is not None for msg in out) and len(harness.received) == 20
+    finally:
+        harness.close()
+
+
 @pytest.mark.parametrize('name', ['auto', 'single'])
 def test_diagnostics_timer_runs_on_sim_time_under_each_executor(
     ros_context: object, coeffs_file: Path, name: str
@@ -303,6 +329,8 @@ def test_calibrate_prints_the_node_remapping_for_the_bags_topics(
         try:
             assert node._imu_sub.topic_name == '/fog/rate'
             assert node._temp_sub.topic_name == '/fog/temp'
+            # the corrected Imu where compensate writes it for this gyro topic
+            assert node._publisher.topic_name == '/fog/rate_compensated'
             assert node.get_parameter('coefficients_file').value == str(out.resolve())
         finally:
             node.destroy_node()

@@ -327,3 +327,14 @@ def test_help_prints_the_usage_and_starts_no_node(module: str, flag: str) -> Non
     assert done.stdout.startswith('usage: ros2 run fog_temp_comp '), done.stdout
     assert 'coefficients_file:=COEFFS.yaml' in done.stdout and 'imu/data' in done.stdout
     assert 'ERROR' not in done.stderr
+    # the docstring as a terminal shows it: no Sphinx roles, no doubled backticks
+    assert re.search(r':[a-z]+:`', done.stdout) is None and '``' not in done.stdout, done.stdout
+
+
+def test_plain_text_shows_sphinx_roles_as_names() -> None:
+    from fog_temp_comp.ros.spin import plain_text
+
+    text = plain_text(
+        'Uses :class:`~a.b.Compensator` and :data:`IMU_INPUT_DEPTH` of :mod:`a.b`, ``x``.'
+    )
+    assert text == 'Uses `Compensator` and `IMU_INPUT_DEPTH` of `a.b`, `x`.'

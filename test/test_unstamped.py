@@ -92,12 +92,16 @@ def test_calibrate_on_an_unstamped_temperature_equals_the_stamped_one(
 
 
 @pytest.mark.parametrize('fmt', ['mcap', 'sqlite3', 'ros1'])
-def test_compensate_on_an_unstamped_temperature_equals_the_stamped_one(
-    fmt: str, run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+@pytest.mark.parametrize('topic', [TEMP, IMU])
+def test_compensate_on_an_unstamped_topic_equals_the_stamped_one(
+    fmt: str, topic: str, run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """Both compensate paths (MCAP blocks; AnyReader chunks) time unset stamps by receipt."""
+    """Both compensate paths (MCAP blocks; AnyReader chunks) time unset stamps by receipt.
+
+    A gyro never stamped was passed through raw, on the corrected topic, with no warning.
+    """
     good = write(tmp_path / name(fmt, 'good'), fmt, run)
-    bad = write(tmp_path / name(fmt, 'bad'), fmt, run, unstamped=TEMP)
+    bad = write(tmp_path / name(fmt, 'bad'), fmt, run, unstamped=topic)
     coeffs = tmp_path / 'c.yaml'
     args = ['calibrate', str(good), '-o', str(coeffs), '--terms', 'const,T,Tdot', '--quiet']
     assert cli.main(args) == 0
@@ -107,7 +111,9 @@ def test_compensate_on_an_unstamped_temperature_equals_the_stamped_one(
         assert cli.main(['compensate', str(bag), '--coeffs', str(coeffs), '-o', str(target)]) == 0
         out[label] = read_record(target, gyro_topic='/imu/data', temp_topic=TEMP)
     err = capsys.readouterr().err
-    assert f'{run.temp_stamps_s.size} messages on {TEMP} have no header stamp' in err
+    count = run.temp_stamps_s.size if topic == TEMP else run.imu_stamps_s.size
+    assert f'{count} messages on {topic} have no header stamp' in err
+    assert 'none of the' not in err
     np.testing.assert_array_equal(out['bad'].rates_rad_s, out['good'].rates_rad_s)
     # and the correction did something (a Tdot and T model on a 2 degC/min cycle)
     assert not np.allclose(out['good'].rates_rad_s, run.rates_rad_s, atol=1e-9)
@@ -307,3 +313,24 @@ def test_readings_that_arrive_hours_late_are_not_taken_for_another_clock() -> No
         apart.note_offsets(TEMP, gyro_s - start_s + 5.0, ns)
     assert info.value.temperature_s == pytest.approx(5.0 - start_s)
     assert 'aligned by receive time' in info.value.note('run')
+
+
+def test_compensate_says_when_nothing_was_corrected(
+    run: SimulatedRun, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A temperature an hour behind every gyro stamp: the output is raw, and it says so."""
+    good = write(tmp_path / 'good', 'mcap', run)
+    coeffs = tmp_path / 'c.yaml'
+    args = ['calibrate', str(good), '-o', str(coeffs), '--terms', 'const,T,Tdot', '--quiet']
+    assert cli.main(args) == 0
+    capsys.readouterr()
+    late = write(tmp_path / 'late', 'mcap', run, temp_clock_s=-3000.0)
+    target = tmp_path / 'late_out'
+    argv = ['compensate', str(late), '--coeffs', str(coeffs), '-o', str(target)]
+    assert cli.main(argv) == 0
+    captured = capsys.readouterr()
+    out = read_record(target, gyro_topic='/imu/data', temp_topic=TEMP)
+    np.testing.assert_array_equal(out.rates_rad_s, run.rates_rad_s[-out.rates_rad_s.shape[0] :])
+    n = out.rates_rad_s.shape[0]
+    assert f'WARNING: {late}: none of the {n} gyro messages was corrected' in captured.err
+    assert f'{n} Imu on /imu/data: 0 corrected, {n} passed through uncorrected' in captured.out

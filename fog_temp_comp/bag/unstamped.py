@@ -155,21 +155,20 @@ class UnsetStamps:
                 receive_s = receive_s + offset
         return np.where(unset, receive_s, stamps)
 
-    def timed(
-        self, topic: str, stamps_s: ArrayLike, receive_ns: ArrayLike, *, fill_unset: bool = True
-    ) -> NDArray[np.float64]:
+    def timed(self, topic: str, stamps_s: ArrayLike, receive_ns: ArrayLike) -> NDArray[np.float64]:
         """The stamps (s) the compensator gets for these messages (shape (n,)).
 
         Their receive times (ns) with :attr:`by_receive`; else the header stamps, their offset
         from the receive times noted (:meth:`note_offsets`), an unset one (0) taking its
-        receive time with ``fill_unset`` (an unset gyro stamp goes to the core as it is).
+        receive time (:meth:`fill`), gyro and temperature alike, as ``calibrate`` and
+        ``evaluate`` read them: a gyro that is never stamped is corrected, not passed through
+        raw under the corrected topic's name (the node, which has no receive times, says so in
+        its diagnostics until ``time_source: receive`` times it on arrival).
         """
         if self.by_receive:
             return np.asarray(receive_ns, dtype=np.int64) / NS_PER_S
         self.note_offsets(topic, stamps_s, receive_ns)
-        if fill_unset:
-            return self.fill(topic, stamps_s, receive_ns)
-        return np.asarray(stamps_s, dtype=np.float64)
+        return self.fill(topic, stamps_s, receive_ns)
 
     def warn(
         self,

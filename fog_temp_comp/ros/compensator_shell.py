@@ -21,7 +21,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Bool
@@ -43,6 +43,7 @@ from fog_temp_comp.ros.diagnostics import build_report, reading_model
 from fog_temp_comp.ros.input_types import TypeMismatch, type_mismatches
 from fog_temp_comp.ros.node_parameters import FILTER_PARAMETERS, GUARD_PARAMETERS, Config
 from fog_temp_comp.ros.params import ParameterError, params_files, unknown_warnings
+from fog_temp_comp.ros.qos_profiles import IMU_INPUT_DEPTH, IMU_INPUT_QOS, OUTPUT_QOS
 from fog_temp_comp.ros.rclpy_compat import RCLError
 from fog_temp_comp.ros.spin import EXECUTORS
 from fog_temp_comp.ros.temperature_input import (
@@ -52,18 +53,8 @@ from fog_temp_comp.ros.temperature_input import (
     temperature_input,
 )
 
-__all__ = ['IMU_INPUT_DEPTH', 'IMU_INPUT_QOS', 'CompensatorShell']
+__all__ = ['IMU_INPUT_DEPTH', 'IMU_INPUT_QOS', 'OUTPUT_QOS', 'CompensatorShell']
 
-#: history depth of the gyro subscription: 50 ms at 2 kHz. A dropped gyro sample is lost to the
-#: attitude integration downstream, so the queue rides out scheduling hiccups (a GC pause, a
-#: busy core) that a depth of 5 (2.5 ms at 2 kHz) cannot; ``benchmarks/bench_node.py``
-IMU_INPUT_DEPTH = 100
-IMU_INPUT_QOS = QoSProfile(
-    history=qos_profile_sensor_data.history,
-    depth=IMU_INPUT_DEPTH,
-    reliability=qos_profile_sensor_data.reliability,
-    durability=qos_profile_sensor_data.durability,
-)
 #: other temperature frame_ids whose latest reading is kept for a reload (bounded memory)
 MAX_OTHER_FRAMES = 16
 
@@ -216,7 +207,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         # copies: rclpy applies a qos_overrides parameter to the profile it is given, in place,
         # which would carry one node's override into every later node of the process
         self._publisher = self._create_output(
-            Imu, 'imu/data', copy(qos_profile_sensor_data), qos_overriding_options=qos_options
+            Imu, 'imu/data', copy(OUTPUT_QOS), qos_overriding_options=qos_options
         )
         self._imu_sub = self.create_subscription(
             Imu,

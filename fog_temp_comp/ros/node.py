@@ -7,9 +7,10 @@ is published on ``/diagnostics``.
 Topics (remappable): ``imu/data_raw`` (sensor_msgs/Imu, in), ``imu/temperature``
 (sensor_msgs/Temperature, in), ``imu/data`` (sensor_msgs/Imu, out), ``/diagnostics``
 (diagnostic_msgs/DiagnosticArray, out); with ``rest_learning`` also ``imu/at_rest``
-(std_msgs/Bool, in) and the service ``~/learn_bias_now`` (std_srvs/Trigger). Sensor-data QoS on
-the data topics, except that the gyro input keeps the newest :data:`IMU_INPUT_DEPTH` messages,
-not 5; reliability and depth can be overridden per topic with the standard ``qos_overrides``
+(std_msgs/Bool, in) and the service ``~/learn_bias_now`` (std_srvs/Trigger). The inputs are
+subscribed best effort (the gyro keeping its newest 100 messages, the temperature 5); the
+corrected Imu is published reliable, keep last 100 (REP 2003: any subscriber receives it).
+Reliability and depth can be overridden per topic with the standard ``qos_overrides``
 parameters.
 """
 
@@ -21,7 +22,12 @@ from typing import Any
 
 from rclpy.node import Node
 
-from fog_temp_comp.ros.compensator_shell import IMU_INPUT_DEPTH, IMU_INPUT_QOS, CompensatorShell
+from fog_temp_comp.ros.compensator_shell import (
+    IMU_INPUT_DEPTH,
+    IMU_INPUT_QOS,
+    OUTPUT_QOS,
+    CompensatorShell,
+)
 from fog_temp_comp.ros.node_parameters import (
     FILTER_PARAMETERS,
     GUARD_PARAMETERS,
@@ -38,6 +44,7 @@ __all__ = [
     'GUARD_PARAMETERS',
     'IMU_INPUT_DEPTH',
     'IMU_INPUT_QOS',
+    'OUTPUT_QOS',
     'REST_EARTH_PARAMETERS',
     'REST_PARAMETERS',
     'CompensatorNode',

@@ -7,6 +7,7 @@ parameter or coefficients file is one ``ERROR:`` line on stderr and exit code 1.
 from __future__ import annotations
 
 import os
+import re
 import sys
 from collections.abc import Callable, Sequence
 
@@ -18,19 +19,37 @@ from fog_temp_comp.core.coefficients import CoefficientsError
 from fog_temp_comp.ros.params import ParameterError, params_files, read_params_file
 from fog_temp_comp.ros.rclpy_compat import RCLError, events_executor_factory
 
-__all__ = ['EXECUTORS', 'make_executor', 'run', 'usage']
+__all__ = ['EXECUTORS', 'make_executor', 'plain_text', 'run', 'usage']
 
 #: values of the ``executor`` parameter
 EXECUTORS = ('auto', 'events', 'single')
 
 
+#: a Sphinx cross-reference in a docstring, ``:class:`~a.b.C``` or ``:data:`NAME```
+_SPHINX_ROLE = re.compile(r':[a-z]+:`~?([^`]+)`')
+
+
+def plain_text(docstring: str) -> str:
+    """A docstring as a terminal shows it: roles as their names, ````code```` as ```code```.
+
+    ``:class:`~a.b.C``` becomes ```C```, ``:class:`a.b.C``` ```a.b.C```.
+    """
+
+    def name(match: re.Match[str]) -> str:
+        target = match.group(1)
+        shown = target.rsplit('.', 1)[-1] if match.group(0).count('~') else target
+        return f'`{shown}`'
+
+    return _SPHINX_ROLE.sub(name, docstring).replace('``', '`')
+
+
 def usage(program: str, about: str) -> str:
-    """The ``--help`` text of a node executable: how it is run, then ``about``."""
+    """The ``--help`` text of a node executable: how it is run, then ``about`` as plain text."""
     name = program.rsplit('/', 1)[-1] or 'compensator'
     return (
         f'usage: ros2 run fog_temp_comp {name} --ros-args -p coefficients_file:=COEFFS.yaml\n'
         '         [-p NAME:=VALUE ...] [--params-file PARAMS.yaml] [-r FROM:=TO ...]\n\n'
-        f'{about.strip()}\n\n'
+        f'{plain_text(about).strip()}\n\n'
         "Parameters: the README's Parameters table (every one, with its unit and default), or\n"
         f'`ros2 param describe /fog_temp_compensator NAME` while it runs.'
     )

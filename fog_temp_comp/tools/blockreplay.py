@@ -228,9 +228,8 @@ def _compensate(
     n_imu = len(spans[imu_topic]) if imu_topic in spans else 0
     if n_imu:
         imu = cdr.decode_imu_rates_cdr(spans[imu_topic])
-        # an unset gyro stamp goes to the compensator as it is (the node does the same: the
-        # core corrects it with the current correction and counts it)
-        stamps = unstamped.timed(imu_topic, imu.stamps_s, logs[imu_topic], fill_unset=False)
+        # an unset stamp (0) takes the receive time, gyro and temperature alike
+        stamps = unstamped.timed(imu_topic, imu.stamps_s, logs[imu_topic])
         rates = imu.angular_velocity_rad_s
     else:
         stamps, rates = np.empty(0), np.empty((0, 3))

@@ -18,6 +18,7 @@ from typing import Any, TextIO
 from fog_temp_comp.bag.one_clock import on_one_clock
 from fog_temp_comp.bag.reduce import reduce_record
 from fog_temp_comp.bag.stream import read_record
+from fog_temp_comp.bag.topic_names import default_output_topic
 from fog_temp_comp.core.calibration import CalibrationResult, calibrate_detailed
 from fog_temp_comp.core.coefficients import Coefficients, load, save
 from fog_temp_comp.core.compensator import GuardSettings
@@ -185,12 +186,16 @@ def _calibrate(
 
 #: the node's input topics (relative: remapped with ``-r``)
 NODE_INPUTS = ('imu/data_raw', 'imu/temperature')
+#: the node's output topic (relative)
+NODE_OUTPUT = 'imu/data'
 
 
 def node_remapping(coeffs_path: Path) -> str:
     """The ``ros2 run`` line for the fitted bags' topics, where they are not the node's; else ''.
 
-    Read from the file's ``provenance`` (one gyro and one temperature topic: several bags on
+    The output is remapped to the topic ``compensate`` writes (``/fog/rate_compensated`` for a
+    gyro on ``/fog/rate``, ``/fog/data`` for ``/fog/data_raw``), so both paths agree. Read
+    from the file's ``provenance`` (one gyro and one temperature topic: several bags on
     different topics give no single line).
     """
     provenance = load(coeffs_path).provenance
@@ -200,7 +205,9 @@ def node_remapping(coeffs_path: Path) -> str:
     pairs = [(n, t) for n, t in zip(NODE_INPUTS, (gyro[0], temp[0]), strict=True)]
     if all(t == f'/{n}' for n, t in pairs):
         return ''
-    remaps = ' '.join(f'-r {n}:={t}' for n, t in pairs)
+    # the output on the topic compensate gives it (/fog/rate_compensated for /fog/rate)
+    pairs.append((NODE_OUTPUT, default_output_topic(gyro[0])))
+    remaps = ' '.join(f'-r {n}:={t}' for n, t in pairs if t != f'/{n}')
     return (
         "the bags' topics are not the node's inputs (imu/data_raw, imu/temperature); run it "
         f'with: ros2 run fog_temp_comp compensator --ros-args -p coefficients_file:='

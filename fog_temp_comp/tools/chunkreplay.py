@@ -92,15 +92,10 @@ class ChunkReplayer:
                 temp_batch = temp_batch.take(ours)
         rates = imu_batch.angular_velocity_rad_s if imu else np.empty((0, 3))
         accel = imu_batch.linear_acceleration if imu and self.with_accel else None
-        # an unset temperature stamp takes the receive time (as the node takes its clock); an
-        # unset gyro stamp goes to the compensator as it is (as on the node)
+        # an unset stamp (0) takes the receive time, gyro and temperature alike
         timed = self.unstamped.timed
         imu_logs = [chunk[k][1] for k in imu]
-        imu_stamps = (
-            timed(self.imu_topic, imu_batch.stamps_s, imu_logs, fill_unset=False)
-            if imu
-            else np.empty(0)
-        )
+        imu_stamps = timed(self.imu_topic, imu_batch.stamps_s, imu_logs) if imu else np.empty(0)
         temp_logs = [chunk[k][1] for k in temp]
         temp_stamps = (
             timed(self.temp_topic, temp_batch.stamps_s, temp_logs) if temp else np.empty(0)

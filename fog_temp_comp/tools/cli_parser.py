@@ -17,6 +17,12 @@ from fog_temp_comp import __version__
 from fog_temp_comp.bag.names import FORMATS
 from fog_temp_comp.core.names import METHODS, TDOT_LIMIT_DEGC_PER_MIN, TERM_NAMES
 from fog_temp_comp.core.stamp_offset import TIME_SOURCES
+from fog_temp_comp.tools.simulate_limits import (
+    CYCLE_RANGE_DEGC_PER_MIN,
+    MAX_MESSAGES_PER_RUN,
+    MAX_RATE_HZ,
+    SOAK_RANGE_DEGC,
+)
 
 __all__ = ['build_parser']
 
@@ -194,10 +200,16 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         '--format', choices=FORMATS, default='mcap', dest='fmt', help='bag format (default mcap)'
     )
     p.add_argument(
-        '--imu-hz', type=float, default=10.0, help='gyro rate (Hz, default 10; at most 1000)'
+        '--imu-hz',
+        type=float,
+        default=10.0,
+        help=f'gyro rate (Hz, default 10; at most {MAX_RATE_HZ:,.0f})',
     )
     p.add_argument(
-        '--temp-hz', type=float, default=1.0, help='temperature rate (Hz, default 1; at most 1000)'
+        '--temp-hz',
+        type=float,
+        default=1.0,
+        help=f'temperature rate (Hz, default 1; at most {MAX_RATE_HZ:,.0f})',
     )
     p.add_argument(
         '--seed', type=int, default=0, help="random seed of the runs' noise (>= 0, default 0)"
@@ -228,8 +240,9 @@ def _add_simulate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         type=_runs,
         metavar='KIND:SETPOINT,...',
         help="runs to write instead of the paper's plan, e.g. soak:20,cycle:1.0 (soak setpoint "
-        'in degC, -60..100; cycle rate in degC/min, 0.01..20; each once; at most 5,000,000 '
-        'messages a run)',
+        f'in degC, {SOAK_RANGE_DEGC[0]:g}..{SOAK_RANGE_DEGC[1]:g}; cycle rate in degC/min, '
+        f'{CYCLE_RANGE_DEGC_PER_MIN[0]:g}..{CYCLE_RANGE_DEGC_PER_MIN[1]:g}; each once; at most '
+        f'{MAX_MESSAGES_PER_RUN:,} messages a run, gyro and temperature)',
     )
     _add_simulate_vehicle(
         p.add_argument_group(

@@ -186,12 +186,21 @@ def _report_written(
             'messages) got the correction of the moment they came, next to them',
             file=sys.stderr,
         )
+    if n_out and counters.imu_uncorrected == n_out:
+        print(
+            f'WARNING: {run.in_bag}: none of the {n_out} gyro messages was corrected: each '
+            'passed through as it came (no temperature within the stale time of its stamp); '
+            f'{run.output_used} holds the raw rate',
+            file=sys.stderr,
+        )
     after = ' or after a time jump' if counters.time_jumps else ''
+    held = f'{counters.imu_held} with the correction held, ' if counters.imu_held else ''
     print(
-        f'wrote {out_bag}: {n_out} corrected Imu on {run.output_used} '
+        f'wrote {out_bag}: {n_out} Imu on {run.output_used}: '
+        f'{n_out - counters.imu_uncorrected - counters.imu_held} corrected, '
+        f'{held}{counters.imu_uncorrected} passed through uncorrected '
         f'({counters.imu_awaiting_temperature} before the first temperature{after} and '
-        f'{counters.imu_duplicate} duplicates not written, '
-        f'{counters.imu_uncorrected} passed through uncorrected)',
+        f'{counters.imu_duplicate} duplicates not written)',
         file=stdout,
     )
 

@@ -7,8 +7,10 @@ Each bound is one ``ERROR:`` line naming its option, before anything is simulate
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
-from fog_temp_comp.tools.simulate import SimulationConfig, chamber_profile, run_name
+if TYPE_CHECKING:  # the simulator's import takes 0.7 s: not for the parser's help texts
+    from fog_temp_comp.tools.simulate import SimulationConfig
 
 __all__ = [
     'CYCLE_RANGE_DEGC_PER_MIN',
@@ -50,6 +52,8 @@ def check_runs(runs: Sequence[tuple[str, float]], cfg: SimulationConfig) -> None
     :data:`CYCLE_RANGE_DEGC_PER_MIN`, at most :data:`MAX_MESSAGES_PER_RUN` messages per run
     at ``cfg``'s rates.
     """
+    from fog_temp_comp.tools.simulate import chamber_profile, run_name
+
     names: set[str] = set()
     for kind, setpoint in runs:
         low, high = SOAK_RANGE_DEGC if kind == 'soak' else CYCLE_RANGE_DEGC_PER_MIN
