@@ -211,20 +211,37 @@ def test_zero_stamp_gyro_gets_current_correction(
     assert 'without stamp' in harness.diagnose().message
 
 
-def test_a_gyro_never_stamped_is_passed_through_uncorrected_and_said(
-    harness: Harness,
+def test_a_gyro_never_stamped_is_timed_on_arrival_and_corrected(
+    harness: Harness, coefficients: Coefficients, capfd: pytest.CaptureFixture[str]
 ) -> None:
-    """No stamp to compute a correction at and none computed yet: raw out, counted, ERROR."""
+    """A driver that never stamps the gyro: timed by the node clock on arrival, corrected.
+
+    On the temperature's header clock (here 3 years behind the node's: T0), as a temperature
+    without stamp is. It was passed through raw, with an ERROR naming ``time_source``.
+    """
     harness.send_temperature(T0, 25.0)
     for _ in range(3):
         out = harness.send_imu(0.0, RATE)
-        assert out is not None
-        assert_array_equal(rate_of(out), RATE)  # not "corrected" by a correction of 0
+        assert out is not None and stamp_of(out) == 0.0  # the header is passed on as it came
+        assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 25.0), rtol=1e-9)
     counters = harness.node.compensator.status.counters
-    assert (counters.imu_uncorrected, counters.imu_corrected, counters.imu_zero_stamp) == (3, 0, 3)
+    assert (counters.imu_uncorrected, counters.imu_corrected, counters.imu_zero_stamp) == (0, 3, 0)
+    assert harness.node.gyro_unstamped == 3
+    # on the temperature's clock: within seconds of its reading, not years after it
+    assert 0.0 <= harness.node.compensator.status.last_imu_stamp_s - T0 < 60.0
     status = harness.diagnose()
-    assert status.level == ERROR
-    assert 'gyro messages without stamp: passed through uncorrected' in status.message
+    assert status.level == WARN, status.message
+    assert 'gyro never stamped: timed by the node clock on arrival' in status.message
+    assert {v.key: v.value for v in status.values}['gyro_unstamped'] == '3'
+    warned = [ln for ln in capfd.readouterr().err.splitlines() if 'never stamped' in ln]
+    assert len(warned) == 1 and '[WARN]' in warned[0], warned
+    assert 'gyro on /imu/data_raw never stamped (header stamp 0)' in warned[0]
+    # a stamped message afterwards is timed by its stamp, and a 0 then gets the current one
+    harness.send_imu(T0 + 1.0, RATE)
+    harness.send_imu(0.0, RATE)
+    assert harness.node.gyro_unstamped == 3 and counters.imu_zero_stamp == 1
+    harness.diagnose()
+    assert 'never stamped' not in capfd.readouterr().err  # said once
 
 
 def test_gyro_time_jump_backwards_resets_and_reports(harness: Harness) -> None:

@@ -99,6 +99,9 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         self.frame_mismatches = 0
         #: messages with an unset (0) header stamp, timed by the node clock instead
         self.unstamped = 0
+        #: gyro messages of a gyro never stamped (0), timed by the node clock on arrival
+        self.gyro_unstamped = 0
+        self._gyro_stamped = False  # a gyro message with a header stamp came
         #: the last stamped temperature's clock minus the node clock, s (0 within 5 s)
         self._header_clock_s = 0.0
         #: temperature minus gyro header clock (s) that made the node time both on arrival
@@ -378,7 +381,8 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
 
         Moved onto the clock of the temperature's other stamps where that runs more than 5 s
         from the node's (a device's clock since power-on). (An unset gyro stamp goes to the
-        core, which corrects it with the current correction and counts it.)
+        core, which corrects it with the current correction and counts it; a gyro never
+        stamped is timed on arrival in :meth:`_on_imu`.)
         """
         self.unstamped += 1
         return self._now_s() + self._header_clock_s
@@ -475,8 +479,14 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
                 self.imu_published += 1
                 return
         compensator = self.compensator
-        # a header stamp of 0 gets the core's current correction
+        # a header stamp of 0 gets the core's current correction, but a gyro never stamped is
+        # timed on arrival, on the temperature's header clock (as an unstamped temperature)
         stamp_s = self._now_s() if self._by_receive else stamp.sec + stamp.nanosec * 1e-9
+        if not self._gyro_stamped:
+            self._gyro_stamped = stamp_s != 0.0
+            if not stamp_s:
+                self.gyro_unstamped += 1
+                stamp_s = self._now_s() + self._header_clock_s
         if compensator.rest is None:
             rate = compensator.correct_xyz(stamp_s, w.x, w.y, w.z)
         else:
@@ -529,7 +539,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
                 self.frame_mismatches,
                 self.frame_mismatches - self._last_frame_mismatches,
             ),
-            unstamped=self.unstamped,
+            unstamped=(self.unstamped, self.gyro_unstamped),
             temperature_stamp_offset_s=self._arrival.offset_s,
             two_clocks=self._arrival.two_clocks,
             clocks_apart_s=self.clocks_apart_s,

@@ -41,6 +41,10 @@ class ConsoleLogMixin(ParametersMixin):
     _arrival: ArrivalOffsets
     #: the reading timing taken from the readings, as last logged ('' none)
     _logged_timing: str = ''
+    _imu_sub: Subscription
+    gyro_unstamped: int
+    #: a gyro never stamped, timed on arrival, was said
+    _logged_gyro_unstamped: bool = False
 
     def _log_config(self, what: str) -> None:
         cfg = self.config
@@ -119,6 +123,15 @@ class ConsoleLogMixin(ParametersMixin):
                 throttle_duration_sec=self._throttle_s,
             )
 
+    def _log_gyro_unstamped(self) -> None:
+        """WARN once that the gyro comes without header stamps and is timed on arrival."""
+        if self.gyro_unstamped and not self._logged_gyro_unstamped:
+            self._logged_gyro_unstamped = True
+            self.get_logger().warning(
+                f'gyro on {self._imu_sub.topic_name} never stamped (header stamp 0): timed by '
+                "the node clock on arrival, on the temperature stamps' clock"
+            )
+
     def _log_console(self, counters: Any, previous: Any) -> None:
         """Throttled console lines for what went wrong since the last report.
 
@@ -150,6 +163,7 @@ class ConsoleLogMixin(ParametersMixin):
             )
         self._log_stale(counters, previous, topic)
         self._log_timing_taken(topic)
+        self._log_gyro_unstamped()
         jumps = counters.time_jumps - previous.time_jumps
         if jumps:
             log.warning(

@@ -88,7 +88,7 @@ def build_report(
     inactive: tuple[int, int] | None = None,
     stale_after_s: float = math.nan,
     frame_mismatches: tuple[int, int] = (0, 0),
-    unstamped: int = 0,
+    unstamped: tuple[int, int] = (0, 0),
     temperature_stamp_offset_s: float = math.nan,
     two_clocks: bool = False,
     clocks_apart_s: float = math.nan,
@@ -106,7 +106,9 @@ def build_report(
     ``stale_after_s`` (s), ``plausible_degC`` (low, high degC): the compensator's. The
     temperature stamp minus the gyro's latest on arrival nearest zero (s), ``two_clocks``:
     :class:`~fog_temp_comp.core.stamp_offset.ArrivalOffsets`; ``clocks_apart_s``: header
-    clocks hours apart that made the node time both on arrival (nan: it did not). ``frames``:
+    clocks hours apart that made the node time both on arrival (nan: it did not);
+    ``unstamped``: temperature and gyro messages without a header stamp, timed on arrival.
+    ``frames``:
     the temperature frame_id kept; ``frame_mismatches``: gyro messages of another frame_id,
     in all and since the last report; ``type_mismatches``: inputs published as other types;
     ``untold_delivery``: how the readings look delivered where the settings do not say.
@@ -130,8 +132,7 @@ def build_report(
         ('imu_rate_hz', _num(imu_rate_hz)),
         ('temperature_rate_hz', _num(temperature_rate_hz)),
         ('temperature_stale_after_s', _num(stale_after_s)),
-        ('temperature_stamp_offset_s', _num(temperature_stamp_offset_s)),
-        ('header_clocks_apart_s', _num(clocks_apart_s)),
+        *_clock_values(temperature_stamp_offset_s, clocks_apart_s, unstamped),
         ('denoise', method),
         ('temperature_reading_model', reading_model),
         ('filter_ready', str(status.estimator_ready)),
@@ -141,7 +142,6 @@ def build_report(
     values += [
         *_fault_values(status, plausible_degC),
         ('frame_id_mismatches', str(frame_mismatches[0])),
-        ('temperature_unstamped', str(unstamped)),
         *frame_values,
         *[(f'published_as {m.topic}', ', '.join(m.published)) for m in type_mismatches],
     ]
@@ -214,13 +214,27 @@ def _temperature_frames(
     return [(WARN, text + ' (set temperature_frame_id)')], values
 
 
+def _clock_values(
+    offset_s: float, clocks_apart_s: float, unstamped: tuple[int, int]
+) -> list[tuple[str, str]]:
+    """The clocks' values: the temperature stamps' offset, clocks apart, unstamped messages."""
+    return [
+        ('temperature_stamp_offset_s', _num(offset_s)),
+        ('header_clocks_apart_s', _num(clocks_apart_s)),
+        ('temperature_unstamped', str(unstamped[0])),
+        ('gyro_unstamped', str(unstamped[1])),
+    ]
+
+
 def _clock_reasons(
-    offset_s: float, two_clocks: bool, clocks_apart_s: float, unstamped: int = 0
+    offset_s: float, two_clocks: bool, clocks_apart_s: float, unstamped: tuple[int, int] = (0, 0)
 ) -> list[tuple[int, str]]:
-    """WARNs for temperature stamps on another clock or none, and for clocks hours apart."""
+    """WARNs for stamps on another clock or none (temperature, gyro), clocks hours apart."""
     reasons = []
-    if unstamped:
+    if unstamped[0]:
         reasons.append((WARN, 'temperature without a header stamp: timed by the node clock'))
+    if unstamped[1]:
+        reasons.append((WARN, 'gyro never stamped: timed by the node clock on arrival'))
     if two_clocks:
         reasons.append((WARN, two_clocks_text(offset_s)))
     if math.isfinite(clocks_apart_s):
