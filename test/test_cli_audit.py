@@ -262,6 +262,18 @@ def test_simulate_accepts_the_bounds(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ['soak_100', 'soak_m60']
 
 
+def test_simulate_help_states_the_bounds_it_checks(capsys: pytest.CaptureFixture[str]) -> None:
+    """The help gave 1000 Hz and 5,000,000 messages, long after the checks allowed more."""
+    from fog_temp_comp.tools.simulate_limits import MAX_MESSAGES_PER_RUN, MAX_RATE_HZ
+
+    with pytest.raises(SystemExit):
+        cli.main(['simulate', '--help'])
+    text = ' '.join(capsys.readouterr().out.split())  # argparse wraps the lines
+    assert text.count(f'at most {MAX_RATE_HZ:,.0f}') == 2  # --imu-hz and --temp-hz
+    assert f'at most {MAX_MESSAGES_PER_RUN:,} messages a run' in text
+    assert 'at most 1000)' not in text
+
+
 @pytest.mark.parametrize(
     ('given', 'name'), [('file', 'out.db3'), ('file', 'out.bag'), ('directory', 'out.DB3')]
 )
