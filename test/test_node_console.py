@@ -155,20 +155,20 @@ def test_two_clocks_warn_throttled(
     harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
 ) -> None:
     h = harness_factory()
-    for k in range(5):  # temperature stamped 18 s behind the gyro (GPS time against UTC)
+    for k in range(5):  # temperature stamped 8 s behind the gyro (within the stale time)
         h.send_imu(T0 + k, RATE)
-        h.send_temperature(T0 + k - 18.0, 25.0)
+        h.send_temperature(T0 + k - 8.0, 25.0)
 
     def cause(k: int) -> None:
         h.send_imu(T0 + 5 + k, RATE)
-        h.send_temperature(T0 + 5 + k - 18.0, 25.0)
+        h.send_temperature(T0 + 5 + k - 8.0, 25.0)
 
     lines = three_times(
         Console(capfd),
         h,
         cause,
         'WARN',
-        r'^/imu/temperature: temperature stamps 18\.0 s behind the gyro stamps on arrival: '
+        r'^/imu/temperature: temperature stamps 8\.0 s behind the gyro stamps on arrival: '
         r'two clocks\?',
     )
     assert lines[0].endswith('misaligned by that much (and stale beyond the stale time)')

@@ -377,15 +377,15 @@ def test_a_gyro_that_stops_is_an_error_until_it_comes_back(harness: Harness) -> 
     assert 'no gyro messages' not in status.message and status.level != ERROR
 
 
-@pytest.mark.parametrize(('offset_s', 'side'), [(-18.0, 'behind'), (7.0, 'ahead of')])
+@pytest.mark.parametrize(('offset_s', 'side'), [(-8.0, 'behind'), (7.0, 'ahead of')])
 def test_temperature_stamped_by_another_clock_is_reported(
     harness: Harness, offset_s: float, side: str
 ) -> None:
-    """A temperature driver on another clock (GPS time against UTC: 18 s) gets a WARN.
+    """A temperature driver on another clock gets a WARN.
 
-    18 s behind, every temperature is stale at the gyro stamps; 7 s ahead it is fresh but
-    misaligned, which nothing else shows. Each arrives while the gyro flows, so its stamp is
-    compared with the gyro's latest.
+    Within the stale time (10 s) of the gyro's, behind or ahead, it is fresh but misaligned,
+    which nothing else shows. Each arrives while the gyro flows, so its stamp is compared with
+    the gyro's latest.
     """
     for k in range(8):
         harness.send_imu(T0 + k, RATE)
@@ -398,6 +398,35 @@ def test_temperature_stamped_by_another_clock_is_reported(
     )
     assert 'two clocks' in status.message
     assert float(values['temperature_stamp_offset_s']) == pytest.approx(offset_s + 0.5)
+
+
+@pytest.mark.parametrize('step_s', [-18.0, -600.0])
+def test_a_temperature_clock_behind_by_more_than_the_stale_time_is_timed_on_arrival(
+    harness: Harness, coefficients: Coefficients, step_s: float
+) -> None:
+    """GPS time against UTC (18 s), or a clock stepped back mid-run (10 min).
+
+    Every reading would be stale at the gyro stamps, and the correction held as long as it
+    lasts (an hour of a ramp's Tdot terms held after the ramp ended: 1.5 deg/h). Once the
+    arrivals show it, both are timed by the node clock, as for clocks hours apart.
+    """
+    for k in range(5):  # one clock first
+        harness.send_imu(T0 + k, RATE)
+        harness.send_temperature(T0 + k + 0.5, 25.0)
+    assert math.isnan(harness.node.clocks_apart_s)
+    for k in range(5, 20):  # the last 15 offsets all beyond: two clocks
+        harness.send_imu(T0 + k, RATE)
+        harness.send_temperature(T0 + k + 0.5 + step_s, 26.0)
+    assert harness.node.clocks_apart_s == pytest.approx(step_s + 0.5)
+    counters = harness.node.compensator.status.counters
+    held = counters.imu_held
+    for k in range(20, 23):  # timed on arrival: each temperature fresh at the next gyro sample
+        harness.send_temperature(T0 + k + step_s, 26.0)
+        out = harness.send_imu(T0 + k, RATE)
+    assert counters.imu_held == held  # not held any more
+    assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 26.0))
+    status = harness.diagnose()
+    assert 'header clocks' in status.message and 'timed by the node clock' in status.message
 
 
 def test_header_clocks_hours_apart_are_timed_on_arrival(

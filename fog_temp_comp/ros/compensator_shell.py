@@ -413,13 +413,18 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         was_ready = status.estimator_ready
         if self.compensator.add_temperature(stamp_s, temperature.degC(msg)):
             self._track_warm_up(stamp_s, was_ready)
-            imu_total = status.counters.imu_total
-            if imu_total > self._imu_total_at_temperature:  # the gyro flows: compare clocks
-                self._arrival.add(stamp_s, status.last_imu_stamp_s)
-                arrival = self._arrival
-                if arrival.two_clocks and abs(arrival.offset_s) > GROSS_CLOCK_MISMATCH_S:
-                    self._time_on_arrival()
-            self._imu_total_at_temperature = imu_total
+        # the clocks compared on every reading, taken or not (a clock stepped back is out of
+        # order until it passes the last stamp)
+        imu_total = status.counters.imu_total
+        if imu_total > self._imu_total_at_temperature:  # the gyro flows: compare clocks
+            self._arrival.add(stamp_s, status.last_imu_stamp_s)
+            arrival = self._arrival
+            if arrival.two_clocks and (
+                abs(arrival.offset_s) > GROSS_CLOCK_MISMATCH_S
+                or arrival.offset_s < -self.compensator.stale_after_s
+            ):
+                self._time_on_arrival()
+        self._imu_total_at_temperature = imu_total
 
     def _note_other_frame(self, msg: Any) -> None:
         """Keep another sensor's latest reading: a reload that moves to it starts from it."""
@@ -432,33 +437,19 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         if stamp_s > 0.0 and math.isfinite(value):
             latest[frame_id] = (stamp_s, value)
 
-    def _log_other_frames(self) -> None:
-        """Say once that the temperature topic carries several sensors' readings."""
-        self._frames_logged = True
-        frames = self.temperature_frames
-        text = (
-            f"imu/temperature carries several sensors' readings ({frames.summary()} so far, by "
-            f'frame_id): {frames.kept} kept'
-        )
-        if frames.preferred and not frames.fell_back:
-            self.get_logger().info(text + ', as calibrated')
-        else:
-            self.get_logger().warning(text + ' (set temperature_frame_id)')
-
     def _time_on_arrival(self) -> None:
-        """Time gyro and temperature by the node clock: their header clocks are hours apart.
+        """Time gyro and temperature by the node clock: their header clocks are too far apart.
 
-        No temperature would ever pair with a gyro sample (a sensor clock since power-on
-        against the computer's). The estimate restarts at the next temperature (a gap).
+        Hours apart (a sensor clock since power-on against the computer's), no temperature
+        would ever pair with a gyro sample; behind the gyro by more than the stale time (a GPS
+        clock against UTC, a clock stepped back), every reading would be stale at the gyro
+        stamps and the correction held as long as it lasts. The estimate restarts at the next
+        temperature (a gap).
         """
         self.clocks_apart_s = self._arrival.offset_s
         self._by_receive = True
         self._arrival.reset()
-        self.get_logger().warning(
-            f'temperature header stamps {self.clocks_apart_s:+.6g} s from the gyro stamps on '
-            'arrival: two clocks hours apart; gyro and temperature are timed by the node clock '
-            'on arrival from now on (as time_source receive)'
-        )
+        self._log_time_on_arrival(self.clocks_apart_s, self.compensator.stale_after_s)
 
     def _on_at_rest(self, msg: Bool) -> None:
         if self.configured and self.compensator.rest is not None:

@@ -13,7 +13,8 @@ from typing import Any
 from rclpy.subscription import Subscription
 
 from fog_temp_comp.core.compensator import STALE_SAMPLE_INTERVALS, Compensator
-from fog_temp_comp.core.stamp_offset import ArrivalOffsets
+from fog_temp_comp.core.frame_lock import FrameLock
+from fog_temp_comp.core.stamp_offset import GROSS_CLOCK_MISMATCH_S, ArrivalOffsets
 from fog_temp_comp.ros.diagnostics import never_stamped_uncorrected, two_clocks_text
 from fog_temp_comp.ros.node_parameters import ParametersMixin
 
@@ -43,6 +44,8 @@ class ConsoleLogMixin(ParametersMixin):
     _logged_timing: str = ''
     _imu_sub: Subscription
     gyro_unstamped: int
+    temperature_frames: FrameLock
+    _frames_logged: bool
     #: a gyro never stamped, timed on arrival, was said
     _logged_gyro_unstamped: bool = False
 
@@ -122,6 +125,32 @@ class ConsoleLogMixin(ParametersMixin):
                 'computed yet (time_source receive times them on arrival)',
                 throttle_duration_sec=self._throttle_s,
             )
+
+    def _log_other_frames(self) -> None:
+        """Say once that the temperature topic carries several sensors' readings."""
+        self._frames_logged = True
+        frames = self.temperature_frames
+        text = (
+            f"imu/temperature carries several sensors' readings ({frames.summary()} so far, by "
+            f'frame_id): {frames.kept} kept'
+        )
+        if frames.preferred and not frames.fell_back:
+            self.get_logger().info(text + ', as calibrated')
+        else:
+            self.get_logger().warning(text + ' (set temperature_frame_id)')
+
+    def _log_time_on_arrival(self, offset_s: float, stale_after_s: float) -> None:
+        """WARN that gyro and temperature are timed on arrival from now on, and why."""
+        why = (
+            'two clocks hours apart'
+            if abs(offset_s) > GROSS_CLOCK_MISMATCH_S
+            else f'two clocks: every reading stale at the gyro stamps (after {stale_after_s:g} s)'
+        )
+        self.get_logger().warning(
+            f'temperature header stamps {offset_s:+.6g} s from the gyro stamps on arrival: '
+            f'{why}; gyro and temperature are timed by the node clock on arrival from now on '
+            '(as time_source receive)'
+        )
 
     def _log_gyro_unstamped(self) -> None:
         """WARN once that the gyro comes without header stamps and is timed on arrival."""
