@@ -294,6 +294,36 @@ def test_offline_estimates_online_methods_run_the_estimator() -> None:
         assert_allclose(series.temperature_degC, online[:, 1], rtol=0, atol=1e-9)
 
 
+def test_tdot_lag_starts_in_steady_state_after_the_warm_up_online_and_offline() -> None:
+    """A filter started mid-ramp: ``Tdot_lag`` is the ramp's Tdot once it is ready, not 0.
+
+    Fed the warm-up's zeros, the lag (240 s) had taken some 10 min to come within 5 % of the
+    ramp; offline (:meth:`EstimateSeries.shaped`, what calibrate fits) gives the same.
+    """
+    t = T0 + np.arange(3600.0)
+    temps = np.round((10.0 + 0.5 / 60.0 * (t - T0)) / (1 / 16)) * (1 / 16)  # a ramp throughout
+    settings = DenoiseSettings(method='kalman', tdot_lag_s=240.0)
+    online = make_estimator(settings).add_block(t, temps)
+    ready = np.array([e.ready for e in online])
+    first = int(np.argmax(ready))
+    assert 0 < first < 600 and ready[first:].all()
+    lag = np.array([e.tdot_lag_degC_per_min for e in online])
+    tdot = np.array([e.tdot_degC_per_min for e in online])
+    assert (lag[:first] == 0.0).all() and lag[first] == tdot[first] > 0.3
+    # within 5 % of the ramp from the warm-up on (the estimate settles; the lag follows it)
+    assert np.abs(lag[first + 60 :] / 0.5 - 1.0).max() < 0.05
+    unshaped = offline_estimates(settings, t, temps, coil_lag=False)
+    offline = unshaped.shaped(settings.tdot_shrink_sigmas, settings.tdot_lag_s)
+    assert_allclose(offline.tdot_lag_degC_per_min, lag, rtol=0, atol=1e-9)
+    # a restart (the estimator reset, warming up again) starts the lag afresh as well
+    again = make_estimator(settings)
+    again.add_block(t[:900], temps[:900])
+    again.reset()
+    restarted = again.add_block(t[1800:], temps[1800:])
+    k = next(i for i, e in enumerate(restarted) if e.ready)
+    assert restarted[k].tdot_lag_degC_per_min == restarted[k].tdot_degC_per_min > 0.3
+
+
 # --------------------------------------------------------------------------------------------
 # coil lag
 # --------------------------------------------------------------------------------------------

@@ -177,6 +177,7 @@ class EstimateSeries:
         """What :class:`TdotShaper` does online, on the whole series (same result)."""
         tdot = self.tdot_degC_per_min
         std = self.tdot_std_degC_per_min
+        warming = np.zeros(tdot.shape, dtype=bool)
         if std is not None:
             known = ~np.isnan(std)
             gain = np.ones_like(tdot)
@@ -186,9 +187,27 @@ class EstimateSeries:
                     gain = np.where(np.abs(tdot) > threshold, 1.0 - (threshold / tdot) ** 2, 0.0)
             if self.ready is not None:
                 gain = np.where(self.ready, gain, 0.0)
+                warming = known & ~self.ready
             tdot = np.where(known, tdot * gain, tdot)
         return dataclasses.replace(
             self,
             tdot_degC_per_min=tdot,
-            tdot_lag_degC_per_min=coil_lag(self.stamp_s, tdot, tdot_lag_s),
+            tdot_lag_degC_per_min=_lag_after_warm_ups(self.stamp_s, tdot, tdot_lag_s, warming),
         )
+
+
+def _lag_after_warm_ups(
+    stamps_s: FloatArray, tdot: FloatArray, tdot_lag_s: float, warming: NDArray[np.bool_]
+) -> FloatArray:
+    """The lag of Tdot (degC/min, shape (n,)), started in steady state after each warm-up.
+
+    What :class:`~fog_temp_comp.core.tdot_following.TdotShaper` does online: each run of
+    samples not ``warming`` is lagged on its own; a warming sample passes (its Tdot is 0).
+    """
+    if not warming.any():
+        return coil_lag(stamps_s, tdot, tdot_lag_s)
+    lagged = tdot.copy()
+    edges = np.flatnonzero(np.diff(np.r_[1, warming.astype(np.int8), 1]))  # run starts and ends
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        lagged[start:stop] = coil_lag(stamps_s[start:stop], tdot[start:stop], tdot_lag_s)
+    return lagged

@@ -158,7 +158,9 @@ class TdotShaper(_FollowingEstimator):
     Tdot is shrunk toward 0 by :func:`shrink_tdot` with ``settings.tdot_shrink_sigmas`` (and is
     0 while an estimator with a posterior standard deviation warms up, shrinkage or not), then
     its lag of ``settings.tdot_lag_s`` (s) fills ``tdot_lag_degC_per_min`` (the shrunk Tdot
-    itself when the time constant is 0).
+    itself when the time constant is 0). The lag starts in steady state at the first estimate
+    after a warm-up: fed the warm-up's zeros, it had taken several time constants to reach a
+    ramp's Tdot (a node started mid-ramp: 0.3-0.5 deg/h off for 5 min after "warmed up").
 
     Parameters
     ----------
@@ -175,14 +177,20 @@ class TdotShaper(_FollowingEstimator):
         self._lag = CoilLag(settings.tdot_lag_s)
 
     def _apply(self, e: TdotEstimate) -> TdotEstimate:
-        tdot = shrink_tdot(e.tdot_degC_per_min, e.tdot_std_degC_per_min, self._sigmas, e.ready)
+        std = e.tdot_std_degC_per_min
+        tdot = shrink_tdot(e.tdot_degC_per_min, std, self._sigmas, e.ready)
+        if e.ready or std != std:  # NaN std: an estimator without a warm-up rule
+            lagged = self._lag.update(e.stamp_s, tdot)
+        else:  # warming up, Tdot held at 0: the lag starts in steady state once it is ready
+            self._lag.reset()
+            lagged = tdot
         self._estimate = TdotEstimate(  # not dataclasses.replace: this runs per sample
             e.stamp_s,
             e.temperature_degC,
             tdot,
             e.raw_tdot_degC_per_min,
-            e.tdot_std_degC_per_min,
-            self._lag.update(e.stamp_s, tdot),
+            std,
+            lagged,
             e.ready,
         )
         return self._estimate
