@@ -222,6 +222,27 @@ def test_temperature_clamped_warns_throttled(
     assert lines[0].endswith('clamped to 60.00 degC')
 
 
+def test_a_temperature_back_inside_the_range_is_said_as_such(
+    harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Clamped, then back inside before the report: not 'X degC outside: clamped to X'."""
+    h = harness_factory()
+    console = Console(capfd)
+    h.send_temperature(T0, 60.5)
+    h.send_imu(T0 + 0.1, RATE)  # clamped
+    for k in range(1, 60):  # down to 57.55 degC at 3 degC/min
+        h.send_temperature(T0 + k, 60.5 - 0.05 * k)
+        h.send_imu(T0 + k + 0.1, RATE)
+    assert h.node.compensator.status.temperature_degC < 60.0
+    console.read()
+    console.lines.clear()
+    h.node.publish_diagnostics()
+    lines = console.matching('WARN', r'^temperature outside the calibrated \[-40\.00, 60\.00\]')
+    assert len(lines) == 1, console.lines
+    assert re.search(r'since the last report: \d+ gyro messages corrected at the range', lines[0])
+    assert re.search(r'\(now 5\d\.\d\d degC, inside\)$', lines[0]), lines[0]
+
+
 def test_tdot_clamped_warns_throttled(
     harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
 ) -> None:

@@ -161,6 +161,27 @@ class ConsoleLogMixin(ParametersMixin):
                 "the node clock on arrival, on the temperature stamps' clock"
             )
 
+    def _log_temperature_clamped(self, counters: Any, previous: Any, every: float) -> None:
+        """WARN of a temperature clamped to the calibrated range since the last report.
+
+        As it is now where it still is outside; else that it was (it came back in between).
+        """
+        status = self.compensator.status
+        t_range = self.config.coefficients.model.temperature_range_degC
+        bounds = f'the calibrated [{t_range.low:.2f}, {t_range.high:.2f}] degC'
+        if not t_range.low < status.temperature_used_degC < t_range.high:  # clamped now
+            text = (
+                f'temperature {status.temperature_degC:.2f} degC outside {bounds}: clamped to '
+                f'{status.temperature_used_degC:.2f} degC'
+            )
+        else:
+            clamped = counters.imu_temperature_clamped - previous.imu_temperature_clamped
+            text = (
+                f'temperature outside {bounds} since the last report: {clamped} gyro messages '
+                f"corrected at the range's end (now {status.temperature_used_degC:.2f} degC, inside)"
+            )
+        self.get_logger().warning(text, throttle_duration_sec=every)
+
     def _log_console(self, counters: Any, previous: Any) -> None:
         """Throttled console lines for what went wrong since the last report.
 
@@ -216,15 +237,8 @@ class ConsoleLogMixin(ParametersMixin):
                 throttle_duration_sec=every,
             )
         self._last_frame_mismatches = self.frame_mismatches
-        model = self.config.coefficients.model
         if counters.imu_temperature_clamped > previous.imu_temperature_clamped:
-            t_range = model.temperature_range_degC
-            log.warning(
-                f'temperature {status.temperature_degC:.2f} degC outside the calibrated '
-                f'[{t_range.low:.2f}, {t_range.high:.2f}] degC: clamped to '
-                f'{status.temperature_used_degC:.2f} degC',
-                throttle_duration_sec=every,
-            )
+            self._log_temperature_clamped(counters, previous, every)
         if counters.imu_tdot_clamped > previous.imu_tdot_clamped:
             log.warning(
                 f'Tdot {status.tdot_degC_per_min:.3f} degC/min clamped to '
