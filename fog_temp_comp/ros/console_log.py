@@ -178,7 +178,8 @@ class ConsoleLogMixin(ParametersMixin):
             clamped = counters.imu_temperature_clamped - previous.imu_temperature_clamped
             text = (
                 f'temperature outside {bounds} since the last report: {clamped} gyro messages '
-                f"corrected at the range's end (now {status.temperature_used_degC:.2f} degC, inside)"
+                f"corrected at the range's end (now {status.temperature_used_degC:.2f} degC, "
+                'inside)'
             )
         self.get_logger().warning(text, throttle_duration_sec=every)
 
