@@ -153,6 +153,18 @@ class Compensator(_BlockCorrection, _DeliveryTiming, _TemperatureLeaps, _LostSpa
         if self.rest is not None:
             self.rest.reset()
 
+    def use_model(self, model: DriftModel) -> None:
+        """Correct with another drift model from the next gyro message on (a reload).
+
+        The Tdot estimator, whose settings are not the model's, goes on as it is: new
+        coefficients of the same sensor and filter settings take effect at once, without
+        another warm-up (a rebuilt compensator left the Tdot terms out for minutes).
+        """
+        self.model = model
+        self._term_functions = [scalar_term_function(term) for term in model.terms]
+        self._coefficient_rows = model.coefficients.tolist()
+        self._set_stale_rule()  # the fault band is the calibrated range's
+
     def start_from(self, stamp_s: float, temperature_degC: float) -> bool:
         """Start from a reading an earlier compensator took (a reload); return whether used.
 

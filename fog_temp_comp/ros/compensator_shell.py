@@ -315,15 +315,21 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
             self.save_learned_bias('reconfigure')
             self._filter_from_file -= changed
             self._show_filter_in_effect_soon()
-        self.config = config
+        previous, self.config = self.config, config
         self._temperature = temperature
         if not rebuild:
             self.compensator.guard = config.guard
             return
+        kept = self.temperature_frames.kept
+        moved = self._follow_temperature_frame(config.coefficients)
+        if previous.settings == config.settings and not (moved or self.compensator.rest):
+            self.compensator.use_model(config.coefficients.model)  # the Tdot filter goes on
+            self.compensator.guard = config.guard
+            self._done_reconfiguring(rebuild)
+            return
         counters = self.compensator.status.counters
         last_reading = self.compensator.last_reading
-        kept = self.temperature_frames.kept
-        if self._follow_temperature_frame(config.coefficients):
+        if moved:
             # another sensor: its latest reading where one came (else its next starts it)
             if kept is not None and last_reading is not None:
                 self._other_frames_latest[kept] = last_reading
@@ -335,6 +341,9 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         if last_reading is not None:  # the gyro goes on corrected (or held), not waiting
             self.compensator.start_from(*last_reading)
         self.compensator.status.counters = counters
+        self._done_reconfiguring(rebuild)
+
+    def _done_reconfiguring(self, rebuild: set[str]) -> None:
         self._load_learned_bias()
         self.reconfigurations += 1
         self._log_config(f'reconfigured ({", ".join(sorted(rebuild))})')
