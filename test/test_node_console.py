@@ -99,16 +99,17 @@ def three_times(
     return lines
 
 
-def test_temperature_missing_warns_throttled(
+def test_temperature_missing_is_an_error_throttled(
     harness_factory: Callable[..., Harness], capfd: pytest.CaptureFixture[str]
 ) -> None:
+    """At the diagnostics' level, ERROR: the raw rate goes out (it was a WARN line)."""
     h = harness_factory()
     assert h.send_imu(T0, RATE) is None  # waiting for the first temperature (10 s)
     lines = three_times(
         Console(capfd),
         h,
         lambda k: h.send_imu(T0 + 11 + k, RATE),
-        'WARN',
+        'ERROR',
         r'^no temperature received on /imu/temperature: gyro passed through uncorrected',
     )
     assert lines[0].endswith('(1 messages so far)')

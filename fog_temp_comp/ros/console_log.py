@@ -114,7 +114,7 @@ class ConsoleLogMixin(ParametersMixin):
         """The throttled line of a gyro passed through for want of a temperature or a stamp."""
         status = self.compensator.status
         if counters.imu_uncorrected > previous.imu_uncorrected and not status.has_temperature:
-            self.get_logger().warning(
+            self.get_logger().error(  # the diagnostics' level: the raw rate goes out
                 f'no temperature received on {topic}: gyro passed through uncorrected '
                 f'({counters.imu_uncorrected} messages so far)',
                 throttle_duration_sec=self._throttle_s,
