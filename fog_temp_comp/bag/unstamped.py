@@ -162,8 +162,8 @@ class UnsetStamps:
         from the receive times noted (:meth:`note_offsets`), an unset one (0) taking its
         receive time (:meth:`fill`), gyro and temperature alike, as ``calibrate`` and
         ``evaluate`` read them: a gyro that is never stamped is corrected, not passed through
-        raw under the corrected topic's name (the node, which has no receive times, says so in
-        its diagnostics until ``time_source: receive`` times it on arrival).
+        raw under the corrected topic's name (the node, which has no receive times, times it
+        by its clock on arrival).
         """
         if self.by_receive:
             return np.asarray(receive_ns, dtype=np.int64) / NS_PER_S
