@@ -425,6 +425,9 @@ def test_a_temperature_clock_behind_by_more_than_the_stale_time_is_timed_on_arri
         out = harness.send_imu(T0 + k, RATE)
     assert counters.imu_held == held  # not held any more
     assert_allclose(rate_of(out), RATE - expected_correction(coefficients, 26.0))
+    # started again from the last reading, now: not bridged across the change of clocks
+    counters = harness.node.compensator.status.counters
+    assert counters.temperature_gaps_bridged == counters.temperature_gaps == 0
     status = harness.diagnose()
     assert 'header clocks' in status.message and 'timed by the node clock' in status.message
 

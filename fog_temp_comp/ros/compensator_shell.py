@@ -389,9 +389,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         """The node clock's time, s, for a temperature whose driver left the stamp unset (0).
 
         Moved onto the clock of the temperature's other stamps where that runs more than 5 s
-        from the node's (a device's clock since power-on). (An unset gyro stamp goes to the
-        core, which corrects it with the current correction and counts it; a gyro never
-        stamped is timed on arrival in :meth:`_on_imu`.)
+        from the node's (a device's clock since power-on); so is a gyro never stamped.
         """
         self.unstamped += 1
         return self._now_s() + self._header_clock_s
@@ -422,8 +420,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
         was_ready = status.estimator_ready
         if self.compensator.add_temperature(stamp_s, temperature.degC(msg)):
             self._track_warm_up(stamp_s, was_ready)
-        # the clocks compared on every reading, taken or not (a clock stepped back is out of
-        # order until it passes the last stamp)
+        # the clocks compared on every reading, taken or not (a clock stepped back is refused)
         imu_total = status.counters.imu_total
         if imu_total > self._imu_total_at_temperature:  # the gyro flows: compare clocks
             self._arrival.add(stamp_s, status.last_imu_stamp_s)
@@ -449,15 +446,18 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
     def _time_on_arrival(self) -> None:
         """Time gyro and temperature by the node clock: their header clocks are too far apart.
 
-        Hours apart (a sensor clock since power-on against the computer's), no temperature
-        would ever pair with a gyro sample; behind the gyro by more than the stale time (a GPS
-        clock against UTC, a clock stepped back), every reading would be stale at the gyro
-        stamps and the correction held as long as it lasts. The estimate restarts at the next
-        temperature (a gap).
+        Hours apart (a sensor clock since power-on against the computer's) no temperature
+        pairs with a gyro sample; behind the gyro by more than the stale time (GPS against UTC,
+        a clock stepped back) every reading is stale and the correction held as long as it
+        lasts. The estimate starts again from the last reading, now (not bridged across clocks).
         """
         self.clocks_apart_s = self._arrival.offset_s
         self._by_receive = True
         self._arrival.reset()
+        reading = self.compensator.last_reading
+        self.compensator.reset()
+        if reading is not None:  # the gyro goes on corrected, not waiting
+            self.compensator.start_from(self._now_s(), reading[1])
         self._log_time_on_arrival(self.clocks_apart_s, self.compensator.stale_after_s)
 
     def _on_at_rest(self, msg: Bool) -> None:
@@ -479,8 +479,7 @@ class CompensatorShell(BiasLearningMixin, ConsoleLogMixin):
                 self.imu_published += 1
                 return
         compensator = self.compensator
-        # a header stamp of 0 gets the core's current correction, but a gyro never stamped is
-        # timed on arrival, on the temperature's header clock (as an unstamped temperature)
+        # a stamp of 0 gets the current correction; a gyro never stamped is timed on arrival
         stamp_s = self._now_s() if self._by_receive else stamp.sec + stamp.nanosec * 1e-9
         if not self._gyro_stamped:
             self._gyro_stamped = stamp_s != 0.0
