@@ -3,7 +3,8 @@
 Subscriptions and publishers around one :class:`~fog_temp_comp.core.compensator.Compensator`:
 messages become floats (stamps in s, rates in rad/s, temperature in degC) and the corrected rates
 go back into the Imu; parameter changes rebuild the compensator (new coefficients with the same
-filter settings keep its Tdot filter); ``/diagnostics`` is published on a timer. Parameters, the learned-bias file and the console lines are its mixins'
+filter settings keep its Tdot filter); ``/diagnostics`` is published on a timer. Parameters,
+the learned-bias file and the console lines are its mixins'
 (:mod:`~fog_temp_comp.ros.node_parameters`, :mod:`~fog_temp_comp.ros.bias_learning`,
 :mod:`~fog_temp_comp.ros.console_log`).
 """
