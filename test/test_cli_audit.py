@@ -11,11 +11,12 @@ import yaml
 from test_cli import SMALL
 
 from fog_temp_comp.bag.bagio import IMU_TYPE, open_bag
+from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.bag.topic_names import output_topic_for
 from fog_temp_comp.tools import cli, commands
 from fog_temp_comp.tools.commands import CalibrateOptions
 from fog_temp_comp.tools.demo import DEMO_FILES
-from fog_temp_comp.tools.simulate import simulate_run
+from fog_temp_comp.tools.simulate import SimulatedRun, simulate_run
 
 from simdata import write_run
 
@@ -287,6 +288,29 @@ def test_compensate_refuses_an_output_named_as_another_format(
     line = error_line(capsys)
     assert f'-o {out}: a {out.suffix.lower()} name' in line and 'name it out.mcap' in line
     assert not out.exists()
+
+
+@pytest.mark.parametrize('name', ['out', 'out.BAG', 'out.bag'])
+def test_a_ros1_output_is_named_with_its_suffix(
+    coeffs: Path,
+    tmp_path: Path,
+    short_cycle_fast: SimulatedRun,
+    capsys: pytest.CaptureFixture[str],
+    name: str,
+) -> None:
+    """A ROS 1 bag is one file read by its .bag suffix: 'out' was written, and never opened."""
+    in_bag = write_run(tmp_path / 'in.bag', 'ros1', short_cycle_fast)
+    out = tmp_path / name
+    code = cli.main(['compensate', str(in_bag), '--coeffs', str(coeffs), '-o', str(out)])
+    if name != 'out.bag':  # rosbags reads neither 'out' nor 'out.BAG' back
+        assert code == 1
+        assert f'-o {out}: a ROS 1 bag is known by its .bag suffix: name it out.bag' in (
+            error_line(capsys)
+        )
+        assert not out.exists()
+    else:
+        assert code == 0
+        assert read_record(out, gyro_topic='/imu/data').imu_stamps_s.size > 0  # it opens
 
 
 def test_a_gyro_frame_id_other_than_the_coefficients_is_warned_of(

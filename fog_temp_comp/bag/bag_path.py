@@ -96,13 +96,20 @@ def misnamed_output(output: Path, fmt: str) -> str | None:
     """Why ``output`` may not name a bag of format ``fmt`` (the message), or None if it may.
 
     A name ending in another format's suffix is refused: ``out.db3`` for an MCAP output would
-    be a rosbag2 directory named like an sqlite3 file, holding ``out.db3.mcap``.
+    be a rosbag2 directory named like an sqlite3 file, holding ``out.db3.mcap``. A ROS 1 bag
+    is a single file that readers know by its ``.bag`` suffix: a name without it is refused
+    too (``out`` was written, and then no reader, rosbags' or this package's, opened it).
     """
     suffix, want = output.suffix.lower(), FORMAT_SUFFIX[fmt]
-    if suffix not in FORMAT_SUFFIX.values() or suffix == want:
-        return None
-    return (
-        f"-o {output}: a {suffix} name, but the output has the input's format ({fmt}, "
-        f'{want}): name it {output.with_suffix(want).name}'
-        + ('' if fmt == 'ros1' else ' or without a suffix (a rosbag2 directory)')
-    )
+    if suffix in FORMAT_SUFFIX.values() and suffix != want:
+        return (
+            f"-o {output}: a {suffix} name, but the output has the input's format ({fmt}, "
+            f'{want}): name it {output.with_suffix(want).name}'
+            + ('' if fmt == 'ros1' else ' or without a suffix (a rosbag2 directory)')
+        )
+    if fmt == 'ros1' and output.suffix != want:  # readers match it exactly: not .BAG either
+        fixed = (
+            output.with_suffix(want) if suffix == want else output.with_name(output.name + want)
+        )
+        return f'-o {output}: a ROS 1 bag is known by its {want} suffix: name it {fixed.name}'
+    return None
