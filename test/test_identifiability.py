@@ -68,9 +68,16 @@ def test_soaks_together_span_t_but_not_tdot(rng: np.random.Generator) -> None:
     # one soak: T is not excited either
     single = unidentifiable_terms(spans[1:2], ('const', 'T', 'Tdot'))
     assert [p.term for p in single] == ['T', 'Tdot']
+    assert 'soaks do not' in message
     # a ramp added to the soaks excites everything
     ramp = record_span('ramp', t, 20.0 + 0.2 * t / 60.0)
     assert unidentifiable_terms([*spans, ramp], ('const', 'T', 'Tdot', 'T_Tdot')) == []
+    # a ramp alone (10 min at 1 degC/min): T moves, but at one rate, which a T term absorbs
+    short = np.arange(0.0, 600.0, 1.0)
+    alone = unidentifiable_terms([record_span('ramp', short, 30.0 + short / 60.0)], ('T', 'Tdot'))
+    assert [p.term for p in alone] == ['Tdot']
+    assert 'at one steady rate (a single ramp)' in alone[0].message
+    assert 'add a run whose rate varies' in alone[0].message
 
 
 def test_three_soak_bags_are_refused_naming_the_term_and_each_bag(

@@ -141,6 +141,12 @@ def unidentifiable_terms(
         'T': 'add a run over a temperature range (a chamber cycle)',
         'Tdot': 'add a run that changes temperature (a ramp or cycle); soaks do not',
     }
+    rate_low, rate_high = (np.nanmin(r_lows), np.nanmax(r_highs)) if spans else (0.0, 0.0)
+    if rate_low >= min_tdot_span_degC_per_min or rate_high <= -min_tdot_span_degC_per_min:
+        advice['Tdot'] = (  # the temperature moves, at one steady rate away from 0
+            'the temperature changes at one steady rate (a single ramp), which no fit tells '
+            'from a T term: add a run whose rate varies (a cycle with holds: up, hold, down)'
+        )
     per_record = '; '.join(s.describe() for s in spans)
     found = []
     for term in terms:
