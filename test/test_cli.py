@@ -7,6 +7,7 @@ import dataclasses
 import io
 import math
 import os
+import shutil
 import subprocess
 import sys
 from collections.abc import Sequence
@@ -1042,6 +1043,23 @@ def test_evaluate_table(cal_bag: Path, fast_bag: Path, coeffs_yaml: Path) -> Non
     for axis in AXES:
         stab_before, stab_after, *_ = rows[fast_bag.name, axis, 10.0]
         assert stab_after < stab_before, axis
+
+
+def test_evaluate_tells_bags_of_one_name_apart(
+    tmp_path: Path, cal_bag: Path, fast_bag: Path, coeffs_yaml: Path
+) -> None:
+    """Two units' cycle_1 in one table: each row says which (their folders), not cycle_1 twice."""
+    a = shutil.copytree(cal_bag, tmp_path / 'u1' / 'cycle_1')
+    b = shutil.copytree(fast_bag, tmp_path / 'u2' / 'cycle_1')
+    stdout = io.StringIO()
+    assert commands.evaluate_command([a, b, fast_bag], coeffs_yaml, stdout=stdout) == 0
+    rows = parse_table(stdout.getvalue())
+    assert {name for name, _, _ in rows} == {'u1/cycle_1', 'u2/cycle_1', 'fast_cycle'}
+    # the same figures as the bag alone under its own name
+    alone = io.StringIO()
+    assert commands.evaluate_command([fast_bag], coeffs_yaml, stdout=alone) == 0
+    single = parse_table(alone.getvalue())
+    assert rows['u2/cycle_1', 'x', 10.0] == single['fast_cycle', 'x', 10.0]
 
 
 def test_evaluate_cli(

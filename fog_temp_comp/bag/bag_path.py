@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 __all__ = [
@@ -11,6 +12,7 @@ __all__ = [
     'inside_bag',
     'misnamed_output',
     'not_a_bag',
+    'short_names',
 ]
 
 #: files that make a directory a bag (rosbag2's storage files, plain or file-compressed)
@@ -113,3 +115,28 @@ def misnamed_output(output: Path, fmt: str) -> str | None:
         )
         return f'-o {output}: a ROS 1 bag is known by its {want} suffix: name it {fixed.name}'
     return None
+
+
+def short_names(paths: Sequence[Path]) -> list[str]:
+    """Each bag's name in a table, unique among ``paths``: its own, or with parent folders.
+
+    ``u1/cycle_1`` and ``u2/cycle_1`` for two bags both named ``cycle_1`` (a table of their
+    names alone would not tell them apart), others by their names; the same bag given twice
+    keeps one name.
+    """
+    full = [p.resolve() for p in paths]
+    depth = [1] * len(full)
+
+    def name(k: int) -> str:
+        return paths[k].name if depth[k] == 1 else '/'.join(full[k].parts[-depth[k] :])
+
+    for _ in range(64):
+        owners: dict[str, set[Path]] = {}
+        for k in range(len(full)):
+            owners.setdefault(name(k), set()).add(full[k])
+        clashing = [k for k in range(len(full)) if len(owners[name(k)]) > 1]
+        if not clashing:
+            break
+        for k in clashing:
+            depth[k] += 1
+    return [name(k) for k in range(len(full))]

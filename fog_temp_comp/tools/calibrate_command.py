@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
 
+from fog_temp_comp.bag.bag_path import short_names
 from fog_temp_comp.bag.one_clock import on_one_clock
 from fog_temp_comp.bag.reduce import reduce_record
 from fog_temp_comp.bag.stream import read_record
@@ -172,7 +173,10 @@ def _calibrate(
         coeffs = _without_constant(coeffs)
     save(coeffs, yaml_path)
     _print_fit(result, coeffs, len(records), stdout, stderr or sys.stderr)
-    runs = _validate(opt, coeffs, [(b.name, load_record(b)) for b in opt.validate], stdout)
+    named = [
+        (n, load_record(b)) for n, b in zip(short_names(opt.validate), opt.validate, strict=True)
+    ]
+    runs = _validate(opt, coeffs, named, stdout)
     if opt.report_dir is None or report_dir is None:
         return None
     if not runs:  # no validation bags: show the training runs

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TextIO
 
+from fog_temp_comp.bag.bag_path import short_names
 from fog_temp_comp.bag.one_clock import on_one_clock
 from fog_temp_comp.bag.stream import read_record
 from fog_temp_comp.core.coefficients import Coefficients, load
@@ -53,7 +54,7 @@ def evaluate_command(
     scores = []
     notes = []
     salvaged = Salvaged()
-    for bag in bags:
+    for bag, name in zip(bags, short_names(bags), strict=True):
 
         def read(topic: str | None, field: str | None, bag: Path = bag) -> ChamberRecord:
             return on_one_clock(
@@ -77,8 +78,8 @@ def evaluate_command(
         )
         if (mismatch := frame_mismatch(bag, record.frame_id, coeffs.frame_id)) is not None:
             print(mismatch, file=sys.stderr)
-        scores += score_record(bag.name, record.imu_stamps_s, record.rates_rad_s, corrected)
-        notes += clamp_notes(bag.name, status, coeffs)
+        scores += score_record(name, record.imu_stamps_s, record.rates_rad_s, corrected)
+        notes += clamp_notes(name, status, coeffs)
     print(format_scores(scores), file=stdout)
     for note in notes:
         print(note, file=stdout)
