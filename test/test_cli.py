@@ -1062,6 +1062,17 @@ def test_evaluate_tells_bags_of_one_name_apart(
     assert rows['u2/cycle_1', 'x', 10.0] == single['fast_cycle', 'x', 10.0]
 
 
+def test_a_topic_missing_from_one_of_several_bags_is_named_with_that_bag(
+    tmp_path: Path, fast_bag: Path, coeffs_yaml: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``evaluate A B --gyro-topic T`` where B lacks T: the error says B, not just 'bag'."""
+    other = write_run(tmp_path / 'other', 'mcap', read_record(fast_bag), imu_topic='/fog/rate')
+    argv = ['evaluate', str(fast_bag), str(other), '--coeffs', str(coeffs_yaml)]
+    assert cli.main([*argv, '--gyro-topic', '/imu/data_raw']) == 1
+    err = capsys.readouterr().err
+    assert f'ERROR: {other}: --gyro-topic /imu/data_raw: not in bag; topics: ' in err
+
+
 def test_evaluate_cli(
     capsys: pytest.CaptureFixture[str], fast_bag: Path, coeffs_yaml: Path
 ) -> None:

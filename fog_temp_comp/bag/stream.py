@@ -35,6 +35,7 @@ from fog_temp_comp.bag.bagio import (
     IMU_TYPE,
     TEMPERATURE_TYPE,
     BagError,
+    MissingTopicError,
     open_bag,
     resolve_topic,
     resolve_topic_in,
@@ -160,6 +161,12 @@ class BagStream(_McapReading, _SqliteReading, _Ros1Reading):
         self.span_stats: list[ScanStats] = []
 
     def __enter__(self) -> BagStream:
+        try:
+            return self._enter()
+        except MissingTopicError as err:  # named by its bag: a command may read several
+            raise MissingTopicError(f'{self.path}: {err}') from err
+
+    def _enter(self) -> BagStream:
         problem = not_a_bag(self.path)
         if problem:
             raise BagError(problem)
